@@ -1,0 +1,3 @@
+from real2sim.cli import main
+
+raise SystemExit(main())
