@@ -138,16 +138,16 @@ def build_asset(
 
     The folder appears whole or not at all. ``log`` receives one line per step.
     """
-    from real2sim.asset_writer import write_representation
-    from real2sim.canonical import canonical_transform
-    from real2sim.fidelity import measure_fidelity
-    from real2sim.inertia import estimate_physical_properties
-
     say = log or (lambda _msg: None)
     out_dir = Path(out_dir)
     mesh = load_mesh(mesh_path)
     solid = geometry_only(mesh)
     validate_mesh(solid, str(mesh_path))
+
+    from real2sim.asset_writer import write_representation
+    from real2sim.canonical import canonical_transform
+    from real2sim.fidelity import measure_fidelity
+    from real2sim.inertia import estimate_physical_properties
 
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         if config.flat_bottom:

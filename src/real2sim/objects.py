@@ -58,7 +58,7 @@ def _bottle() -> trimesh.Trimesh:
     # A squeeze bottle like the YCB mustard bottle: an oval body 0.096 x 0.060 m,
     # bulging low, tapering to a shoulder, with an off-centre cap; 0.19 m tall.
     z_body = np.linspace(0.0, 0.160, 40)
-    r_body = 0.045 + 0.004 * np.sin(np.pi * z_body / 0.11) - 0.09 * np.clip(z_body - 0.10, 0, None) ** 1.2
+    r_body = 0.045 + 0.004 * np.sin(np.pi * z_body / 0.11) - 0.2 * np.clip(z_body - 0.09, 0, None) ** 1.1
     r_body = np.clip(r_body, 0.017, None)
     # Rounded bottom edge: a 4 mm fillet so the support face is flat but not sharp.
     fillet = np.linspace(0.0, np.pi / 2, 6)[1:]
