@@ -1,0 +1,79 @@
+"""Shared by the benchmarks: machine description and writing results into docs/.
+
+Each benchmark writes its own section, docs/benchmarks/<name>.md, and then
+docs/benchmarks.md is rebuilt as the index of all sections, so one benchmark
+can be re-run without losing the others' numbers.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SECTIONS = ROOT / "docs" / "benchmarks"
+INDEX = ROOT / "docs" / "benchmarks.md"
+
+
+def machine_description() -> str:
+    """One line: CPU model, cores available, memory, OS, Python, torch and Drake versions."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    try:
+        mem_gib = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
+    except (ValueError, OSError):
+        mem_gib = float("nan")
+    versions = []
+    for module in ("torch", "pydrake"):
+        try:
+            mod = __import__(module)
+            versions.append(f"{module} {getattr(mod, '__version__', '?')}")
+        except ImportError:
+            pass
+    return f"{cpu}, {cores} cores, {mem_gib:.0f} GiB, {platform.system()} {platform.release()}, Python {platform.python_version()}, " + ", ".join(versions)
+
+
+def today() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+
+
+def markdown_table(header: list[str], rows: list[list]) -> str:
+    def fmt(v) -> str:
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return str(v)
+
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def write_section(name: str, title: str, body: str, command: str) -> Path:
+    """Write docs/benchmarks/<name>.md (with machine, date and the command) and rebuild the index."""
+    SECTIONS.mkdir(parents=True, exist_ok=True)
+    path = SECTIONS / f"{name}.md"
+    path.write_text(
+        f"## {title}\n\n_Machine: {machine_description()}. Date: {today()}. Command: `{command}`._\n\n{body.strip()}\n"
+    )
+    rebuild_index()
+    return path
+
+
+def rebuild_index() -> None:
+    parts = [
+        "# Benchmarks\n",
+        "Every number here is written by a script in `benchmarks/` (run `make bench`, or one script alone). "
+        "Each section names its machine, date and command. Tests never assert timings.\n",
+    ]
+    for section in sorted(SECTIONS.glob("*.md")):
+        parts.append(section.read_text().strip() + "\n")
+    INDEX.write_text("\n".join(parts))

@@ -1,0 +1,32 @@
+"""Run every benchmark in this folder (each writes its section of docs/benchmarks.md).
+
+Usage: python benchmarks/run_all.py [--full]   (default: each benchmark's quick setting)
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def main() -> int:
+    extra = ["--full"] if "--full" in sys.argv[1:] else []
+    failed = []
+    for script in sorted(HERE.glob("bench_*.py")):
+        print(f"== {script.name}", flush=True)
+        if subprocess.run([sys.executable, str(script), *extra]).returncode != 0:
+            failed.append(script.name)
+    sys.path.insert(0, str(HERE))
+    from common import rebuild_index
+
+    rebuild_index()
+    if failed:
+        print("failed: " + ", ".join(failed))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
