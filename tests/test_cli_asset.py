@@ -110,7 +110,7 @@ def _check_asset_folder(asset: Path, names: list[str], mass_kg: float) -> None:
         plant = MultibodyPlant(0.001)
         Parser(plant).AddModels(str(rep / "model.urdf"))
         plant.Finalize()
-        masses = [plant.get_body(i).default_mass() for i in range(plant.num_bodies())]
+        masses = [plant.GetBodyByName("base_link").default_mass()]
         assert max(masses) == pytest.approx(mass_kg, rel=1e-6)
 
 

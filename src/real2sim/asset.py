@@ -39,6 +39,9 @@ class AssetConfig:
 
     support_height_m: height of the table plane in the input mesh frame (+z up),
         used by ``flat_bottom``; a capture stands the object on z = 0.
+    keep_up: keep the input's +z as the asset's +z (PCA only picks x in the
+        horizontal plane); without it the longest principal axis becomes +z, as the
+        paper does, which tilts squat objects such as a mug.
     fit_config / coacd_config / vhacd_config: None means each stage's defaults
         (the paper's settings, documented in those modules).
     """
@@ -47,6 +50,7 @@ class AssetConfig:
     specs: tuple[CollisionSpec, ...]
     flat_bottom: bool = False
     support_height_m: float = 0.0
+    keep_up: bool = False
     formats: tuple[str, ...] = ("urdf",)
     seed: int = 0
     device: str = "cpu"
@@ -156,7 +160,7 @@ def build_asset(
             say(f"closing a flat bottom at z = {config.support_height_m} m (input frame)")
             solid = close_flat_bottom(solid, support_height_m=config.support_height_m)
 
-        transform = canonical_transform(solid)
+        transform = canonical_transform(solid, up_axis=(0.0, 0.0, 1.0) if config.keep_up else None)
         solid = solid.copy()
         solid.apply_transform(transform)
         visual = mesh.copy()

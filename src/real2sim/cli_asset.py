@@ -36,6 +36,9 @@ def add_asset_arguments(p: argparse.ArgumentParser) -> None:
                    help="crop below the support plane and close the bottom flat (paper IV-C1)")
     p.add_argument("--support-height", type=float, default=0.0, metavar="M",
                    help="support (table) height in the input mesh frame, +z up, m (default 0)")
+    p.add_argument("--keep-up", action="store_true",
+                   help="keep the input's +z as the asset's up axis instead of the longest principal axis "
+                   "(for squat objects such as mugs)")
     p.add_argument("--format", action="append", choices=["urdf", "sdf"], dest="formats",
                    help="model formats to write (repeatable; URDF always)")
     p.add_argument("--seed", type=int, default=0, help="random seed of sampling and fitting (default 0)")
@@ -108,6 +111,7 @@ def config_from_args(args: argparse.Namespace):
         specs=specs,
         flat_bottom=args.flat_bottom,
         support_height_m=args.support_height,
+        keep_up=args.keep_up,
         formats=formats,
         seed=args.seed,
         device=args.device,
