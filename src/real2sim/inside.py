@@ -6,6 +6,11 @@ approximation), not from face normals: a point is inside where |w| > 0.5. A
 small hole changes w only near the hole; a closed internal shell adds a whole
 turn (|w| ~ 2, still inside); an open internal sheet shifts w by less than 0.5
 away from the sheet. Taking |w| also accepts meshes whose faces all point inward.
+
+Speed: queries go to libigl in z-order (:func:`morton_order`), so that
+consecutive queries walk the same tree nodes; on 600k near-surface points this
+is about 2-3x faster than random order, with identical results (measured in
+``docs/benchmarks/sdf_sampling.md``).
 """
 
 from __future__ import annotations
@@ -20,15 +25,45 @@ def _vf(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(mesh.vertices, dtype=np.float64), np.ascontiguousarray(mesh.faces, dtype=np.int64)
 
 
+def morton_order(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """Permutation (N,) sorting points (N, 3) along a z-order curve over their bounding box."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        return np.empty(0, dtype=np.int64)
+    lo = p.min(axis=0)
+    span = np.maximum(p.max(axis=0) - lo, 1e-12)
+    grid = ((p - lo) / span * ((1 << bits) - 1)).astype(np.uint64)
+    code = np.zeros(len(p), dtype=np.uint64)
+    for axis in range(3):
+        code |= _spread_bits(grid[:, axis]) << np.uint64(axis)
+    return np.argsort(code, kind="stable")
+
+
+def _spread_bits(x: np.ndarray) -> np.ndarray:
+    """Two zero bits between each of the low 10 bits of x (30-bit Morton codes)."""
+    x = x & np.uint64(0x3FF)
+    x = (x | (x << np.uint64(16))) & np.uint64(0x30000FF)
+    x = (x | (x << np.uint64(8))) & np.uint64(0x300F00F)
+    x = (x | (x << np.uint64(4))) & np.uint64(0x30C30C3)
+    x = (x | (x << np.uint64(2))) & np.uint64(0x9249249)
+    return x
+
+
+def _ordered_queries(points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    q = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    order = morton_order(q)
+    return np.ascontiguousarray(q[order]), order
+
+
 def winding_numbers(mesh: trimesh.Trimesh, points_m: np.ndarray) -> np.ndarray:
     """Generalized winding number of each point (N,) with respect to ``mesh`` (same frame)."""
     import igl
 
     v, f = _vf(mesh)
-    q = np.ascontiguousarray(points_m, dtype=np.float64).reshape(-1, 3)
+    q, order = _ordered_queries(points_m)
     out = np.empty(len(q))
     for start in range(0, len(q), _CHUNK):
-        out[start : start + _CHUNK] = igl.fast_winding_number(v, f, q[start : start + _CHUNK])
+        out[order[start : start + _CHUNK]] = igl.fast_winding_number(v, f, q[start : start + _CHUNK])
     return out
 
 
@@ -46,10 +81,12 @@ def signed_distance(mesh: trimesh.Trimesh, points_m: np.ndarray) -> np.ndarray:
     import igl
 
     v, f = _vf(mesh)
-    q = np.ascontiguousarray(points_m, dtype=np.float64).reshape(-1, 3)
+    q, order = _ordered_queries(points_m)
     unsigned = np.empty(len(q))
+    winding = np.empty(len(q))
     for start in range(0, len(q), _CHUNK):
-        d, _, _, _ = igl.signed_distance(q[start : start + _CHUNK], v, f, igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_UNSIGNED)
-        unsigned[start : start + _CHUNK] = np.abs(d)
-    sign = np.where(inside_mask(mesh, q), -1.0, 1.0)
-    return sign * unsigned
+        chunk = q[start : start + _CHUNK]
+        d, _, _, _ = igl.signed_distance(chunk, v, f, igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_UNSIGNED)
+        unsigned[order[start : start + _CHUNK]] = np.abs(d)
+        winding[order[start : start + _CHUNK]] = igl.fast_winding_number(v, f, chunk)
+    return np.where(np.abs(winding) > 0.5, -unsigned, unsigned)
