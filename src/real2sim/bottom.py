@@ -23,9 +23,9 @@ order (each result is checked to be a closed oriented 2-manifold by manifold3d):
      ``h + slab``, extruded down to the plane. It follows a concave footprint
      exactly and costs milliseconds.
    * ``floor="vhacd"`` (the paper's): a convex decomposition (V-HACD, ``vhacdx``)
-     of the cropped mesh, each hull cut to the slab. Convex hulls bulge over a
-     concave footprint and V-HACD takes tens of seconds on a loaded 2-core
-     machine at modest resolution.
+     of the closed, remeshed solid (V-HACD cannot fill an open mesh), each hull
+     that reaches the bottom band extended down to the plane and cut to the slab.
+     Convex hulls bulge over a concave footprint, and V-HACD costs seconds.
 
 Paths 1 and 2 are exact and need no slab. The path taken is recorded in the
 result's ``metadata["flat_bottom_method"]`` ("trim", "cap" or "remesh"), the
@@ -188,27 +188,31 @@ def _sdf_grid_mesh(cropped: trimesh.Trimesh, voxel_m: float) -> trimesh.Trimesh:
     return surface
 
 
-def _slab_hulls(cropped: trimesh.Trimesh, up: np.ndarray, height: float, slab_m: float, max_hulls: int) -> list:
-    """Convex pieces of the cropped mesh (V-HACD), cut to the slab height <= p.up <= height + slab."""
-    import manifold3d
-    import vhacdx
+def _slab_hulls(solid: trimesh.Trimesh, up: np.ndarray, height: float, slab_m: float, max_hulls: int) -> list:
+    """Convex pieces of ``solid`` (V-HACD) near the support plane, cut to height <= p.up <= height + slab.
 
-    hulls = vhacdx.compute_vhacd(
-        np.ascontiguousarray(cropped.vertices, dtype=np.float64),
-        np.ascontiguousarray(cropped.faces, dtype=np.uint32),
-        maxConvexHulls=max_hulls,
-        resolution=20_000,
-        fillMode="raycast",  # the cropped mesh is open at the bottom: a flood fill would leak
-        asyncACD=False,
-    )
+    A remeshed solid stops about half a voxel above the plane, so each piece that
+    reaches into the bottom band is extended straight down to the plane first (its
+    points in the band projected onto it); pieces higher up get no floor under them.
+    """
+    import manifold3d
+
+    from real2sim.decomposition import VhacdConfig, vhacd_point_sets
+
+    hulls = vhacd_point_sets(solid, VhacdConfig(max_convex_hulls=max_hulls, resolution=20_000))
     pieces = []
-    for points, _ in hulls:
+    for points in hulls:
         if len(points) < 4:
             continue
-        hull = manifold3d.Manifold.hull_points(np.asarray(points, dtype=np.float64))
-        slab = hull.trim_by_plane(tuple(up), float(height)).trim_by_plane(tuple(-up), float(-(height + slab_m)))
-        if not slab.is_empty():
-            pieces.append(slab)
+        level = points @ up - height
+        low = points[level < 2.0 * slab_m]
+        if len(low) == 0:
+            continue
+        extended = np.concatenate([points, low - np.outer(low @ up - height, up)])
+        hull = manifold3d.Manifold.hull_points(np.asarray(extended, dtype=np.float64))
+        piece = hull.trim_by_plane(tuple(up), float(height)).trim_by_plane(tuple(-up), float(-(height + slab_m)))
+        if not piece.is_empty():
+            pieces.append(piece)
     return pieces
 
 
@@ -304,7 +308,8 @@ def close_flat_bottom(
     if floor == "section":
         pieces = [body] + _section_slab(body, up, height, slab)
     elif floor == "vhacd":
-        pieces = [body] + _slab_hulls(cropped, up, height, slab, max_hulls)
+        # decompose the closed, remeshed body: V-HACD cannot fill the inside of an open mesh
+        pieces = [body] + _slab_hulls(from_manifold(body), up, height, slab, max_hulls)
     else:
         raise ValueError(f"floor must be 'section' or 'vhacd', got {floor!r}")
     closed = manifold3d.Manifold.batch_boolean(pieces, manifold3d.OpType.Add)

@@ -138,7 +138,8 @@ def _run_coacd(mesh: trimesh.Trimesh, config: CoacdConfig, seed: int) -> list[np
     return [np.asarray(v, dtype=np.float64) for v, _ in parts]
 
 
-def _run_vhacd(mesh: trimesh.Trimesh, config: VhacdConfig) -> list[np.ndarray]:
+def vhacd_point_sets(mesh: trimesh.Trimesh, config: VhacdConfig) -> list[np.ndarray]:
+    """Vertices (k_i, 3) of each V-HACD convex piece of ``mesh``, in the mesh's frame."""
     from vhacdx import compute_vhacd
 
     # vhacdx takes faces flattened VTK-style, each triangle prefixed by its vertex count
@@ -213,7 +214,7 @@ def decompose(
     if method == "coacd":
         point_sets = _run_coacd(mesh_canonical, coacd_config, coacd_config.seed if seed is None else seed)
     else:
-        point_sets = _run_vhacd(mesh_canonical, vhacd_config)
+        point_sets = vhacd_point_sets(mesh_canonical, vhacd_config)
     hulls = _hulls(point_sets)
     if not hulls:
         raise RuntimeError(f"{method} produced no convex piece with volume for this mesh")
