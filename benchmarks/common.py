@@ -32,12 +32,13 @@ def machine_description() -> str:
         mem_gib = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
     except (ValueError, OSError):
         mem_gib = float("nan")
+    from importlib.metadata import PackageNotFoundError, version
+
     versions = []
-    for module in ("torch", "pydrake"):
+    for dist in ("torch", "drake"):
         try:
-            mod = __import__(module)
-            versions.append(f"{module} {getattr(mod, '__version__', '?')}")
-        except ImportError:
+            versions.append(f"{dist} {version(dist)}")
+        except PackageNotFoundError:
             pass
     return f"{cpu}, {cores} cores, {mem_gib:.0f} GiB, {platform.system()} {platform.release()}, Python {platform.python_version()}, " + ", ".join(versions)
 
