@@ -117,11 +117,18 @@ def _check_asset_folder(asset: Path, names: list[str], mass_kg: float) -> None:
 def test_asset_end_to_end_small(tmp_path, can_obj, capsys):
     out = tmp_path / "can_asset"
     code, stdout, err = run_cli(capsys, "asset", can_obj, "--mass", OBJECTS["can"].mass_kg, "--out", out,
-                                "--collision", "mesh", "--collision", "vhacd", "--format", "sdf")
+                                "--collision", "mesh", "--collision", "vhacd", "--collision", "cylinders:2",
+                                "--collision", "boxes:1+spheres:2", "--iterations", "150", "--format", "sdf")
     assert code == 0, err
     assert str(out) in stdout
-    _check_asset_folder(out, ["mesh", "vhacd"], OBJECTS["can"].mass_kg)
+    _check_asset_folder(out, ["mesh", "vhacd", "cylinders_2", "boxes_1_spheres_2"], OBJECTS["can"].mass_kg)
     assert (out / "vhacd" / "model.sdf").exists()
+    fit = json.loads((out / "cylinders_2" / "fit_report.json").read_text())
+    assert fit["device"] == "cpu" and fit["final_loss"] >= 0 and fit["num_primitives"] <= 2
+    assert fit["iou"] > 0.85  # a can is two stacked cylinders at most
+    kinds = {s["type"] for s in json.loads((out / "boxes_1_spheres_2" / "collision.json").read_text())["shapes"]}
+    assert kinds <= {"box", "sphere"} and "box" in kinds
+    assert not (out / ".sdf_cache").exists()
     leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
     assert leftovers == []
 

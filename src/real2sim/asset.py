@@ -14,6 +14,7 @@ is the contract of DESIGN.md ("Files on disk"):
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +45,9 @@ class AssetConfig:
         paper does, which tilts squat objects such as a mug.
     fit_config / coacd_config / vhacd_config: None means each stage's defaults
         (the paper's settings, documented in those modules).
+    sdf_cache_dir: where signed-distance samples are cached across builds ("auto":
+        $REAL2SIM_CACHE or ~/.cache/real2sim); None caches them for this build only,
+        so several primitive SPECs of one build sample the mesh once.
     """
 
     mass_kg: float
@@ -58,7 +62,7 @@ class AssetConfig:
     fit_config: object | None = None
     coacd_config: object | None = None
     vhacd_config: object | None = None
-    sdf_cache_dir: Path | None = None
+    sdf_cache_dir: Path | str | None = None
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.mass_kg) and self.mass_kg > 0):
@@ -96,7 +100,8 @@ def geometry_only(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
 
 
 def build_collision(
-    mesh_canonical: trimesh.Trimesh, spec: CollisionSpec, rep_dir: Path, config: AssetConfig
+    mesh_canonical: trimesh.Trimesh, spec: CollisionSpec, rep_dir: Path, config: AssetConfig,
+    sdf_cache_dir: Path | str | None = None,
 ) -> tuple[CollisionGeometry, dict]:
     """One collision representation of the canonical mesh, with its fitting report.
 
@@ -120,7 +125,7 @@ def build_collision(
             mesh_canonical,
             spec,
             fit_config=config.fit_config or FitConfig(),
-            cache_dir=config.sdf_cache_dir,
+            cache_dir=sdf_cache_dir,
             device=config.device,
             seed=config.seed,
         )
@@ -184,11 +189,13 @@ def build_asset(
         write_physical_properties(props, tmp / "physical_properties.json")
 
         results = []
+        build_cache = tmp / ".sdf_cache"
+        sdf_cache = config.sdf_cache_dir if config.sdf_cache_dir is not None else build_cache
         for spec in config.specs:
             rep_dir = tmp / spec.name
             rep_dir.mkdir()
             say(f"collision {spec.text}: fitting")
-            geometry, report = build_collision(solid, spec, rep_dir, config)
+            geometry, report = build_collision(solid, spec, rep_dir, config, sdf_cache)
             write_collision_json(geometry, rep_dir / "collision.json")
             write_representation(
                 rep_dir, geometry, props, config.contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}",
@@ -207,5 +214,6 @@ def build_asset(
                 f"Chamfer {report.get('chamfer_mm', float('nan')):.2f} mm, {report['fit_seconds']:.1f} s"
             )
             results.append(RepresentationResult(spec.name, out_dir / spec.name / "model.urdf", report))
+        shutil.rmtree(build_cache, ignore_errors=True)
 
     return AssetResult(Path(out_dir), props, transform, tuple(results))

@@ -43,7 +43,16 @@ def add_asset_arguments(p: argparse.ArgumentParser) -> None:
                    help="model formats to write (repeatable; URDF always)")
     p.add_argument("--seed", type=int, default=0, help="random seed of sampling and fitting (default 0)")
     p.add_argument("--device", default="cpu", help="torch device for primitive fitting: cpu, cuda, cuda:N (default cpu)")
-    p.add_argument("--iterations", type=int, default=None, metavar="N", help="maximum fitting iterations (default: the fitter's)")
+    g = p.add_argument_group("primitive fitting (paper IV-C3)")
+    g.add_argument("--iterations", type=int, default=None, metavar="N", help="maximum fitting iterations (default 1000)")
+    g.add_argument("--fit-parameterization", choices=["direct", "network"], default=None,
+                   help="optimise the primitive parameters directly (default, measured better) or through the "
+                   "paper's over-parameterized network g_theta()")
+    g.add_argument("--fit-paper-loss", action="store_true",
+                   help="use eq. 9's linear hinge inside the object instead of the squared hinge (default)")
+    g.add_argument("--sdf-cache", default=None, metavar="DIR",
+                   help="cache signed-distance samples across runs in DIR ('auto': $REAL2SIM_CACHE or "
+                   "~/.cache/real2sim); default: within this build only")
     p.add_argument("--coacd-threshold", type=positive_float, default=0.05,
                    help="CoACD concavity threshold (default 0.05, the paper's setting)")
     p.add_argument("--coacd-max-hulls", type=int, default=-1, help="CoACD maximum convex hulls (-1: no limit)")
@@ -91,12 +100,22 @@ def config_from_args(args: argparse.Namespace):
         resolution_hint_m=args.resolution_hint,
     )
     fit_config = coacd_config = vhacd_config = None
-    if any(s.is_primitive_fit for s in specs) and args.iterations is not None:
-        from dataclasses import replace
+    fit_overrides = {}
+    if args.iterations is not None:
+        if args.iterations < 1:
+            from real2sim.errors import UserInputError
 
+            raise UserInputError(f"--iterations must be at least 1, got {args.iterations}")
+        fit_overrides["max_iterations"] = args.iterations
+        fit_overrides["min_iterations"] = min(args.iterations, 300)
+    if args.fit_parameterization:
+        fit_overrides["parameterization"] = args.fit_parameterization
+    if args.fit_paper_loss:
+        fit_overrides["inside_loss"] = "hinge"
+    if any(s.is_primitive_fit for s in specs) and fit_overrides:
         from real2sim.fitting import FitConfig
 
-        fit_config = replace(FitConfig(), max_iterations=args.iterations)
+        fit_config = FitConfig(**fit_overrides)
     if any(s.baseline == "coacd" for s in specs):
         from real2sim.decomposition import CoacdConfig
 
@@ -119,6 +138,7 @@ def config_from_args(args: argparse.Namespace):
         fit_config=fit_config,
         coacd_config=coacd_config,
         vhacd_config=vhacd_config,
+        sdf_cache_dir=args.sdf_cache,
     )
 
 
