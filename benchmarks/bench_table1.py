@@ -12,7 +12,6 @@ evaluation sweep (rows already in runs.csv are skipped). Writes docs/benchmarks/
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 from pathlib import Path
@@ -72,7 +71,6 @@ def main() -> int:
     parser.add_argument("--work", type=Path, default=ROOT / "benchmarks" / "out" / "table1")
     args = parser.parse_args()
 
-    from real2sim.cli import default_jobs
     from real2sim.evaluate import EvaluationConfig, evaluate
     from real2sim.report import paper_name, read_paper_table
 
@@ -82,7 +80,7 @@ def main() -> int:
     asset_dirs = build_assets(args.work, specs, args.seed)
     build_s = time.perf_counter() - start
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=("point", "hydroelastic"), runs=runs,
-                              seed=args.seed, jobs=args.jobs or default_jobs())
+                              seed=args.seed, **({"jobs": args.jobs} if args.jobs else {}))
     result = evaluate(asset_dirs, args.work / "results", config, progress=True)
     eval_s = time.perf_counter() - start - build_s
 

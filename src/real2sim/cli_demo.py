@@ -54,7 +54,6 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from real2sim.asset import AssetConfig, build_asset
-    from real2sim.cli import default_jobs
     from real2sim.evaluate import EvaluationConfig, evaluate
     from real2sim.objects import OBJECTS, export_object
     from real2sim.outputs import atomic_output_dir
@@ -75,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
 
             build_asset(mesh_path, tmp / "bottle_asset", config, log=log)
         eval_config = EvaluationConfig(
-            tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs, jobs=args.jobs or default_jobs()
+            tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs,
+            **({"jobs": args.jobs} if args.jobs else {}),
         )
         result = evaluate([tmp / "bottle_asset"], tmp / "results", eval_config, progress=True)
     minutes = (time.perf_counter() - start) / 60

@@ -53,6 +53,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from real2sim.errors import UserInputError
+from real2sim.outputs import publish_dir
 from real2sim.scenes import RunSpec, SceneConfig, make_run_specs
 
 TASKS = ("push", "ramp")
@@ -777,16 +778,6 @@ def _prepare_workdir(out_dir: Path, overwrite: bool) -> tuple[Path, Path, bool]:
     return target, partial, True
 
 
-def _publish(partial: Path, target: Path) -> None:
-    if target.exists():
-        old = target.with_name(f".{target.name}.old-{os.getpid()}")
-        target.rename(old)
-        partial.rename(target)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        partial.rename(target)
-
-
 def _prepare_inputs(assets: Sequence[Asset], config: EvaluationConfig, reference_mesh: Path | str | None,
                     partial: Path) -> tuple[EvaluationConfig, dict[str, Path]]:
     """Reference mesh per asset (placed ones written into ``partial``), the effective config,
@@ -882,7 +873,7 @@ def evaluate(
     from real2sim.report import build_outputs
 
     summary, plots, report_path = build_outputs(partial, all_rows)
-    _publish(partial, target)
+    publish_dir(partial, target)
     failed = sum(1 for r in all_rows if r["error"])
     return EvaluationResult(
         out_dir=target,

@@ -6,6 +6,7 @@ place at the end, so a crash or a bad input never leaves a half-written result.
 
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
 from contextlib import contextmanager
@@ -39,10 +40,15 @@ def atomic_output_dir(target: Path, overwrite: bool = False) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    publish_dir(tmp, target)
+
+
+def publish_dir(finished: Path, target: Path) -> None:
+    """Rename the finished folder to ``target``, replacing an existing ``target`` last."""
     if target.exists():
-        old = target.with_name(f".{target.name}.old-{tmp.name[-8:]}")
+        old = target.with_name(f".{target.name}.old-{finished.name[-8:]}-{os.getpid()}")
         target.rename(old)
-        tmp.rename(target)
+        finished.rename(target)
         shutil.rmtree(old, ignore_errors=True)
     else:
-        tmp.rename(target)
+        finished.rename(target)

@@ -27,7 +27,6 @@ state (candidates take the reference trajectory's first sample).
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
