@@ -36,7 +36,8 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int) -> list[Path]:
     """
     import shutil
 
-    from real2sim.asset import AssetConfig, build_asset
+    from real2sim.asset import AssetConfig, build_asset, rewrite_models
+    from real2sim.contact import ContactProperties
     from real2sim.objects import OBJECTS as BUNDLED
     from real2sim.objects import export_object
     from real2sim.spec import parse_spec
@@ -53,6 +54,8 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int) -> list[Path]:
                 build_asset(mesh, build, AssetConfig(mass_kg=BUNDLED[name].mass_kg, specs=(spec,), seed=seed),
                             overwrite=True)
                 print(f"built {name} {spec_text} in {time.perf_counter() - start:.1f} s", flush=True)
+            else:  # an earlier build: refresh its URDF with today's contact defaults, no refit
+                rewrite_models(build, ContactProperties())
             if not asset.exists():
                 shutil.copytree(build, asset, ignore=shutil.ignore_patterns(spec.name))
             if not (asset / spec.name).exists():

@@ -101,6 +101,7 @@ CONTACT = ContactProperties(
     hydroelastic="compliant",
     hydroelastic_modulus_pa=3.5e6,
     hunt_crossley_dissipation_s_per_m=2.5,
+    point_contact_stiffness_n_per_m=2.0e4,
     mu_static=0.7,
     mu_dynamic=0.45,
     resolution_hint_m=0.004,
@@ -216,6 +217,7 @@ def test_proximity_properties_read_back(asset, fmt):
         assert friction.static_friction() == pytest.approx(CONTACT.mu_static)
         assert friction.dynamic_friction() == pytest.approx(CONTACT.mu_dynamic)
         assert props.GetProperty("material", "hunt_crossley_dissipation") == pytest.approx(2.5)
+        assert props.GetProperty("material", "point_contact_stiffness") == pytest.approx(2.0e4)
         assert props.GetProperty("hydroelastic", "resolution_hint") == pytest.approx(0.004)
         if geometry.shapes[k].kind == "mesh":  # written rigid: a compliant .obj would become its hull
             assert not props.HasProperty("hydroelastic", "hydroelastic_modulus")

@@ -142,3 +142,17 @@ def test_asset_every_object_every_baseline(name, tmp_path, capsys):
                            "--collision", "coacd", "--collision", "vhacd", "--collision", "mesh")
     assert code == 0, err
     _check_asset_folder(out, ["coacd", "vhacd", "mesh"], OBJECTS[name].mass_kg)
+
+
+def test_rewrite_models_changes_contact_without_refitting(tmp_path, can_obj, capsys):
+    from real2sim.asset import rewrite_models
+    from real2sim.contact import ContactProperties
+
+    out = tmp_path / "can_asset"
+    assert run_cli(capsys, "asset", can_obj, "--mass", "0.35", "--out", out, "--collision", "mesh")[0] == 0
+    before = (out / "mesh" / "collision.json").read_text()
+    [urdf] = rewrite_models(out, ContactProperties(mu_static=0.9, mu_dynamic=0.8, point_contact_stiffness_n_per_m=5e4))
+    text = urdf.read_text()
+    assert 'mu_static value="0.9"' in text and 'point_contact_stiffness value="50000.0"' in text
+    assert (out / "mesh" / "collision.json").read_text() == before
+    _check_asset_folder(out, ["mesh"], 0.35)

@@ -217,3 +217,26 @@ def build_asset(
         shutil.rmtree(build_cache, ignore_errors=True)
 
     return AssetResult(Path(out_dir), props, transform, tuple(results))
+
+
+def rewrite_models(asset_dir: Path | str, contact: ContactProperties, formats: tuple[str, ...] = ("urdf",)) -> list[Path]:
+    """Re-write every representation's model files of an asset with new contact properties.
+
+    Geometry (collision.json) and mass properties (physical_properties.json) are
+    kept: changing friction, stiffness or hydroelastic settings needs no refit.
+    Returns the URDF paths written.
+    """
+    from real2sim.asset_writer import write_representation
+    from real2sim.collision import read_collision_json
+    from real2sim.physical import read_physical_properties
+
+    asset_dir = Path(asset_dir)
+    props = read_physical_properties(asset_dir / "physical_properties.json")
+    written = []
+    for collision_json in sorted(asset_dir.glob("*/collision.json")):
+        rep_dir = collision_json.parent
+        write_representation(rep_dir, read_collision_json(collision_json), props, contact,
+                             visual_mesh_relpath=f"../{VISUAL_RELPATH}", formats=formats, model_name=rep_dir.name)
+        written.append(rep_dir / "model.urdf")
+    return written
+

@@ -17,6 +17,8 @@ def add_contact_arguments(p: argparse.ArgumentParser) -> None:
                    help="hydroelastic type of the collision shapes (default: compliant, as the paper)")
     g.add_argument("--hydroelastic-modulus", type=positive_float, default=1.0e7, metavar="PA",
                    help="hydroelastic modulus, Pa (default 1e7)")
+    g.add_argument("--point-stiffness", type=positive_float, default=1.0e4, metavar="N_PER_M",
+                   help="point-contact stiffness, N/m (default 1e4)")
     g.add_argument("--dissipation", type=positive_float, default=1.0, metavar="S_PER_M",
                    help="Hunt-Crossley dissipation, s/m (default 1.0)")
     g.add_argument("--mu-static", type=positive_float, default=0.5, help="static friction coefficient (default 0.5)")
@@ -94,6 +96,7 @@ def config_from_args(args: argparse.Namespace):
     contact = ContactProperties(
         hydroelastic=args.hydroelastic,
         hydroelastic_modulus_pa=args.hydroelastic_modulus,
+        point_contact_stiffness_n_per_m=args.point_stiffness,
         hunt_crossley_dissipation_s_per_m=args.dissipation,
         mu_static=args.mu_static,
         mu_dynamic=args.mu_dynamic,
