@@ -106,8 +106,9 @@ def main() -> int:
     for metric, paper_gain in (("ocae_m", 47.4), ("cpd_m_per_s", 73.1)):
         bp, bc = best(metric, is_prim), best(metric, is_coacd)
         gain = 100 * (1 - bp[1] / bc[1]) if bc[1] == bc[1] and bc[1] > 0 else float("nan")
+        verdict = f"{gain:.1f}% lower" if gain >= 0 else f"{-gain:.1f}% higher"
         lines.append(f"- best primitive {metric}: {bp[0]} {bp[1]:.4g} vs best CoACD {bc[0]} {bc[1]:.4g}: "
-                     f"{gain:.1f}% lower (paper: {paper_gain}% lower)")
+                     f"{verdict} (paper: {paper_gain}% lower)")
     body = (
         f"Objects: bundled bottle and can. Tasks: push, ramp. Contact: point, hydroelastic. Runs: {runs} per "
         f"object and task (seed {args.seed}). Equation error (resets every 0.1 s) against the full closed mesh "

@@ -22,12 +22,12 @@ class DemoPlan:
     runs: int
 
 
-# Full: about 10 minutes on 2 cores; quick: about 3 (CI runs it).
+# Full: about 5 minutes on 2 cores (measured, docs/benchmarks.md); quick: about 1 (CI runs it).
 FULL = DemoPlan(
-    specs=("cylinders:10", "boxes:50", "spheres:64", "rotated_boxes:20", "coacd"),
+    specs=("cylinders:10", "boxes:50", "spheres:64", "ellipsoids:32", "rotated_boxes:20", "coacd"),
     tasks=("push", "ramp"),
     contact_models=("point", "hydroelastic"),
-    runs=2,
+    runs=3,
 )
 QUICK = DemoPlan(specs=("cylinders:4", "spheres:16", "coacd"), tasks=("push", "ramp"), contact_models=("point", "hydroelastic"), runs=1)
 
@@ -39,7 +39,7 @@ def register(sub) -> None:
         description="Exports the bundled mustard-like bottle, builds an asset with several collision "
         "representations plus CoACD, evaluates each in Drake (planar pushing, actuated ramp; point and "
         "hydroelastic contact) against the bottle's full mesh, and writes Pareto plots and report.html. "
-        "About 10 minutes on 2 CPU cores; --quick about 3.",
+        "About 5 minutes on 2 CPU cores; --quick about 1.",
     )
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default demo_out)")
     p.add_argument("--quick", action="store_true", help="fewer, smaller representations and one run per task")
