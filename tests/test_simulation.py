@@ -47,8 +47,9 @@ def test_push_moves_the_object_along_the_approach(can_asset):
     # The pusher tracked its line: it travelled speed * push duration along u.
     travel = traj.actuated_positions[-1] - traj.actuated_positions[0]
     assert travel @ u == pytest.approx(0.2 * 0.25, abs=0.005)
-    # Contact with floor only before the pusher arrives, floor + pusher at the end.
-    assert len(traj.contact_points_object_m[40]) == 1
+    # Contact with floor only before the pusher arrives (at 0.1 s: the 1 mm drop's one
+    # small bounce on the soft point contact is over by 0.06 s), floor + pusher at the end.
+    assert len(traj.contact_points_object_m[100]) == 1
     assert len(traj.contact_points_object_m[-1]) == 2
     assert traj.sim_time_s > 0 and traj.sim_duration_s == pytest.approx(0.3)
 
