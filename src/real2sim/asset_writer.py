@@ -219,6 +219,12 @@ def build_urdf(
     return robot
 
 
+def _xml_text(root: ET.Element) -> str:
+    """Indented XML document text of ``root``."""
+    ET.indent(root, space=" ")
+    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
 def write_model_urdf_string(
     geometry: CollisionGeometry,
     props: PhysicalProperties,
@@ -228,9 +234,7 @@ def write_model_urdf_string(
     link_name: str = LINK_NAME,
 ) -> str:
     """The URDF text (UTF-8 XML with the ``drake`` namespace declared on ``<robot>``)."""
-    root = build_urdf(geometry, props, contact, visual_mesh_relpath, model_name, link_name)
-    ET.indent(root, space=" ")
-    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    return _xml_text(build_urdf(geometry, props, contact, visual_mesh_relpath, model_name, link_name))
 
 
 # ----------------------------------------------------------------------------------------
@@ -322,9 +326,7 @@ def write_model_sdf_string(
     link_name: str = LINK_NAME,
 ) -> str:
     """The SDFormat text (``xmlns:drake`` declared on ``<sdf>``)."""
-    root = build_sdf(geometry, props, contact, visual_mesh_relpath, model_name, link_name)
-    ET.indent(root, space=" ")
-    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    return _xml_text(build_sdf(geometry, props, contact, visual_mesh_relpath, model_name, link_name))
 
 
 # ----------------------------------------------------------------------------------------
