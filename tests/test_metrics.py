@@ -151,3 +151,40 @@ def test_cpd_breaks_cut_the_series_like_gaps():
 def test_real_time_factor():
     assert real_time_factor(2.0, 0.5) == pytest.approx(4.0)
     assert math.isnan(real_time_factor(2.0, 0.0))
+
+
+def test_force_weighted_cpd_ignores_a_contact_that_carries_no_load():
+    """A loaded contact at 0.05 m and a flickering one at 0.10 m: unweighted, every flicker
+    is a jump of the mean; weighted by force, a zero-load flicker changes nothing."""
+    dt = 0.001
+    loaded = np.array([[0.05, 0.0, 0.0]])
+    both = np.array([[0.05, 0.0, 0.0], [0.10, 0.0, 0.0]])
+    pts = [both if t % 4 < 2 else loaded for t in range(40)]
+    forces = [np.array([[0.0, 0.0, 5.0], [0.0, 0.0, 0.0]]) if t % 4 < 2 else np.array([[0.0, 0.0, 5.0]])
+              for t in range(40)]
+    assert cpd_m_per_s(pts, dt) > 1.0
+    assert cpd_m_per_s(pts, dt, contact_forces_n=forces) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_force_weighted_cpd_is_the_force_weighted_mean_radius():
+    dt = 0.001
+    # Radii 0.02 and 0.06 m with loads 3:1 -> weighted mean 0.03 m; then loads 1:1 -> 0.04 m.
+    pts = [np.array([[0.02, 0.0, 0.0], [0.0, 0.06, 0.0]])] * 10
+    forces = [np.array([[3.0, 0, 0], [1.0, 0, 0]])] * 5 + [np.array([[0, 2.0, 0], [0, 0, -2.0]])] * 5
+    series_jump = 0.01
+    # The single step of 0.01 m shows up in two central differences of 0.01 / (2 dt) each.
+    expected = 2 * (series_jump / (2 * dt)) / 10
+    assert cpd_m_per_s(pts, dt, contact_forces_n=forces) == pytest.approx(expected, rel=1e-9)
+    # Unweighted the radius never changes.
+    assert cpd_m_per_s(pts, dt) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_force_weighted_cpd_treats_unloaded_steps_as_no_contact():
+    dt = 0.001
+    pts = [np.array([[0.05, 0.0, 0.0]])] * 10
+    forces = [np.zeros((1, 3))] * 10
+    assert math.isnan(cpd_m_per_s(pts, dt, contact_forces_n=forces))
+    with pytest.raises(ValueError):
+        cpd_m_per_s(pts, dt, contact_forces_n=forces[:3])
+    with pytest.raises(ValueError):
+        cpd_m_per_s(pts, dt, contact_forces_n=[np.zeros((2, 3))] * 10)

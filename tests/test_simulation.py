@@ -56,10 +56,10 @@ def test_push_moves_the_object_along_the_approach(can_asset):
 
 @pytest.mark.parametrize("contact_model", ["point", "hydroelastic"])
 def test_contact_points_are_in_the_object_frame(can_asset, contact_model):
-    mesh_path, urdf, _ = can_asset
+    mesh_path, urdf, props = can_asset
     spec = make_run_specs("push", 1, seed=0)[0]
-    # Resting can, floor contact only.
-    cfg = dataclasses.replace(SHORT_PUSH, settle_s=0.15, push_duration_s=0.0)
+    # Resting can, floor contact only (settled after about 0.25 s).
+    cfg = dataclasses.replace(SHORT_PUSH, settle_s=0.35, push_duration_s=0.0)
     traj = simulate_candidate(urdf, contact_model, spec, cfg, initial_mesh_path=mesh_path)
     steps = [i for i in range(20, len(traj.times_s)) if len(traj.contact_points_object_m[i])]
     assert len(steps) > 100
@@ -78,6 +78,18 @@ def test_contact_points_are_in_the_object_frame(can_asset, contact_model):
         R = RotationMatrix(Quaternion(q / np.linalg.norm(q))).matrix()
         p_w = traj.contact_points_object_m[i] @ R.T + traj.object_position_m[i]
         assert np.all(np.abs(p_w[:, 2]) < 1.5e-3)
+    # One force per contact point; at rest the floor carries the weight: the mean net
+    # contact force on the object, back in the world, is m g upward.
+    assert [len(f) for f in traj.contact_forces_object_n] == [len(p) for p in traj.contact_points_object_m]
+    late = [i for i in steps if i >= 250]
+    net_w = []
+    for i in late:
+        q = traj.object_quaternion_wxyz[i]
+        R = RotationMatrix(Quaternion(q / np.linalg.norm(q))).matrix()
+        net_w.append((traj.contact_forces_object_n[i] @ R.T).sum(axis=0))
+    mean_net_w = np.mean(net_w, axis=0)
+    assert mean_net_w[2] == pytest.approx(props.mass_kg * 9.81, rel=0.02)
+    assert np.linalg.norm(mean_net_w[:2]) < 0.05 * mean_net_w[2]
 
 
 def test_contact_points_belong_to_the_logged_pose_of_a_fast_rolling_can(can_asset):

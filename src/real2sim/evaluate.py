@@ -61,13 +61,17 @@ CONTACT_MODELS = ("point", "hydroelastic")
 EXECUTORS = ("local", "ray")
 RUN_COLUMNS = (
     "object", "representation", "contact_model", "task", "run", "ate_m", "ocae_m", "cpd_m_per_s",
-    "sim_time_s", "sim_duration_s", "real_time_factor", "error",
+    "cpd_force_weighted_m_per_s", "sim_time_s", "sim_duration_s", "real_time_factor", "error",
 )
+# Added after the first release: a runs.csv without them still reads (as NaN).
+_OPTIONAL_RUN_COLUMNS = ("cpd_force_weighted_m_per_s",)
 KEY_COLUMNS = ("object", "representation", "contact_model", "task", "run")
-FLOAT_COLUMNS = ("ate_m", "ocae_m", "cpd_m_per_s", "sim_time_s", "sim_duration_s", "real_time_factor")
+FLOAT_COLUMNS = ("ate_m", "ocae_m", "cpd_m_per_s", "cpd_force_weighted_m_per_s", "sim_time_s", "sim_duration_s",
+                 "real_time_factor")
 SUMMARY_COLUMNS = (
     "representation", "ocae_m", "ate_m", "cpd_m_per_s", "sim_time_s",  # the layout of the paper's Table I
-    "collision", "contact_model", "sim_duration_s", "real_time_factor", "runs_ok", "runs_failed",
+    "cpd_force_weighted_m_per_s", "collision", "contact_model", "sim_duration_s", "real_time_factor",
+    "runs_ok", "runs_failed",
 )
 # Settings that change the meaning of a row: a resumed sweep must use the same ones.
 _PINNED_SETTINGS = ("seed", "scene", "simulation_error", "reference")
@@ -262,7 +266,8 @@ def _sign_continuous(q: np.ndarray) -> np.ndarray:
 
 
 def score(reference: Any, candidate: Any, lever_m: float = 1.0) -> dict[str, float]:
-    """ATE, OCAE (m) of ``candidate`` against ``reference``, and the candidate's CPD (m/s)."""
+    """ATE, OCAE (m) of ``candidate`` against ``reference``, and the candidate's CPD (m/s), as the
+    paper defines it and force-weighted (:func:`real2sim.metrics.cpd_m_per_s`)."""
     from real2sim.metrics import ate_m, cpd_m_per_s, ocae_m, real_time_factor
 
     p_ref, q_ref, p_c, q_c = _align(reference, candidate)
@@ -272,10 +277,14 @@ def score(reference: Any, candidate: Any, lever_m: float = 1.0) -> dict[str, flo
     # contact series there, so that the reset's jump does not count as a discontinuity.
     breaks = np.asarray(getattr(candidate, "reset_steps", ()), dtype=int) + 1
     cpd = cpd_m_per_s(candidate.contact_points_object_m, dt_s, breaks) if math.isfinite(dt_s) else float("nan")
+    forces = getattr(candidate, "contact_forces_object_n", None)
+    cpd_fw = (cpd_m_per_s(candidate.contact_points_object_m, dt_s, breaks, contact_forces_n=forces)
+              if forces and math.isfinite(dt_s) else float("nan"))
     return {
         "ate_m": ate_m(p_ref, p_c),
         "ocae_m": ocae_m(p_ref, q_ref, p_c, q_c, lever_m=lever_m),
         "cpd_m_per_s": cpd,
+        "cpd_force_weighted_m_per_s": cpd_fw,
         "sim_time_s": float(candidate.sim_time_s),
         "sim_duration_s": float(candidate.sim_duration_s),
         "real_time_factor": real_time_factor(candidate.sim_duration_s, candidate.sim_time_s),
@@ -629,14 +638,14 @@ def read_runs_csv(path: Path) -> list[dict]:
     rows = []
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
-        missing = set(RUN_COLUMNS) - set(reader.fieldnames or ())
+        missing = set(RUN_COLUMNS) - set(reader.fieldnames or ()) - set(_OPTIONAL_RUN_COLUMNS)
         if missing:
             raise UserInputError(f"{path} is not a runs.csv (missing columns {', '.join(sorted(missing))})")
         for raw in reader:
-            row: dict[str, Any] = {c: raw[c] for c in RUN_COLUMNS}
+            row: dict[str, Any] = {c: raw.get(c, "") for c in RUN_COLUMNS}
             row["run"] = int(raw["run"])
             for c in FLOAT_COLUMNS:
-                row[c] = float(raw[c]) if raw[c] not in ("", None) else math.nan
+                row[c] = float(raw.get(c) or "nan")
             row["error"] = raw["error"] or ""
             rows.append(row)
     return rows
@@ -662,7 +671,7 @@ def summarize(rows: Sequence[dict]) -> list[dict]:
         ok = [r for r in group if not r["error"]]
 
         def mean(col: str, src=ok) -> float:
-            vals = np.array([r[col] for r in src], dtype=float)
+            vals = np.array([r.get(col, math.nan) for r in src], dtype=float)
             vals = vals[np.isfinite(vals)]
             return float(np.mean(vals)) if len(vals) else math.nan
 
@@ -674,6 +683,7 @@ def summarize(rows: Sequence[dict]) -> list[dict]:
             "ate_m": mean("ate_m"),
             "cpd_m_per_s": mean("cpd_m_per_s"),
             "sim_time_s": mean("sim_time_s"),
+            "cpd_force_weighted_m_per_s": mean("cpd_force_weighted_m_per_s"),
             "collision": rep,
             "contact_model": cm,
             "sim_duration_s": mean("sim_duration_s"),
@@ -689,7 +699,7 @@ def read_summary_csv(path: Path) -> list[dict]:
     with open(path, newline="") as fh:
         for raw in csv.DictReader(fh):
             row: dict[str, Any] = dict(raw)
-            for c in ("ocae_m", "ate_m", "cpd_m_per_s", "sim_time_s", "sim_duration_s", "real_time_factor"):
+            for c in FLOAT_COLUMNS:
                 if c in row:
                     row[c] = float(row[c]) if row[c] not in ("", None) else math.nan
             for c in ("runs_ok", "runs_failed"):
@@ -737,6 +747,8 @@ def _config_record(config: EvaluationConfig, assets: Sequence[Asset], reference_
             "ocae_m": "mean ATE of three points at 1 m along the object's x, y, z axes",
             "cpd_m_per_s": "mean |d/dt| (central differences) of the mean contact-point distance from the "
             "object origin, inside contiguous contact runs of >= 3 steps, cut at equation-error resets",
+            "cpd_force_weighted_m_per_s": "as cpd_m_per_s, with the mean contact-point distance weighted by "
+            "contact force magnitude (not in the paper)",
             "sim_time_s": "wall-clock seconds per candidate simulation (measured under the sweep's parallel load)",
         },
         "software": {"python": platform.python_version(), "drake": drake_version, "machine": platform.machine(),

@@ -92,16 +92,34 @@ def ocae_m(
     return float(np.mean(per_point_ate))
 
 
-def contact_magnitude_series(contact_points_object: Sequence[np.ndarray]) -> np.ndarray:
+def contact_magnitude_series(contact_points_object: Sequence[np.ndarray],
+                             contact_forces_n: Sequence[np.ndarray] | None = None) -> np.ndarray:
     """Per step, the mean distance (m) of the contact points from the object-frame origin.
+
+    ``contact_forces_n``: optional, per step the (k_t, 3) contact forces (N) at those
+    points (any frame: only their magnitudes are used). When given, the mean is weighted
+    by force magnitude, so a contact that carries almost no load moves the series
+    almost not at all when it appears or vanishes; steps whose forces sum to zero count
+    as steps without contact.
 
     Steps without contact are NaN (not zero: a zero would be a fake jump to the origin).
     """
+    if contact_forces_n is not None and len(contact_forces_n) != len(contact_points_object):
+        raise ValueError("contact_forces_n must have one entry per step of contact_points_object")
     out = np.full(len(contact_points_object), np.nan)
     for t, pts in enumerate(contact_points_object):
         pts = np.asarray(pts, dtype=float).reshape(-1, 3)
-        if len(pts):
-            out[t] = float(np.mean(np.linalg.norm(pts, axis=1)))
+        if not len(pts):
+            continue
+        radii = np.linalg.norm(pts, axis=1)
+        if contact_forces_n is None:
+            out[t] = float(np.mean(radii))
+            continue
+        w = np.linalg.norm(np.asarray(contact_forces_n[t], dtype=float).reshape(-1, 3), axis=1)
+        if len(w) != len(pts):
+            raise ValueError(f"step {t}: {len(pts)} contact points but {len(w)} forces")
+        if w.sum() > 0:
+            out[t] = float(np.dot(w, radii) / w.sum())
     return out
 
 
@@ -126,7 +144,8 @@ def contact_runs(valid: np.ndarray, min_length: int = MIN_CONTACT_RUN,
     return out
 
 
-def cpd_m_per_s(contact_points_object: Sequence[np.ndarray], dt_s: float, breaks: Sequence[int] = ()) -> float:
+def cpd_m_per_s(contact_points_object: Sequence[np.ndarray], dt_s: float, breaks: Sequence[int] = (),
+                contact_forces_n: Sequence[np.ndarray] | None = None) -> float:
     """Contact point discontinuity (paper V-C), metres per second.
 
     1. Per step, the mean magnitude of the object's contact points in the object frame
@@ -146,10 +165,16 @@ def cpd_m_per_s(contact_points_object: Sequence[np.ndarray], dt_s: float, breaks
     ``breaks``: sample indices where the series is cut as if by a gap -- the evaluation
     passes the first sample after each equation-error reset, because a jump caused by
     setting the state to the reference's is the protocol's, not the geometry's.
+
+    ``contact_forces_n``: when given, step 1 weights each point by its force magnitude
+    (:func:`contact_magnitude_series`). This is not the paper's definition; it is
+    reported beside it because the paper motivates CPD by the continuity of contact
+    *forces*, and the unweighted mean jumps whenever a contact that carries almost no
+    load flickers in or out (typical of many small primitives resting on a floor).
     """
     if not (np.isfinite(dt_s) and dt_s > 0):
         raise ValueError("dt_s must be positive")
-    series = contact_magnitude_series(contact_points_object)
+    series = contact_magnitude_series(contact_points_object, contact_forces_n)
     runs = contact_runs(np.isfinite(series), breaks=breaks)
     grads = [np.gradient(series[a:b], dt_s, edge_order=2) for a, b in runs]
     if not grads:

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +57,10 @@ class Trajectory:
         contact point; hydroelastic -> each contact surface's centroid. They are the
         contacts of that sample's state (what the next step's contact forces act at;
         Drake's unsampled contact-results port), at a reset step those of the prediction.
+    contact_forces_object_n: per sample, (k_t, 3) the contact force on the object at each
+        of those points, N, expressed in the object frame (point contact: the pair's
+        force; hydroelastic: the surface's net force). Only used to weight the
+        force-weighted CPD; empty in trajectories saved before it existed.
     sim_time_s: wall seconds of the bare timed run (see module docstring).
     sim_duration_s: simulated seconds.
     instrumented_time_s: wall seconds of the per-step logging run.
@@ -80,6 +84,7 @@ class Trajectory:
     contact_model: str
     representation: str
     run: int
+    contact_forces_object_n: list = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -200,6 +205,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     aq = np.empty((n + 1, na))
     av = np.empty((n + 1, na))
     contacts_w: list[np.ndarray] = []
+    forces_w: list[np.ndarray] = []
     obj_index = scene.object_body.index()
     obj_geoms = scene.object_geometry_ids
     port = plant.get_contact_results_output_port()
@@ -213,16 +219,28 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
 
     def log_contacts() -> None:
         results = port.Eval(pctx)
-        pts = []
+        pts, forces = [], []
         for k in range(results.num_point_pair_contacts()):
             info = results.point_pair_contact_info(k)
-            if info.bodyA_index() == obj_index or info.bodyB_index() == obj_index:
+            # contact_force() acts on body B; the object feels minus that when it is body A.
+            if info.bodyB_index() == obj_index:
                 pts.append(info.contact_point())
+                forces.append(info.contact_force())
+            elif info.bodyA_index() == obj_index:
+                pts.append(info.contact_point())
+                forces.append(-info.contact_force())
         for k in range(results.num_hydroelastic_contacts()):
-            surface = results.hydroelastic_contact_info(k).contact_surface()
-            if surface.id_M() in obj_geoms or surface.id_N() in obj_geoms:
+            info = results.hydroelastic_contact_info(k)
+            surface = info.contact_surface()
+            # F_Ac_W acts on the body of geometry M at the centroid; N's body feels minus it.
+            if surface.id_M() in obj_geoms:
                 pts.append(surface.centroid())
+                forces.append(info.F_Ac_W().translational())
+            elif surface.id_N() in obj_geoms:
+                pts.append(surface.centroid())
+                forces.append(-info.F_Ac_W().translational())
         contacts_w.append(np.asarray(pts, dtype=float).reshape(-1, 3))
+        forces_w.append(np.asarray(forces, dtype=float).reshape(-1, 3))
 
     log(0)
     log_contacts()
@@ -243,17 +261,19 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
                       f"{np.abs(plant.GetPositions(pctx) - timed_final_q).max():.3g}); "
                       "sim_time_s timed a different rollout", RuntimeWarning, stacklevel=3)
 
-    contacts_o = []
-    for i, pw in enumerate(contacts_w):
+    contacts_o, forces_o = [], []
+    for i, (pw, fw) in enumerate(zip(contacts_w, forces_w)):
         if len(pw) == 0:
             contacts_o.append(np.zeros((0, 3)))
+            forces_o.append(np.zeros((0, 3)))
             continue
         R = RotationMatrix(Quaternion(oq[i, :4] / np.linalg.norm(oq[i, :4]))).matrix()
         contacts_o.append((pw - oq[i, 4:]) @ R)
+        forces_o.append(fw @ R)
     return Trajectory(times_s=np.arange(n + 1) * dt, object_position_m=oq[:, 4:].copy(),
                       object_quaternion_wxyz=oq[:, :4].copy(), object_spatial_velocity=ov,
                       actuated_positions=aq, actuated_velocities=av,
-                      contact_points_object_m=contacts_o, sim_time_s=sim_time_s,
+                      contact_points_object_m=contacts_o, contact_forces_object_n=forces_o, sim_time_s=sim_time_s,
                       sim_duration_s=n * dt, instrumented_time_s=instrumented_time_s,
                       reset_steps=reset_steps, task=scene.task, contact_model=scene.contact_model,
                       representation=representation, run=run)
