@@ -15,7 +15,7 @@ $(PY):
 
 $(STAMP): $(PY) pyproject.toml
 	@$(PY) -c "import torch" 2>/dev/null || $(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e ".[test,capture]"
+	$(PY) -m pip install -q -e ".[test,capture,maskrcnn]"
 	@touch $(STAMP)
 
 install: $(STAMP)

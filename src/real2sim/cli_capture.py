@@ -6,6 +6,16 @@ import argparse
 from pathlib import Path
 
 
+def _pos_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
 def _nonneg_float(text: str) -> float:
     try:
         value = float(text)
@@ -83,6 +93,13 @@ def register(sub) -> None:
     p.add_argument("--threshold", type=_nonneg_float, default=12.0,
                    help="background difference threshold, 0-255 (default 12)")
     p.add_argument("--device", default="cpu", help="torch device for Mask R-CNN (default cpu)")
+    p.add_argument("--maskrcnn-min-size", type=_pos_int, default=800, metavar="PX",
+                   help="Mask R-CNN resizes the shorter image side to this, px (default 800, as trained; "
+                   "smaller is faster on a CPU)")
+    p.add_argument("--maskrcnn-max-size", type=_pos_int, default=1333, metavar="PX",
+                   help="upper bound on the longer side after resizing, px (default 1333)")
+    p.add_argument("--maskrcnn-max-instances", type=_pos_int, default=100, metavar="N",
+                   help="detections kept per image before choosing the object (default 100)")
     p.set_defaults(func=run_mask)
 
 
@@ -150,7 +167,9 @@ def run_mask(args: argparse.Namespace) -> int:
 
     from real2sim.masking import MaskConfig, compute_masks
 
-    cfg = MaskConfig(threshold=args.threshold, weights=args.weights, device=args.device)
+    cfg = MaskConfig(threshold=args.threshold, weights=args.weights, device=args.device,
+                     maskrcnn_min_size_px=args.maskrcnn_min_size, maskrcnn_max_size_px=args.maskrcnn_max_size,
+                     maskrcnn_max_instances=args.maskrcnn_max_instances)
     with Progress(transient=True) as bar:
         task = bar.add_task(f"masks ({args.method})", total=None)
         result = compute_masks(args.dataset, args.method, cfg,

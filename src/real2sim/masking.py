@@ -9,7 +9,8 @@ convention). Methods:
   file ``masks/<image stem>.png``; checked for existence and size.
 - ``maskrcnn``: torchvision's Mask R-CNN (ResNet-50 FPN) from a local weights
   file; a pixel is the object where the top-scoring instance's mask probability
-  exceeds 0.5 (as in the paper). torchvision is an optional dependency.
+  exceeds 0.5 (as in the paper). torchvision is an optional dependency (extra
+  ``maskrcnn``), imported through :mod:`real2sim.torchvision_compat`.
 - ``background``: difference to an image of the empty scene from the same pose
   (``background/<image name>``), thresholded, cleaned with morphology, holes filled.
 
@@ -45,7 +46,13 @@ class MaskConfig:
     ``open_px`` / ``close_px``: structuring-element radii (pixels) of the opening (removes
     speckle) and closing (joins parts the threshold split). ``min_area_fraction``:
     connected components smaller than this fraction of the largest are dropped.
-    ``score_threshold`` / ``mask_threshold``: Mask R-CNN instance score and per-pixel probability."""
+    ``score_threshold`` / ``mask_threshold``: Mask R-CNN instance score and per-pixel probability.
+    ``maskrcnn_min_size_px`` / ``maskrcnn_max_size_px``: Mask R-CNN resizes each image so that
+    its short side is ``min`` pixels unless its long side would exceed ``max`` (torchvision's
+    defaults 800 / 1333, which the COCO weights were trained with); smaller is faster on a CPU
+    (about quadratically) and coarser. Masks always come back at the image's own size.
+    ``maskrcnn_max_instances``: most detections per image (torchvision's default 100); each
+    costs a mask-head pass, and only the top-scoring ones can be picked."""
 
     threshold: float = 12.0
     low_threshold: float | None = None
@@ -58,6 +65,9 @@ class MaskConfig:
     mask_threshold: float = 0.5
     weights: Path | None = None
     device: str = "cpu"
+    maskrcnn_min_size_px: int = 800
+    maskrcnn_max_size_px: int = 1333
+    maskrcnn_max_instances: int = 100
 
 
 @dataclass(frozen=True)
@@ -134,23 +144,33 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
 # ----------------------------------------------------------------------------- Mask R-CNN
 
 
-def load_maskrcnn(weights: Path | str | None, device: str = "cpu"):
+def load_maskrcnn(weights: Path | str | None, device: str = "cpu", min_size_px: int = 800,
+                  max_size_px: int = 1333, score_threshold: float = 0.05, max_instances: int = 100):
     """torchvision Mask R-CNN (ResNet-50 FPN) with weights from a local file; never downloads.
 
     The file holds a state dict (or a checkpoint with a ``model`` entry) for the
     COCO layout (91 classes) or any class count (inferred from the box predictor).
+    ``min_size_px`` / ``max_size_px``: the model's internal resize (see :class:`MaskConfig`).
+    ``score_threshold``: detections scoring at most this are dropped inside the model
+    (torchvision's ``box_score_thresh``); passing :func:`maskrcnn_mask`'s own threshold
+    gives the same selected instance -- a lower-scoring box never suppresses a higher one
+    in NMS -- and spares the mask head the boxes that could never be picked.
+    ``max_instances``: torchvision's ``box_detections_per_img``.
+    torchvision is imported through :mod:`real2sim.torchvision_compat`, which makes a
+    CUDA build of torchvision usable on a CPU-only torch (its NMS replaced by ours).
     """
     if weights is None:
         raise UserInputError("--method maskrcnn needs --weights PATH (a local Mask R-CNN weights file)")
     weights = Path(weights)
     if not weights.is_file():
         raise UserInputError(f"Mask R-CNN weights file not found: {weights}")
-    try:
-        from torchvision.models.detection import maskrcnn_resnet50_fpn
-    except ImportError:
-        raise UserInputError(
-            "--method maskrcnn needs torchvision, which is not installed (install the torchvision build "
-            "matching your torch, or use --method background / provided)") from None
+    if not (0 < int(min_size_px) <= int(max_size_px)):
+        raise UserInputError(f"Mask R-CNN resize needs 0 < min size <= max size (got {min_size_px}, {max_size_px} px)")
+    if int(max_instances) < 1:
+        raise UserInputError(f"Mask R-CNN needs at least 1 instance per image (got {max_instances})")
+    from real2sim.torchvision_compat import import_maskrcnn_builder
+
+    maskrcnn_resnet50_fpn = import_maskrcnn_builder()  # UserInputError when torchvision is missing
     import torch
 
     try:
@@ -162,7 +182,9 @@ def load_maskrcnn(weights: Path | str | None, device: str = "cpu"):
     key = "roi_heads.box_predictor.cls_score.weight"
     if not isinstance(state, dict) or key not in state:
         raise UserInputError(f"{weights} is not a torchvision Mask R-CNN state dict (no {key})")
-    model = maskrcnn_resnet50_fpn(weights=None, weights_backbone=None, num_classes=int(state[key].shape[0]))
+    model = maskrcnn_resnet50_fpn(weights=None, weights_backbone=None, num_classes=int(state[key].shape[0]),
+                                  min_size=int(min_size_px), max_size=int(max_size_px),
+                                  box_score_thresh=float(score_threshold), box_detections_per_img=int(max_instances))
     try:
         model.load_state_dict(state)
     except RuntimeError as exc:
@@ -177,7 +199,8 @@ def maskrcnn_mask(model, image: np.ndarray, cfg: MaskConfig) -> np.ndarray:
     since the capture points the camera at the object."""
     import torch
 
-    x = torch.from_numpy(image).permute(2, 0, 1).float().div(255.0).to(cfg.device)
+    # A copy: decoded images can be read-only arrays, which torch.from_numpy warns about.
+    x = torch.from_numpy(np.array(image, dtype=np.uint8)).permute(2, 0, 1).float().div(255.0).to(cfg.device)
     with torch.no_grad():
         out = model([x])[0]
     scores = out["scores"].cpu().numpy()
@@ -254,7 +277,8 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
                                  "capture with --with-background")
         model = None
     else:
-        model = load_maskrcnn(cfg.weights, cfg.device)
+        model = load_maskrcnn(cfg.weights, cfg.device, cfg.maskrcnn_min_size_px, cfg.maskrcnn_max_size_px,
+                              cfg.score_threshold, cfg.maskrcnn_max_instances)
 
     from PIL import Image
 
