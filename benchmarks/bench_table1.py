@@ -26,13 +26,15 @@ QUICK_SPECS = ("boxes:10", "cylinders:10", "spheres:64", "coacd")
 OBJECTS = ("bottle", "can")
 
 
-def build_assets(work: Path, specs: tuple[str, ...], seed: int) -> list[Path]:
+def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None) -> list[Path]:
     """One asset folder per object holding every SPEC.
 
     Each SPEC is built alone into work/build/<object>/<SPEC> (so an interrupted run
     resumes per SPEC), then the representation folders are gathered into
     work/assets/<object>; the shared files are identical across builds (same mesh,
-    same seed), so one evaluation reference serves them all.
+    same seed), so one evaluation reference serves them all. Every URDF is then
+    rewritten with ``contact`` (default: ``ContactProperties()``), so the gathered
+    copies never keep the contact settings of an earlier run.
     """
     import shutil
 
@@ -54,12 +56,11 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int) -> list[Path]:
                 build_asset(mesh, build, AssetConfig(mass_kg=BUNDLED[name].mass_kg, specs=(spec,), seed=seed),
                             overwrite=True)
                 print(f"built {name} {spec_text} in {time.perf_counter() - start:.1f} s", flush=True)
-            else:  # an earlier build: refresh its URDF with today's contact defaults, no refit
-                rewrite_models(build, ContactProperties())
             if not asset.exists():
                 shutil.copytree(build, asset, ignore=shutil.ignore_patterns(spec.name))
             if not (asset / spec.name).exists():
                 shutil.copytree(build / spec.name, asset / spec.name)
+        rewrite_models(asset, contact or ContactProperties())  # no refit: contact settings only
         assets.append(asset)
     return assets
 
@@ -93,6 +94,12 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=None)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--work", type=Path, default=ROOT / "benchmarks" / "out" / "table1")
+    parser.add_argument("--contact", nargs="+", default=["point", "hydroelastic"], choices=["point", "hydroelastic"])
+    parser.add_argument("--dissipation", type=float, default=None, metavar="S_PER_M",
+                        help="Hunt-Crossley dissipation written into the candidates' URDFs (default: "
+                        "ContactProperties'); the reference keeps the default")
+    parser.add_argument("--tag", default=None,
+                        help="results in <work>/results_<tag>, section docs/benchmarks/table1_<tag>.md")
     args = parser.parse_args()
 
     from real2sim.evaluate import EvaluationConfig, evaluate
@@ -101,11 +108,16 @@ def main() -> int:
     specs = tuple(args.specs or (FULL_SPECS if args.full else QUICK_SPECS))
     runs = args.runs or (10 if args.full else 2)
     start = time.perf_counter()
-    asset_dirs = build_assets(args.work, specs, args.seed)
+    from real2sim.contact import ContactProperties
+
+    contact = (ContactProperties() if args.dissipation is None
+               else ContactProperties(hunt_crossley_dissipation_s_per_m=args.dissipation))
+    asset_dirs = build_assets(args.work, specs, args.seed, contact)
     build_s = time.perf_counter() - start
-    config = EvaluationConfig(tasks=("push", "ramp"), contact_models=("point", "hydroelastic"), runs=runs,
+    config = EvaluationConfig(tasks=("push", "ramp"), contact_models=tuple(args.contact), runs=runs,
                               seed=args.seed, **({"jobs": args.jobs} if args.jobs else {}))
-    result = evaluate(asset_dirs, args.work / "results", config, progress=True)
+    results_dir = args.work / (f"results_{args.tag}" if args.tag else "results")
+    result = evaluate(asset_dirs, results_dir, config, progress=True)
     eval_s = time.perf_counter() - start - build_s
 
     paper = read_paper_table()
@@ -147,9 +159,12 @@ def main() -> int:
         lines.append(f"- {metric}: ours lower than the paper's in {better} of {len(pairs)} rows")
     fits = fit_table(args.work, specs)
     body = (
-        f"Objects: bundled bottle and can. Tasks: push, ramp. Contact: point, hydroelastic. Runs: {runs} per "
+        f"Objects: bundled bottle and can. Tasks: push, ramp. Contact: {', '.join(args.contact)}. Runs: {runs} per "
         f"object and task (seed {args.seed}). Equation error (resets every 0.1 s) against the full closed mesh "
-        f"simulated with hydroelastic contact. Assets built in {build_s / 60:.1f} min, sweep {eval_s / 60:.1f} min "
+        f"simulated with hydroelastic contact. "
+        + (f"Candidates' Hunt-Crossley dissipation: {args.dissipation:g} s/m (the reference keeps "
+           f"{ContactProperties().hunt_crossley_dissipation_s_per_m:g} s/m). " if args.dissipation is not None else "")
+        + f"Assets built in {build_s / 60:.1f} min, sweep {eval_s / 60:.1f} min "
         f"({len(result.runs)} rows, {result.failed} failed"
         + (f"; {result.skipped} rows were already in runs.csv from an interrupted or earlier run of this sweep, "
            "so this time covers only the rest" if result.skipped else "") + ").\n\n"
@@ -167,8 +182,9 @@ def main() -> int:
         + markdown_table(["object", "SPEC", "IoU", "Chamfer mm", "pieces", "seconds"], fits) + "\n"
     )
     command = "python benchmarks/bench_table1.py " + " ".join(sys.argv[1:])
-    path = write_section("table1", "Table I protocol: ours vs the paper", body, command.strip())
-    with open(args.work / "results" / "summary.csv") as f:
+    title = "Table I protocol: ours vs the paper" + (f" ({args.tag})" if args.tag else "")
+    path = write_section(f"table1_{args.tag}" if args.tag else "table1", title, body, command.strip())
+    with open(results_dir / "summary.csv") as f:
         print(f.read())
     print(f"wrote {path}")
     return 0
