@@ -149,6 +149,8 @@ def main() -> int:
         for cm in ("hydroelastic", "point"):
             bp = best(metric, lambda lab, cm=cm: is_prim(lab) and lab.endswith("_" + cm))
             bc = best(metric, lambda lab, cm=cm: is_coacd(lab) and lab.endswith("_" + cm))
+            if bp[0] == "-" or bc[0] == "-":
+                continue  # that contact model was not part of this sweep
             gain = 100 * (1 - bp[1] / bc[1]) if bc[1] == bc[1] and bc[1] > 0 else float("nan")
             verdict = f"{gain:.1f}% lower" if gain >= 0 else f"{-gain:.1f}% higher"
             lines.append(f"- {cm} only, {metric}: best primitive {bp[0]} {bp[1]:.4g} vs {bc[0]} {bc[1]:.4g}: {verdict}")
