@@ -5,15 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-def _pos_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
+from real2sim.cli import positive_int
 
 
 def _nonneg_float(text: str) -> float:
@@ -93,12 +85,12 @@ def register(sub) -> None:
     p.add_argument("--threshold", type=_nonneg_float, default=12.0,
                    help="background difference threshold, 0-255 (default 12)")
     p.add_argument("--device", default="cpu", help="torch device for Mask R-CNN (default cpu)")
-    p.add_argument("--maskrcnn-min-size", type=_pos_int, default=800, metavar="PX",
+    p.add_argument("--maskrcnn-min-size", type=positive_int, default=800, metavar="PX",
                    help="Mask R-CNN resizes the shorter image side to this, px (default 800, as trained; "
                    "smaller is faster on a CPU)")
-    p.add_argument("--maskrcnn-max-size", type=_pos_int, default=1333, metavar="PX",
+    p.add_argument("--maskrcnn-max-size", type=positive_int, default=1333, metavar="PX",
                    help="upper bound on the longer side after resizing, px (default 1333)")
-    p.add_argument("--maskrcnn-max-instances", type=_pos_int, default=100, metavar="N",
+    p.add_argument("--maskrcnn-max-instances", type=positive_int, default=100, metavar="N",
                    help="detections kept per image before choosing the object (default 100)")
     p.set_defaults(func=run_mask)
 
