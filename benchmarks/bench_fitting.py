@@ -14,6 +14,7 @@ inside loss). Prints tables and writes ``docs/benchmarks/fitting.md``.
 from __future__ import annotations
 
 import argparse
+import tempfile
 import dataclasses
 import datetime as dt
 import os
@@ -56,8 +57,9 @@ def _run_one(mesh, samples, spec_text: str, config, seed: int) -> dict:
 
     spec = parse_spec(spec_text)
     res = fit_primitives(samples.points, samples.sdf, spec.parts, config, seed=seed)
-    geo = to_collision_geometry(res, samples.centre_m, samples.scale_m, spec.text)
-    fid = measure_fidelity(mesh, geo, None, seed=seed)
+    with tempfile.TemporaryDirectory() as rep_dir:  # superquadrics' mesh pieces live here
+        geo = to_collision_geometry(res, samples.centre_m, samples.scale_m, spec.text, rep_dir)
+        fid = measure_fidelity(mesh, geo, rep_dir, seed=seed)
     return {
         "spec": spec.text,
         "iou": fid["iou"],

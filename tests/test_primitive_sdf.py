@@ -12,7 +12,10 @@ import trimesh
 from real2sim.collision import quaternion_to_matrix as np_quat_to_matrix
 from real2sim.inside import signed_distance
 from real2sim.primitive_sdf import (
+    EXPONENT_DIM,
+    HAS_ROTATION,
     PARAM_DIM,
+    SIZE_DIM,
     box_sdf,
     capsule_sdf,
     cylinder_sdf,
@@ -126,9 +129,9 @@ def test_dense_and_paired_agree_for_every_kind():
 def test_union_is_minimum_and_gradients_finite_at_singular_points():
     # Points at a sphere centre, on box edges/corners and on a cylinder axis: sqrt/abs kinks.
     x = torch.tensor([[0.0, 0.0, 0.0], [0.2, 0.1, 0.3], [0.2, 0.0, 0.0], [0.0, 0.0, 0.25]], dtype=torch.float64)
-    for kind, dim in PARAM_DIM.items():
-        packed = torch.tensor([[0.0, 0.0, 0.0] + [0.2, 0.1, 0.3][: dim - 3 - (4 if dim in (9, 10) else 0)]
-                               + ([1.0, 0.0, 0.0, 0.0] if dim in (9, 10) else [])], dtype=torch.float64)
+    for kind in PARAM_DIM:
+        packed = torch.tensor([[0.0, 0.0, 0.0] + [0.2, 0.1, 0.3][: SIZE_DIM[kind]] + [0.02, 1.0][: EXPONENT_DIM[kind]]
+                               + ([1.0, 0.0, 0.0, 0.0] if HAS_ROTATION[kind] else [])], dtype=torch.float64)
         if kind in ("cylinder", "capsule"):
             packed[0, 3:5] = torch.tensor([0.1, 0.25])
         packed.requires_grad_(True)
@@ -149,7 +152,7 @@ def test_unknown_size_layout_round_trip(kind):
     # Sign sanity for every kind: the centre is inside, a far point outside.
     packed = torch.zeros(1, PARAM_DIM[kind], dtype=torch.float64)
     packed[0, 3:] = 0.2
-    if PARAM_DIM[kind] in (9, 10):
+    if HAS_ROTATION[kind]:
         packed[0, -4:] = torch.tensor([1.0, 0, 0, 0])
     d = primitive_sdf(kind, torch.tensor([[0.0, 0, 0], [3.0, 0, 0]], dtype=torch.float64), packed)[0]
     assert d[0] < 0 < d[1]

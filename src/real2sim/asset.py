@@ -105,7 +105,7 @@ def build_collision(
 ) -> tuple[CollisionGeometry, dict]:
     """One collision representation of the canonical mesh, with its fitting report.
 
-    Baselines write their convex pieces under ``rep_dir/pieces``.
+    Baselines and superquadric fits write their convex pieces under ``rep_dir/pieces``.
     """
     start = time.perf_counter()
     if spec.baseline is not None:
@@ -126,6 +126,7 @@ def build_collision(
             spec,
             fit_config=config.fit_config or FitConfig(),
             cache_dir=sdf_cache_dir,
+            rep_dir=rep_dir,
             device=config.device,
             seed=config.seed,
         )

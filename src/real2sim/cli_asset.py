@@ -32,7 +32,8 @@ def add_asset_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mass", type=positive_float, required=True, metavar="KG", help="measured mass of the object, kg")
     p.add_argument("--collision", action="append", metavar="SPEC",
                    help="collision representation, repeatable: spheres:128, boxes:100, rotated_boxes:50, "
-                   "cylinders:10, ellipsoids:64, capsules:16, mixes like boxes:20+cylinders:20, or the "
+                   "cylinders:10, ellipsoids:64, capsules:16, superquadrics:2 (written as convex mesh pieces), "
+                   "mixes like boxes:20+cylinders:20, or the "
                    f"baselines coacd, vhacd, mesh (default: {' '.join(DEFAULT_SPECS)})")
     p.add_argument("--flat-bottom", action="store_true",
                    help="crop below the support plane and close the bottom flat (paper IV-C1)")

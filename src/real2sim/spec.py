@@ -19,6 +19,7 @@ PRIMITIVE_FAMILIES: dict[str, str] = {
     "cylinders": "cylinder",
     "ellipsoids": "ellipsoid",
     "capsules": "capsule",
+    "superquadrics": "superquadric",  # beyond the paper; simulated as convex mesh pieces
 }
 BASELINES: tuple[str, ...] = ("coacd", "vhacd", "mesh")
 MAX_PRIMITIVES = 2000
