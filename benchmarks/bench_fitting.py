@@ -167,6 +167,12 @@ def main(argv: list[str] | None = None) -> int:
             "inside_loss=hinge (paper)": {"inside_loss": "hinge"},
             "inside_loss=squared": {"inside_loss": "squared"},
         }
+        if "superquadrics" in args.ablation_spec:
+            variants.update({
+                "superquadric_truncation=off": {"superquadric_truncation": 1e9},
+                "superquadric_exponent_gain=1": {"superquadric_exponent_gain": 1.0},
+                "superquadric_init_exponent=1 (ellipsoid)": {"superquadric_init_exponent": 1.0},
+            })
         rows = []
         name = objects[0]
         mesh, samples = prepared[name]

@@ -224,5 +224,5 @@ def test_exponents_stay_in_the_convex_range_whatever_the_raw_parameters():
     from real2sim.fitting import _constrain
 
     raw = torch.tensor([[0.0, 0.0, 0.0, 0.1, 0.1, 0.1, -50.0, 50.0, 1.0, 0.0, 0.0, 0.0]], dtype=torch.float64)
-    packed = _constrain("superquadric", raw, 0.004)
+    packed = _constrain("superquadric", raw, 0.004, FitConfig().superquadric_exponent_gain)
     assert 0.02 <= float(packed[0, 6]) < 0.021 and 1.99 < float(packed[0, 7]) <= 2.0

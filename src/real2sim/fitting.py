@@ -96,6 +96,12 @@ class FitConfig:
     # its distance is a first-order estimate, too small away from the surface near edges, and
     # fitting those far values rounds boxes off (a box's samples pulled e2 to 0.38, not ~0).
     superquadric_truncation: float = 0.1
+    # Raw superquadric exponents are multiplied by this before their sigmoid, i.e. they take larger
+    # steps than the sizes: only samples near edges and corners inform them, so their minibatch
+    # gradient is noisy and Adam moves them slowly.
+    superquadric_exponent_gain: float = 4.0
+    # Superquadrics start box-like (both exponents this value) rather than as ellipsoids (1.0).
+    superquadric_init_exponent: float = 0.3
     latent_dim: int = 128  # Fig. 3: latent vector ...
     hidden_dim: int = 512  # ... through FC layers of this width, with a dense (concat) skip
     fill_interior: bool = True  # add labelled-inside points in the enclosed interior (beyond the paper)
@@ -118,8 +124,11 @@ class FitConfig:
             raise ValueError(f"inside_loss must be 'hinge' or 'squared', got {self.inside_loss!r}")
         if self.batch_size < 1 or self.max_iterations < 0:
             raise ValueError("batch_size must be >= 1 and max_iterations >= 0")
-        if not self.superquadric_truncation > 0:
-            raise ValueError(f"superquadric_truncation must be positive, got {self.superquadric_truncation}")
+        if not self.superquadric_truncation > 0 or not self.superquadric_exponent_gain > 0:
+            raise ValueError("superquadric_truncation and superquadric_exponent_gain must be positive")
+        lo, hi = SUPERQUADRIC_EXPONENT_RANGE
+        if not lo < self.superquadric_init_exponent < hi:
+            raise ValueError(f"superquadric_init_exponent must lie in ({lo}, {hi})")
 
     @property
     def lr(self) -> float:
@@ -201,33 +210,23 @@ class _Layout:
         ]
 
 
-# Raw superquadric exponents are multiplied by this before the sigmoid, i.e. they take 4x larger
-# steps than the sizes: only samples near edges and corners inform them, so their minibatch
-# gradient is noisy and Adam moves them slowly (on the can, e1 stalled at 0.2 with gain 1
-# and reached 0.06 with gain 4 in the same 1000 steps).
-_EXPONENT_GAIN = 4.0
-# Start superquadrics box-like rather than as ellipsoids: on the bundled bottle, superquadrics:2
-# reached IoU 0.955 from (0.3, 0.3) and 0.889 from (1, 1) (docs/benchmarks/fitting_superquadrics.md).
-SUPERQUADRIC_INIT_EXPONENT = 0.3
-
-
-def _constrain(kind: str, raw: torch.Tensor, min_size: float) -> torch.Tensor:
+def _constrain(kind: str, raw: torch.Tensor, min_size: float, gain: float) -> torch.Tensor:
     """Raw rows -> packed rows: sizes through softplus + min_size, superquadric exponents through a
     sigmoid onto their convex range; centre and quaternion as they are (the SDFs normalise
     quaternions, so eq. 12 still sees the raw output, as in the paper)."""
     s, e = SIZE_DIM[kind], EXPONENT_DIM[kind]
     sizes = torch.nn.functional.softplus(raw[:, 3 : 3 + s]) + min_size
     lo, hi = SUPERQUADRIC_EXPONENT_RANGE
-    exponents = lo + (hi - lo) * torch.sigmoid(_EXPONENT_GAIN * raw[:, 3 + s : 3 + s + e])
+    exponents = lo + (hi - lo) * torch.sigmoid(gain * raw[:, 3 + s : 3 + s + e])
     return torch.cat((raw[:, :3], sizes, exponents, raw[:, 3 + s + e :]), 1)
 
 
-def _unconstrain(kind: str, packed: torch.Tensor, min_size: float) -> torch.Tensor:
+def _unconstrain(kind: str, packed: torch.Tensor, min_size: float, gain: float) -> torch.Tensor:
     s, e = SIZE_DIM[kind], EXPONENT_DIM[kind]
     sizes = _inverse_softplus(packed[:, 3 : 3 + s] - min_size)
     lo, hi = SUPERQUADRIC_EXPONENT_RANGE
     unit = ((packed[:, 3 + s : 3 + s + e] - lo) / (hi - lo)).clamp(1e-6, 1 - 1e-6)
-    return torch.cat((packed[:, :3], sizes, torch.logit(unit) / _EXPONENT_GAIN, packed[:, 3 + s + e :]), 1)
+    return torch.cat((packed[:, :3], sizes, torch.logit(unit) / gain, packed[:, 3 + s + e :]), 1)
 
 
 class _PrimitiveNet(torch.nn.Module):
@@ -351,7 +350,7 @@ def _cluster_spreads(x: torch.Tensor, centres: torch.Tensor, labels: torch.Tenso
     return torch.sqrt(sums / counts)
 
 
-def _packed_from_blobs(kind: str, centres: torch.Tensor, sigma: torch.Tensor) -> torch.Tensor:
+def _packed_from_blobs(kind: str, centres: torch.Tensor, sigma: torch.Tensor, init_exponent: float) -> torch.Tensor:
     """Packed rows for primitives whose volume matches blobs with per-axis std ``sigma``.
 
     A uniform solid of half-extent h has std h/sqrt(3) (box), a uniform disc of radius r
@@ -369,8 +368,8 @@ def _packed_from_blobs(kind: str, centres: torch.Tensor, sigma: torch.Tensor) ->
         return torch.cat((centres, sigma * math.sqrt(3.0), ident), 1)
     if kind == "ellipsoid":
         return torch.cat((centres, sigma * math.sqrt(5.0), ident), 1)
-    if kind == "superquadric":  # starts as a rounded box (e1 = e2 = 0.3), sized like the box
-        exponents = torch.full_like(centres[:, :2], SUPERQUADRIC_INIT_EXPONENT)
+    if kind == "superquadric":  # starts with both exponents at init_exponent, sized like the box
+        exponents = torch.full_like(centres[:, :2], init_exponent)
         return torch.cat((centres, sigma * math.sqrt(3.0), exponents, ident), 1)
     radius = torch.sqrt(2.0 * (sigma[:, 0] ** 2 + sigma[:, 1] ** 2))
     half = sigma[:, 2] * math.sqrt(3.0)
@@ -413,7 +412,7 @@ def _initial_packed(
         sigma = (0.03 + 0.07 * torch.rand(n, 3, generator=generator)).to(dev, dt)
     out = []
     for kind, count, off in zip(layout.kinds, layout.counts, layout.offsets):
-        packed = _packed_from_blobs(kind, centres[off : off + count], sigma[off : off + count])
+        packed = _packed_from_blobs(kind, centres[off : off + count], sigma[off : off + count], config.superquadric_init_exponent)
         s = SIZE_DIM[kind]
         packed[:, 3 : 3 + s] = packed[:, 3 : 3 + s].clamp(min=floor)
         if HAS_ROTATION[kind] and config.init == "random":
@@ -594,7 +593,7 @@ def fit_primitives(
         torch.manual_seed(seed)
         gen = torch.Generator(device="cpu").manual_seed(seed)
         init = _initial_packed(layout, points, target, config, gen)
-        base = torch.cat([_unconstrain(k, p, config.min_size).reshape(-1) for k, p in zip(layout.kinds, init)])
+        base = torch.cat([_unconstrain(k, p, config.min_size, config.superquadric_exponent_gain).reshape(-1) for k, p in zip(layout.kinds, init)])
         if config.parameterization == "network":
             model: torch.nn.Module = _PrimitiveNet(base.cpu(), config.latent_dim, config.hidden_dim).to(device)
         else:
@@ -623,7 +622,7 @@ def fit_primitives(
             x, s = points[idx], target[idx]
             raw = model()
             raws = layout.split(raw)
-            packed = [_constrain(k, r, config.min_size) for k, r in zip(layout.kinds, raws)]
+            packed = [_constrain(k, r, config.min_size, config.superquadric_exponent_gain) for k, r in zip(layout.kinds, raws)]
             dist, arg = _closest(layout, [p.detach() for p in packed], x)
             d = _paired_distance(layout, packed, x, arg)
             if "superquadric" in layout.kinds:
@@ -653,7 +652,7 @@ def fit_primitives(
 
         with torch.no_grad():
             raws = layout.split(model())
-            packed = [_constrain(k, r, config.min_size) for k, r in zip(layout.kinds, raws)]
+            packed = [_constrain(k, r, config.min_size, config.superquadric_exponent_gain) for k, r in zip(layout.kinds, raws)]
             dist, arg = _closest(layout, packed, points)
             keep = _alive(arg, dist, target, layout.total) if config.remove_dead else torch.ones(layout.total, dtype=torch.bool, device=device)
             if not bool(keep.any()):
@@ -715,7 +714,7 @@ def _revive(
     probe = torch.randint(len(points), (min(len(points), 65_536),), generator=gen).to(points.device)
     x, s = points[probe], target[probe]
     raws = layout.split(model())
-    packed = [_constrain(k, r, config.min_size) for k, r in zip(layout.kinds, raws)]
+    packed = [_constrain(k, r, config.min_size, config.superquadric_exponent_gain) for k, r in zip(layout.kinds, raws)]
     dist, _ = _closest(layout, packed, x)
     miss = torch.where(s < 0, dist, torch.zeros_like(dist))  # how far an interior sample is from being covered
     order = miss.argsort(descending=True)
@@ -732,10 +731,10 @@ def _revive(
         if len(sel) == 0:
             continue
         sigma = size[sel, None].expand(-1, 3) / math.sqrt(3.0)
-        new_packed = _packed_from_blobs(kind, seeds[sel], sigma)
+        new_packed = _packed_from_blobs(kind, seeds[sel], sigma, config.superquadric_init_exponent)
         s_dim = SIZE_DIM[kind]
         new_packed[:, 3 : 3 + s_dim] = new_packed[:, 3 : 3 + s_dim].clamp(min=2 * config.min_size)
-        new_raw = _unconstrain(kind, new_packed, config.min_size)
+        new_raw = _unconstrain(kind, new_packed, config.min_size, config.superquadric_exponent_gain)
         d = PARAM_DIM[kind]
         rows = dead[sel] - off
         flat = (ro + rows[:, None] * d + torch.arange(d, device=rows.device)[None, :]).reshape(-1)
