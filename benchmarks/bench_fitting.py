@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
             variants.update({
                 "superquadric_truncation=off": {"superquadric_truncation": 1e9},
                 "superquadric_exponent_gain=1": {"superquadric_exponent_gain": 1.0},
-                "superquadric_init_exponent=1 (ellipsoid)": {"superquadric_init_exponent": 1.0},
+                "superquadric_init_exponent=0.3 (box-like)": {"superquadric_init_exponent": 0.3},
             })
         rows = []
         name = objects[0]

@@ -22,9 +22,10 @@ class DemoPlan:
     runs: int
 
 
-# Full: about 5 minutes on 2 cores (measured, docs/benchmarks.md); quick: about 1 (CI runs it).
+# Full: minutes on 2 cores (measured by benchmarks/bench_demo.py, docs/benchmarks.md); quick:
+# about 1 (CI runs it).
 FULL = DemoPlan(
-    specs=("cylinders:10", "boxes:50", "spheres:64", "ellipsoids:32", "rotated_boxes:20", "coacd"),
+    specs=("cylinders:10", "boxes:50", "spheres:64", "ellipsoids:32", "rotated_boxes:20", "superquadrics:5", "coacd"),
     tasks=("push", "ramp"),
     contact_models=("point", "hydroelastic"),
     runs=3,
