@@ -103,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--ablations", action="store_true", help="also run the beyond-the-paper ablations")
     ap.add_argument("--ablation-spec", default="boxes:100")
+    ap.add_argument("--ablation-only", default=None, metavar="PREFIX",
+                    help="run only the default and the ablations whose label starts with PREFIX")
     ap.add_argument("--no-main", action="store_true", help="only the ablations")
     ap.add_argument("--out", default="docs/benchmarks/fitting.md")
     args = ap.parse_args(argv)
@@ -171,12 +173,14 @@ def main(argv: list[str] | None = None) -> int:
             variants.update({
                 "superquadric_truncation=off": {"superquadric_truncation": 1e9},
                 "superquadric_exponent_gain=1": {"superquadric_exponent_gain": 1.0},
-                "superquadric_init_exponent=0.3 (box-like)": {"superquadric_init_exponent": 0.3},
+                "superquadric_init_exponent=1 (ellipsoid)": {"superquadric_init_exponent": 1.0},
             })
         rows = []
         name = objects[0]
         mesh, samples = prepared[name]
         for label, change in variants.items():
+            if args.ablation_only and label != "default" and not label.startswith(args.ablation_only):
+                continue
             cfg = dataclasses.replace(base, **change)
             if label != "default" and cfg == base:
                 continue  # same as the default
