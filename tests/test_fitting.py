@@ -98,9 +98,9 @@ def test_one_box_recovers_box(box_samples):
     np.testing.assert_allclose(p[3:6], h, atol=0.02)
 
 
-def test_one_cylinder_recovers_radius_length_and_axis():
-    rng = np.random.default_rng(4)
-    c, r, h = np.array([0.05, -0.1, 0.0]), 0.3, 0.6
+def cylinder_samples(c, r: float, h: float, seed: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Near-surface samples of a capped cylinder (axis z, radius r, half-length h) centred at c."""
+    rng = np.random.default_rng(seed)
 
     def sdf(p):
         q = p - c
@@ -113,7 +113,12 @@ def test_one_cylinder_recovers_radius_length_and_axis():
         np.stack([r * np.cos(th), r * np.sin(th), z], 1),
         np.stack([rr * np.cos(t2), rr * np.sin(t2), np.where(np.arange(3000) % 2 == 0, -h, h)], 1),
     ]) + c  # fmt: skip
-    pts, target = _near_surface(sdf, surf, seed=4)
+    return _near_surface(sdf, surf, seed=seed)
+
+
+def test_one_cylinder_recovers_radius_length_and_axis():
+    c, r, h = np.array([0.05, -0.1, 0.0]), 0.3, 0.6
+    pts, target = cylinder_samples(c, r, h)
     p = np.asarray(fit_primitives(pts, target, (("cylinders", 1),), FAST).parameters[0])
     np.testing.assert_allclose(p[:3], c, atol=0.02)
     assert abs(p[3] - r) < 0.02 and abs(p[4] - h) < 0.02

@@ -17,7 +17,7 @@ from real2sim.inside import signed_distance
 from real2sim.primitive_sdf import ellipsoid_sdf, primitive_sdf, superquadric_sdf
 from real2sim.spec import parse_spec
 from real2sim.superquadric import inside_outside, superquadric_hull, volume
-from test_fitting import _box_sdf_np, _box_surface, _near_surface
+from test_fitting import _box_sdf_np, _box_surface, _near_surface, cylinder_samples
 
 CENTRE = np.array([0.1, -0.2, 0.05])
 Q = np.array([math.cos(0.35), math.sin(0.35) * 0.6, 0.0, math.sin(0.35) * 0.8])
@@ -97,23 +97,6 @@ def test_sphere_closed_form_and_bad_parameters():
 FAST = FitConfig(batch_size=4096, max_iterations=400, min_iterations=400, revive_dead=False)
 
 
-def _cylinder_samples(c, r, h, seed=4):
-    rng = np.random.default_rng(seed)
-
-    def sdf(p):
-        q = p - c
-        dr, dz = np.hypot(q[:, 0], q[:, 1]) - r, np.abs(q[:, 2]) - h
-        return np.hypot(np.maximum(dr, 0), np.maximum(dz, 0)) + np.minimum(np.maximum(dr, dz), 0)
-
-    th, z = rng.uniform(0, 2 * np.pi, 8000), rng.uniform(-h, h, 8000)
-    rr, t2 = r * np.sqrt(rng.uniform(0, 1, 4000)), rng.uniform(0, 2 * np.pi, 4000)
-    surf = np.vstack([
-        np.stack([r * np.cos(th), r * np.sin(th), z], 1),
-        np.stack([rr * np.cos(t2), rr * np.sin(t2), np.where(np.arange(4000) % 2 == 0, -h, h)], 1),
-    ]) + c  # fmt: skip
-    return _near_surface(sdf, surf, seed=seed)
-
-
 def test_fit_finds_a_box_and_a_cylinder_by_their_exponents():
     rng = np.random.default_rng(2)
     c, half = np.array([-0.1, 0.05, 0.1]), np.array([0.3, 0.2, 0.5])
@@ -125,7 +108,7 @@ def test_fit_finds_a_box_and_a_cylinder_by_their_exponents():
     axes_world = np.abs(quaternion_to_matrix(box[8:12])) @ box[3:6]
     np.testing.assert_allclose(axes_world, half, atol=0.03)
 
-    pts, sdf = _cylinder_samples(np.array([0.05, -0.1, 0.0]), 0.3, 0.6)
+    pts, sdf = cylinder_samples(np.array([0.05, -0.1, 0.0]), 0.3, 0.6)
     cyl = np.asarray(fit_primitives(pts, sdf, (("superquadrics", 1),), FAST).parameters[0])
     # Round section (e2 = 1) around the axis, flat profile (e1 small) along it.
     axis = int(np.argmax(np.abs(quaternion_to_matrix(cyl[8:12])[2, :])))
