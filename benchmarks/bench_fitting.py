@@ -14,12 +14,12 @@ inside loss). Prints tables and writes ``docs/benchmarks/fitting.md``.
 from __future__ import annotations
 
 import argparse
-import tempfile
 import dataclasses
 import datetime as dt
 import os
 import platform
 import sys
+import tempfile
 import time
 from pathlib import Path
 

@@ -98,6 +98,18 @@ def test_capsule_exact():
     _check(d, mesh, pts, tol=5e-4)
 
 
+def check_estimate(d: np.ndarray, exact: np.ndarray, sign_tol: float, band: float, min_near: int,
+                   rel: float, atol: float) -> None:
+    """An estimated (not exact) signed distance ``d`` against brute force ``exact``: the right sign
+    wherever |exact| > sign_tol, and, within ``band`` of the surface (at least ``min_near``
+    points), an error below ``rel * |exact| + atol``."""
+    far = np.abs(exact) > sign_tol
+    assert np.all(np.sign(d[far]) == np.sign(exact[far]))
+    near = np.abs(exact) < band
+    assert near.sum() > min_near
+    assert np.all(np.abs(d[near] - exact[near]) < rel * np.abs(exact[near]) + atol)
+
+
 def test_ellipsoid_bound_sign_everywhere_and_close_near_surface():
     axes = np.array([0.3, 0.15, 0.2])
     sphere = trimesh.creation.icosphere(subdivisions=6)
@@ -105,12 +117,7 @@ def test_ellipsoid_bound_sign_everywhere_and_close_near_surface():
     mesh = _pose(sphere, Q)
     pts = _queries(600)
     d = ellipsoid_sdf(_t(pts), _t([CENTRE]), _t([axes]), _t([Q])).numpy()[0]
-    exact = _brute(mesh, pts)
-    far = np.abs(exact) > 2e-3
-    assert np.all(np.sign(d[far]) == np.sign(exact[far]))
-    near = np.abs(exact) < 0.03
-    assert near.sum() > 10
-    assert np.all(np.abs(d[near] - exact[near]) < 0.2 * np.abs(exact[near]) + 2e-3)
+    check_estimate(d, _brute(mesh, pts), sign_tol=2e-3, band=0.03, min_near=10, rel=0.2, atol=2e-3)
 
 
 def test_dense_and_paired_agree_for_every_kind():

@@ -18,6 +18,7 @@ from real2sim.primitive_sdf import ellipsoid_sdf, primitive_sdf, superquadric_sd
 from real2sim.spec import parse_spec
 from real2sim.superquadric import inside_outside, superquadric_hull, volume
 from test_fitting import _box_sdf_np, _box_surface, _near_surface, cylinder_samples
+from test_primitive_sdf import check_estimate
 
 CENTRE = np.array([0.1, -0.2, 0.05])
 Q = np.array([math.cos(0.35), math.sin(0.35) * 0.6, 0.0, math.sin(0.35) * 0.8])
@@ -44,13 +45,9 @@ def test_sdf_sign_everywhere_and_close_near_surface(exponents):
     pts = CENTRE + rng.uniform(-0.45, 0.45, size=(1500, 3))
     exact = signed_distance(dense, pts)
     d = superquadric_sdf(_t(pts), _t([CENTRE]), _t([AXES]), _t([exponents]), _t([Q])).numpy()[0]
-    far = np.abs(exact) > 3e-3
-    assert np.all(np.sign(d[far]) == np.sign(exact[far]))
-    near = np.abs(exact) < 0.02
-    assert near.sum() > 30
     # First-order estimate: exact on the surface, error growing with the distance from it
     # (and, for sharp shapes, bounded by the L-infinity-like behaviour at edges).
-    assert np.all(np.abs(d[near] - exact[near]) < 0.5 * np.abs(exact[near]) + 3e-3)
+    check_estimate(d, exact, sign_tol=3e-3, band=0.02, min_near=30, rel=0.5, atol=3e-3)
 
 
 def test_exponents_one_give_the_ellipsoid_estimate_exactly():

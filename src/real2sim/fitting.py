@@ -63,6 +63,7 @@ from real2sim.primitive_sdf import (
     primitive_sdf,
 )
 from real2sim.spec import PRIMITIVE_FAMILIES, CollisionSpec, parse_spec
+from real2sim.superquadric import DEFAULT_VERTICES, superquadric_hull
 
 ProgressFn = Callable[[int, int, float], None]
 
@@ -229,6 +230,11 @@ def _unconstrain(kind: str, packed: torch.Tensor, min_size: float, gain: float) 
     lo, hi = SUPERQUADRIC_EXPONENT_RANGE
     unit = ((packed[:, 3 + s : 3 + s + e] - lo) / (hi - lo)).clamp(1e-6, 1 - 1e-6)
     return torch.cat((packed[:, :3], sizes, torch.logit(unit) / gain, packed[:, 3 + s + e :]), 1)
+
+
+def _constrain_all(layout: _Layout, raws: list[torch.Tensor], config: FitConfig) -> list[torch.Tensor]:
+    """Packed rows of every family from its raw rows (:func:`_constrain` with the config's bounds)."""
+    return [_constrain(k, r, config.min_size, config.superquadric_exponent_gain) for k, r in zip(layout.kinds, raws)]
 
 
 class _PrimitiveNet(torch.nn.Module):
@@ -624,7 +630,7 @@ def fit_primitives(
             x, s = points[idx], target[idx]
             raw = model()
             raws = layout.split(raw)
-            packed = [_constrain(k, r, config.min_size, config.superquadric_exponent_gain) for k, r in zip(layout.kinds, raws)]
+            packed = _constrain_all(layout, raws, config)
             dist, arg = _closest(layout, [p.detach() for p in packed], x)
             d = _paired_distance(layout, packed, x, arg)
             if "superquadric" in layout.kinds:
@@ -654,7 +660,7 @@ def fit_primitives(
 
         with torch.no_grad():
             raws = layout.split(model())
-            packed = [_constrain(k, r, config.min_size, config.superquadric_exponent_gain) for k, r in zip(layout.kinds, raws)]
+            packed = _constrain_all(layout, raws, config)
             dist, arg = _closest(layout, packed, points)
             keep = _alive(arg, dist, target, layout.total) if config.remove_dead else torch.ones(layout.total, dtype=torch.bool, device=device)
             if not bool(keep.any()):
@@ -716,7 +722,7 @@ def _revive(
     probe = torch.randint(len(points), (min(len(points), 65_536),), generator=gen).to(points.device)
     x, s = points[probe], target[probe]
     raws = layout.split(model())
-    packed = [_constrain(k, r, config.min_size, config.superquadric_exponent_gain) for k, r in zip(layout.kinds, raws)]
+    packed = _constrain_all(layout, raws, config)
     dist, _ = _closest(layout, packed, x)
     miss = torch.where(s < 0, dist, torch.zeros_like(dist))  # how far an interior sample is from being covered
     order = miss.argsort(descending=True)
@@ -795,7 +801,7 @@ def prune_dead(result: FitResult, points_unit, sdf) -> FitResult:
 
 
 def to_collision_geometry(
-    result: FitResult, centre_m, scale_m: float, spec_text: str, rep_dir=None, *, superquadric_vertices: int | None = None
+    result: FitResult, centre_m, scale_m: float, spec_text: str, rep_dir=None, *, superquadric_vertices: int = DEFAULT_VERTICES
 ) -> CollisionGeometry:
     """Primitives in metres in the asset frame (``asset = centre_m + scale_m * unit``).
 
@@ -805,8 +811,6 @@ def to_collision_geometry(
     volume-matched polytopes (:mod:`real2sim.superquadric`) are written to
     ``rep_dir/pieces/superquadric_NNN.obj`` in the shape frame, so ``rep_dir`` is required then.
     """
-    from real2sim.superquadric import DEFAULT_VERTICES, superquadric_hull
-
     centre = np.asarray(centre_m, dtype=float).reshape(3)
     scale = float(scale_m)
     if not np.isfinite(scale) or scale <= 0:
@@ -831,7 +835,7 @@ def to_collision_geometry(
             shapes.append(CollisionShape("ellipsoid", tuple(float(scale * v) for v in p[3:6]), pos, quat))
         elif kind == "superquadric":
             rel = f"pieces/superquadric_{len(shapes):03d}.obj"
-            hull = superquadric_hull(scale * p[3:6], p[6:8], superquadric_vertices or DEFAULT_VERTICES)
+            hull = superquadric_hull(scale * p[3:6], p[6:8], superquadric_vertices)
             (Path(rep_dir) / rel).parent.mkdir(parents=True, exist_ok=True)
             hull.export(Path(rep_dir) / rel, include_normals=False)
             shapes.append(CollisionShape("convex", (), pos, quat, mesh_file=rel))
