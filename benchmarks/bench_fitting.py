@@ -40,9 +40,9 @@ TARGETS = {"boxes:100": 0.95, "spheres:128": 0.90, "cylinders:10": 0.90}
 def _prepare(name: str, sampling_seed: int):
     import numpy as np
 
-    from real2sim.canonical import canonicalize
-    from real2sim.objects import make_object
-    from real2sim.sdf_sampling import SdfSamplingConfig, sample_sdf
+    from real2sim.asset.canonical import canonicalize
+    from real2sim.geometry.objects import make_object
+    from real2sim.collision.sdf_sampling import SdfSamplingConfig, sample_sdf
 
     mesh, _ = canonicalize(make_object(name))
     t0 = time.perf_counter()
@@ -51,9 +51,9 @@ def _prepare(name: str, sampling_seed: int):
 
 
 def _run_one(mesh, samples, spec_text: str, config, seed: int) -> dict:
-    from real2sim.fidelity import measure_fidelity
-    from real2sim.fitting import fit_primitives, to_collision_geometry
-    from real2sim.spec import parse_spec
+    from real2sim.geometry.fidelity import measure_fidelity
+    from real2sim.collision.fit.fitting import fit_primitives, to_collision_geometry
+    from real2sim.formats.spec import parse_spec
 
     spec = parse_spec(spec_text)
     res = fit_primitives(samples.points, samples.sdf, spec.parts, config, seed=seed)
@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from real2sim.fitting import FitConfig
+    from real2sim.collision.fit.fitting import FitConfig
 
     torch.set_num_threads(args.threads)
     base = FitConfig(device=args.device)
@@ -132,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         "",
         f"FitConfig: `{base}`",
         "",
-        "IoU: volumetric, Monte Carlo with 95 % half-width (`real2sim.fidelity.measure_fidelity`); Chamfer:"
+        "IoU: volumetric, Monte Carlo with 95 % half-width (`real2sim.geometry.fidelity.measure_fidelity`); Chamfer:"
         " symmetric, mm; pieces: kept / requested (dead primitives dropped); fit_s: wall seconds of the"
         " fit alone (the SDF sampling is cached and timed separately); loss: eq. 9 over all samples.",
         "",

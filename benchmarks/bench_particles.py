@@ -6,7 +6,7 @@ size, the particle count, the build time, the IoU of the union of spheres with
 the mesh's solid (uniform samples in the padded bounding box, inside by winding
 number) and the mean surface error (|SDF of the union| at area-uniform points on
 the mesh surface), for touching particles (radius = voxel / 2, GPU Gems) and
-voxel-covering ones (radius = voxel * sqrt(3) / 2). When ``real2sim.fidelity``
+voxel-covering ones (radius = voxel * sqrt(3) / 2). When ``real2sim.geometry.fidelity``
 is present its ``measure_fidelity`` numbers (IoU, Chamfer) are added for up to
 300 particles (it builds the union mesh of all spheres, which is slow beyond).
 
@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from real2sim.inside import inside_mask
-from real2sim.objects import make_object
-from real2sim.particles import COVERING, TOUCHING, particle_spheres, voxel_size_for_count
+from real2sim.geometry.inside import inside_mask
+from real2sim.geometry.objects import make_object
+from real2sim.collision.particles import COVERING, TOUCHING, particle_spheres, voxel_size_for_count
 
 
 FIDELITY_MAX_PIECES = 300  # measure_fidelity meshes the union of all spheres: ~20 s at 257, ~80 s at 1024
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     targets = [64, 256, 1024] if args.quick else [64, 256, 1024, 4096, 10_000]
     try:
-        from real2sim.fidelity import measure_fidelity  # written by another stage; optional here
+        from real2sim.geometry.fidelity import measure_fidelity  # written by another stage; optional here
     except ImportError:
         measure_fidelity = None
 

@@ -33,14 +33,14 @@ def main() -> int:
     parser.add_argument("--full", action="store_true", help="accepted for run_all.py; same as the default")
     args = parser.parse_args()
 
-    from real2sim.asset import AssetConfig, build_asset, rewrite_models
-    from real2sim.contact import ContactProperties
-    from real2sim.metrics import cpd_m_per_s, ocae_m
-    from real2sim.objects import OBJECTS, export_object
-    from real2sim.physical import read_physical_properties
-    from real2sim.scenes import SceneConfig, make_run_specs
-    from real2sim.simulation import simulate_candidate, simulate_reference
-    from real2sim.spec import parse_spec
+    from real2sim.asset.build import AssetConfig, build_asset, rewrite_models
+    from real2sim.formats.contact import ContactProperties
+    from real2sim.evaluate.metrics import cpd_m_per_s, ocae_m
+    from real2sim.geometry.objects import OBJECTS, export_object
+    from real2sim.formats.physical import read_physical_properties
+    from real2sim.evaluate.scenes import SceneConfig, make_run_specs
+    from real2sim.evaluate.simulate import simulate_candidate, simulate_reference
+    from real2sim.formats.spec import parse_spec
 
     spec = parse_spec(args.spec)
     work = Path(tempfile.mkdtemp(prefix="bench_point_stiffness-"))

@@ -39,7 +39,7 @@ def _mesh(kind: str):
 
     if kind == "icosphere":
         return trimesh.creation.icosphere(subdivisions=6)  # 81,920 faces
-    from real2sim.objects import make_object
+    from real2sim.geometry.objects import make_object
 
     mesh = make_object("bottle")
     while len(mesh.faces) < 90_000:  # 5,938 -> 23,752 -> 95,008 faces
@@ -100,7 +100,7 @@ def _split(mesh, config) -> dict:
     import numpy as np
 
     from real2sim import sdf_sampling as S
-    from real2sim.inside import morton_order
+    from real2sim.geometry.inside import morton_order
 
     split: dict[str, float] = {}
 

@@ -38,11 +38,11 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None) ->
     """
     import shutil
 
-    from real2sim.asset import AssetConfig, build_asset, rewrite_models
-    from real2sim.contact import ContactProperties
-    from real2sim.objects import OBJECTS as BUNDLED
-    from real2sim.objects import export_object
-    from real2sim.spec import parse_spec
+    from real2sim.asset.build import AssetConfig, build_asset, rewrite_models
+    from real2sim.formats.contact import ContactProperties
+    from real2sim.geometry.objects import OBJECTS as BUNDLED
+    from real2sim.geometry.objects import export_object
+    from real2sim.formats.spec import parse_spec
 
     assets = []
     for name in OBJECTS:
@@ -69,7 +69,7 @@ def fit_table(work: Path, specs: tuple[str, ...]) -> list[list]:
     """One row per object and SPEC from the builds' fit reports."""
     import json
 
-    from real2sim.spec import parse_spec
+    from real2sim.formats.spec import parse_spec
 
     rows = []
     for name in OBJECTS:
@@ -102,13 +102,13 @@ def main() -> int:
                         help="results in <work>/results_<tag>, section docs/benchmarks/table1_<tag>.md")
     args = parser.parse_args()
 
-    from real2sim.evaluate import EvaluationConfig, evaluate
-    from real2sim.report import paper_name, read_paper_table
+    from real2sim.evaluate.sweep import EvaluationConfig, evaluate
+    from real2sim.report.html import paper_name, read_paper_table
 
     specs = tuple(args.specs or (FULL_SPECS if args.full else QUICK_SPECS))
     runs = args.runs or (10 if args.full else 2)
     start = time.perf_counter()
-    from real2sim.contact import ContactProperties
+    from real2sim.formats.contact import ContactProperties
 
     contact = (ContactProperties() if args.dissipation is None
                else ContactProperties(hunt_crossley_dissipation_s_per_m=args.dissipation))
@@ -174,7 +174,7 @@ def main() -> int:
         "Each metric: ours | paper (Table I). sim_time_s is mean wall seconds per simulation; the paper's "
         "machine and simulated durations differ from ours, so compare times within a column, not across. "
         "The last column is not in the paper: CPD with each contact point weighted by the magnitude of its "
-        "contact force (real2sim.metrics.cpd_m_per_s), so that contacts carrying almost no load do not count "
+        "contact force (real2sim.evaluate.metrics.cpd_m_per_s), so that contacts carrying almost no load do not count "
         "as jumps when they flicker.\n\n"
         + markdown_table(["representation", "OCAE m", "paper", "ATE m", "paper", "CPD m/s", "paper", "ST s", "paper",
                           "CPD force-weighted m/s"], rows)

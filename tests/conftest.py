@@ -12,20 +12,20 @@ import pytest
 
 @pytest.fixture(scope="session")
 def bottle_mesh():
-    from real2sim.objects import make_object
+    from real2sim.geometry.objects import make_object
 
     return make_object("bottle")
 
 
 @pytest.fixture(scope="session")
 def can_mesh():
-    from real2sim.objects import make_object
+    from real2sim.geometry.objects import make_object
 
     return make_object("can")
 
 
 @pytest.fixture(scope="session")
 def mug_mesh():
-    from real2sim.objects import make_object
+    from real2sim.geometry.objects import make_object
 
     return make_object("mug")

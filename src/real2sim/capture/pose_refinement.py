@@ -1,0 +1,491 @@
+"""Refine a dataset's robot-reported camera poses with COLMAP, keeping the robot frame.
+
+As in the paper (IV-A): COLMAP is seeded with the poses from the wrist-camera
+calibration, refines them, and the refined model is aligned back to the robot
+frame with a similarity transform (Umeyama on camera centres, the role of
+COLMAP's model aligner). Steps:
+
+1. SIFT features on every image (the whole image by default: the textured table
+   gives far more, and better spread, features than the object alone).
+2. Matching of the pairs chosen from the known poses: each view with its
+   ``k_neighbors`` nearest views by camera centre and viewing direction
+   (not exhaustive: O(N k) pairs), with geometric verification.
+3. Triangulation with the given poses fixed, using tolerances wide enough for
+   the pose noise; then bundle adjustment (poses + points, robust loss,
+   intrinsics fixed); then filtering of bad observations, re-triangulation with
+   normal tolerances and a second bundle adjustment.
+4. Similarity alignment of the refined model onto the given poses: Umeyama on
+   the camera centres (robust: one round of outlier rejection), then the rotation
+   re-estimated from centres and orientations together, weighted by the robot's
+   pose noise (``align="centres"`` keeps the centres-only fit).
+
+Frames that COLMAP could not constrain (too few observations) or whose
+refined pose moved implausibly far keep their given pose. When too few frames
+are refined, all poses are kept and the result says why.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from real2sim.formats.dataset import (
+    CV_FROM_GL,
+    Dataset,
+    pose_errors,
+    read_dataset,
+    read_ground_truth,
+    write_json_atomic,
+    write_transforms,
+)
+from real2sim.formats.errors import UserInputError
+
+ProgressFn = Callable[[str, float], None]
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Pose refinement settings.
+
+    ``sift_first_octave``: None picks -1 (upsampled) for images up to 400 px, else 0.
+    ``feature_region``: "all" (whole image, default) or "object" (only inside the
+    masks, dilated by ``mask_dilation_px``). ``max_change_deg`` / ``max_change_mm``:
+    a refined pose further than this from the given one is treated as a failure
+    for that frame. ``min_observations``: a frame with fewer triangulated
+    observations keeps its given pose. ``min_refined_fraction``: below this
+    fraction of refined frames, all poses are kept. ``align``: "centres" (Umeyama on
+    camera centres only, as COLMAP's model aligner) or "poses" (default: centres and
+    orientations, weighted by the robot's pose noise ``prior_noise_mm`` / ``prior_noise_deg``;
+    None reads them from the dataset's ``real2sim`` block, else 5 mm / 1 deg).
+    """
+
+    k_neighbors: int = 10
+    feature_region: str = "all"
+    mask_dilation_px: int = 15
+    max_num_features: int = 4096
+    sift_first_octave: int | None = None
+    max_image_size: int = 1600
+    min_num_inliers: int = 15
+    init_max_reproj_error_px: float | None = None
+    final_max_reproj_error_px: float = 4.0
+    robust_loss_scale_px: float = 2.0
+    ba_rounds: int = 2
+    ba_function_tolerance: float = 1e-6
+    ba_max_iterations: int = 50
+    min_observations: int = 60
+    max_change_deg: float = 10.0
+    max_change_mm: float = 100.0
+    min_refined_fraction: float = 0.5
+    align: str = "poses"
+    prior_noise_mm: float | None = None
+    prior_noise_deg: float | None = None
+    num_threads: int = -1
+    seed: int = 0
+    quiet: bool = True
+
+
+@dataclass(frozen=True)
+class RefineResult:
+    """What happened. Errors are means over frames vs ground_truth/ (None without it)."""
+
+    refined: bool
+    reason: str
+    num_frames: int
+    num_refined_frames: int
+    num_pairs: int
+    num_points3d: int
+    mean_reproj_error_px: float | None
+    sim3_scale: float | None
+    rot_error_before_deg: float | None = None
+    trans_error_before_mm: float | None = None
+    rot_error_after_deg: float | None = None
+    trans_error_after_mm: float | None = None
+    seconds: float = 0.0
+    timings_s: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        from dataclasses import asdict
+
+        return asdict(self)
+
+
+# ----------------------------------------------------------------------------- geometry helpers
+
+
+def umeyama(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Similarity (s, R, t) minimising sum ||s R src_i + t - dst_i||^2 for (N, 3) point sets."""
+    mu_s, mu_d = src.mean(0), dst.mean(0)
+    xs, xd = src - mu_s, dst - mu_d
+    cov = xd.T @ xs / len(src)
+    u, d, vt = np.linalg.svd(cov)
+    sign = np.eye(3)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:
+        sign[2, 2] = -1.0
+    rot = u @ sign @ vt
+    var_s = (xs ** 2).sum() / len(src)
+    scale = float(np.trace(np.diag(d) @ sign) / var_s)
+    trans = mu_d - scale * rot @ mu_s
+    return scale, rot, trans
+
+
+def robust_umeyama(src: np.ndarray, dst: np.ndarray, reject_factor: float = 3.0
+                   ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """Umeyama, then refit without points whose residual exceeds ``reject_factor`` x the median."""
+    s, r, t = umeyama(src, dst)
+    res = np.linalg.norm(s * src @ r.T + t - dst, axis=1)
+    keep = res <= reject_factor * max(np.median(res), 1e-12)
+    if 3 <= keep.sum() < len(src):
+        s, r, t = umeyama(src[keep], dst[keep])
+    return s, r, t, keep
+
+
+def align_poses(est_c2w: np.ndarray, given_c2w: np.ndarray, noise_mm: float, noise_deg: float
+                ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """Similarity (s, R, t) taking refined camera poses onto the given (robot) ones, and the inlier mask.
+
+    Start from a robust Umeyama fit of the camera centres (the paper's model aligner), then
+    re-estimate the rotation from centres *and* orientations, each weighted by the inverse
+    variance of the robot's pose noise: E|dc|^2 = noise_mm^2 for centres, and
+    E||R_noise - I||_F^2 = 2 theta^2 for orientations (theta = noise_deg in radians).
+    The orientations carry as much information about the frame's rotation as the
+    centres do, so using both roughly halves the variance of the aligned rotation.
+    """
+    src, dst = est_c2w[:, :3, 3], given_c2w[:, :3, 3]
+    s, r, t, keep = robust_umeyama(src, dst)
+    w_t = 1.0 / max((1e-3 * noise_mm) ** 2, 1e-12)
+    w_r = 1.0 / max(2.0 * np.radians(noise_deg) ** 2, 1e-12)
+    x = src[keep] - src[keep].mean(0)
+    y = dst[keep] - dst[keep].mean(0)
+    m = w_t * s * (y.T @ x) + w_r * np.einsum("nij,nkj->ik", given_c2w[keep, :3, :3], est_c2w[keep, :3, :3])
+    u, _, vt = np.linalg.svd(m)
+    fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    r = u @ fix @ vt
+    s = float(np.einsum("ij,ij->", y, x @ r.T) / (x ** 2).sum())
+    t = dst[keep].mean(0) - s * r @ src[keep].mean(0)
+    return s, r, t, keep
+
+
+def select_pairs(c2w_gl: np.ndarray, k: int) -> list[tuple[int, int]]:
+    """Unordered index pairs: each view with its k nearest by centre distance and viewing direction.
+
+    Distance = |c_i - c_j| / (mean camera-to-centroid distance) + (1 - cos angle between
+    viewing directions); views looking more than 90 degrees apart are never paired.
+    """
+    n = len(c2w_gl)
+    if n < 2:
+        return []
+    centres = c2w_gl[:, :3, 3]
+    dirs = -c2w_gl[:, :3, 2]
+    scale = np.linalg.norm(centres - centres.mean(0), axis=1).mean() + 1e-9
+    dist = np.linalg.norm(centres[:, None] - centres[None], axis=2) / scale
+    cos = np.clip(dirs @ dirs.T, -1.0, 1.0)
+    score = dist + (1.0 - cos)
+    score[cos < 0.0] = np.inf
+    np.fill_diagonal(score, np.inf)
+    kk = min(k, n - 1)
+    nearest = np.argsort(score, axis=1)[:, :kk]
+    pairs = set()
+    for i in range(n):
+        for j in nearest[i]:
+            if np.isfinite(score[i, j]):
+                pairs.add((min(i, int(j)), max(i, int(j))))
+    return sorted(pairs)
+
+
+# ----------------------------------------------------------------------------- COLMAP
+
+
+def _camera_spec(ds: Dataset) -> tuple[str, str]:
+    k = ds.intrinsics
+    if any(v != 0.0 for v in (k.k1, k.k2, k.p1, k.p2)):
+        return "OPENCV", ",".join(str(v) for v in (k.fl_x, k.fl_y, k.cx, k.cy, k.k1, k.k2, k.p1, k.p2))
+    return "PINHOLE", ",".join(str(v) for v in (k.fl_x, k.fl_y, k.cx, k.cy))
+
+
+def _write_feature_masks(ds: Dataset, mask_root: Path, dilation_px: int) -> None:
+    """COLMAP masks: ``mask_root/<image name>.png``, features kept where the mask is non-zero."""
+    from PIL import Image
+    from scipy import ndimage
+
+    from real2sim.formats.dataset import load_mask
+
+    for f in ds.frames:
+        if f.mask_path is None:
+            raise UserInputError(f"feature_region 'object' needs masks, but frame {f.file_path} has no mask_path")
+        m = load_mask(ds.root / f.mask_path)
+        if dilation_px > 0:
+            m = ndimage.binary_dilation(m, iterations=dilation_px)
+        out = mask_root / f"{f.file_path}.png"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray((m * 255).astype(np.uint8)).save(out)
+
+
+def _run_colmap(ds: Dataset, cfg: RefineConfig, work: Path, progress: ProgressFn | None
+                ) -> tuple[dict[str, np.ndarray], dict[str, int], int, int, float | None, dict]:
+    """Run COLMAP in ``work``; return refined cam_from_world (3x4, COLMAP frame) by file_path,
+    observation counts by file_path, pair count, 3D point count, mean reprojection error, timings."""
+    import pycolmap
+
+    timings = {}
+    names = [f.file_path for f in ds.frames]
+    db_path = work / "database.db"
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model, reader.camera_params = _camera_spec(ds)
+    if cfg.feature_region == "object":
+        _write_feature_masks(ds, work / "feature_masks", cfg.mask_dilation_px)
+        reader.mask_path = str(work / "feature_masks")
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = cfg.num_threads
+    extraction.max_image_size = cfg.max_image_size
+    extraction.sift.max_num_features = cfg.max_num_features
+    # Upsampling (octave -1) finds more features in small images but costs ~3x at 640x480,
+    # where octave 0 gave the same pose accuracy.
+    extraction.sift.first_octave = (cfg.sift_first_octave if cfg.sift_first_octave is not None
+                                    else (-1 if max(ds.intrinsics.width, ds.intrinsics.height) <= 400 else 0))
+    extraction.use_gpu = False
+    t0 = time.perf_counter()
+    if progress:
+        progress("extracting features", 0.05)
+    pycolmap.extract_features(db_path, ds.root, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
+                              reader_options=reader, extraction_options=extraction, device=pycolmap.Device.cpu)
+    timings["features_s"] = time.perf_counter() - t0
+
+    pairs = select_pairs(ds.poses_c2w_gl(), cfg.k_neighbors)
+    pairs_path = work / "pairs.txt"
+    pairs_path.write_text("".join(f"{names[i]} {names[j]}\n" for i, j in pairs))
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = cfg.num_threads
+    matching.use_gpu = False
+    pairing = pycolmap.ImportedPairingOptions()
+    pairing.match_list_path = str(pairs_path)
+    verification = pycolmap.TwoViewGeometryOptions()
+    verification.min_num_inliers = cfg.min_num_inliers
+    t0 = time.perf_counter()
+    if progress:
+        progress(f"matching {len(pairs)} pairs", 0.35)
+    pycolmap.match_image_pairs(db_path, matching_options=matching, pairing_options=pairing,
+                               verification_options=verification, device=pycolmap.Device.cpu)
+    timings["matching_s"] = time.perf_counter() - t0
+
+    # A reconstruction with the database's ids and the given poses as initialisation.
+    rec = pycolmap.Reconstruction()
+    with pycolmap.Database.open(db_path) as db:
+        cameras = db.read_all_cameras()
+        images = db.read_all_images()
+        num_verified = db.num_verified_image_pairs()
+    if num_verified == 0:
+        raise _ColmapFailure(f"no image pair passed geometric verification ({len(pairs)} pairs tried)")
+    for cam in cameras:
+        rec.add_camera_with_trivial_rig(cam)
+    c2w_cv = {f.file_path: f.transform_matrix @ CV_FROM_GL for f in ds.frames}
+    for img in images:
+        cfw = np.linalg.inv(c2w_cv[img.name])[:3, :]
+        rec.add_image_with_trivial_frame(pycolmap.Image(name=img.name, camera_id=img.camera_id,
+                                                        image_id=img.image_id), pycolmap.Rigid3d(cfw))
+
+    diag = max(ds.intrinsics.width, ds.intrinsics.height)
+    init_err = cfg.init_max_reproj_error_px if cfg.init_max_reproj_error_px is not None else 0.05 * diag
+    tri_opts = pycolmap.IncrementalPipelineOptions()
+    tri_opts.num_threads = cfg.num_threads
+    tri_opts.random_seed = cfg.seed
+    # The triangulator's own global bundle adjustment would also move the poses, with the gauge
+    # free (singular, slow); keep it to the points and adjust the poses in _bundle_adjust.
+    tri_opts.fix_existing_frames = True
+    ba = pycolmap.BundleAdjustmentOptions()
+    ba.refine_focal_length = False
+    ba.refine_principal_point = False
+    ba.refine_extra_params = False
+    ba.print_summary = False
+    ba.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
+    ba.ceres.loss_function_scale = cfg.robust_loss_scale_px
+    ba.ceres.solver_options.num_threads = cfg.num_threads
+    # Ceres' defaults (no function tolerance, 100 iterations) keep iterating long after the
+    # poses stop moving; a relative cost tolerance of 1e-6 stops at the same poses.
+    ba.ceres.solver_options.function_tolerance = cfg.ba_function_tolerance
+    ba.ceres.solver_options.max_num_iterations = cfg.ba_max_iterations
+    t0 = time.perf_counter()
+    for rnd in range(cfg.ba_rounds):
+        # The first triangulation sees the noisy poses: widen the tolerances so tracks survive.
+        err = init_err if rnd == 0 else cfg.final_max_reproj_error_px
+        tri_opts.triangulation.complete_max_reproj_error = err
+        tri_opts.triangulation.merge_max_reproj_error = err
+        tri_opts.triangulation.create_max_angle_error = 2.0 if rnd else 6.0
+        tri_opts.triangulation.continue_max_angle_error = 2.0 if rnd else 6.0
+        tri_opts.mapper.filter_max_reproj_error = err
+        if progress:
+            progress(f"triangulating + bundle adjustment (round {rnd + 1}/{cfg.ba_rounds})",
+                     0.6 + 0.35 * rnd / cfg.ba_rounds)
+        out = work / f"tri_{rnd}"
+        out.mkdir()
+        rec = pycolmap.triangulate_points(rec, db_path, ds.root, out, clear_points=True, options=tri_opts)
+        if rec.num_points3D() < 10:
+            raise _ColmapFailure(f"triangulation produced only {rec.num_points3D()} points")
+        _bundle_adjust(rec, ba)
+        obs = pycolmap.ObservationManager(rec)
+        obs.filter_all_points3D(cfg.final_max_reproj_error_px if rnd else 2 * cfg.final_max_reproj_error_px, 1.0)
+        _bundle_adjust(rec, ba)
+    timings["triangulation_ba_s"] = time.perf_counter() - t0
+
+    refined, counts = {}, {}
+    for image_id, img in rec.images.items():
+        counts[img.name] = int(img.num_points3D)
+        if img.has_pose:
+            refined[img.name] = np.asarray(img.cam_from_world().matrix())
+    return (refined, counts, len(pairs), rec.num_points3D(),
+            float(rec.compute_mean_reprojection_error()), timings)
+
+
+def _bundle_adjust(rec, options) -> None:
+    """Bundle adjustment of all registered poses and points with the gauge fixed.
+
+    With every pose free the problem has a 7-DoF gauge freedom (similarity), which
+    leaves the normal equations singular: Ceres then fails many steps and crawls.
+    Fixing the gauge on two cameras removes it; the final similarity alignment
+    puts the model back onto the robot frame anyway."""
+    import pycolmap
+
+    config = pycolmap.BundleAdjustmentConfig()
+    for image_id in rec.reg_image_ids():
+        config.add_image(image_id)
+    config.fix_gauge(pycolmap.BundleAdjustmentGauge.TWO_CAMS_FROM_WORLD)
+    pycolmap.create_default_bundle_adjuster(options, config, rec).solve()
+
+
+class _ColmapFailure(RuntimeError):
+    pass
+
+
+def _c2w_gl_from_cfw(cfw: np.ndarray) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :] = cfw
+    return np.linalg.inv(m) @ CV_FROM_GL
+
+
+def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progress: ProgressFn | None = None
+                         ) -> tuple[np.ndarray, RefineResult]:
+    """Refined (N, 4, 4) camera-to-world poses (OpenGL axes, the dataset's frame) and a report.
+
+    Never raises for a COLMAP failure: it returns the given poses with ``refined=False``
+    and the reason (also issued as a warning).
+    """
+    if cfg.align not in ("centres", "poses"):
+        raise UserInputError(f"align must be 'centres' or 'poses' (got {cfg.align!r})")
+    if cfg.feature_region not in ("all", "object"):
+        raise UserInputError(f"feature_region must be 'all' or 'object' (got {cfg.feature_region!r})")
+    t_start = time.perf_counter()
+    given = ds.poses_c2w_gl()
+    n = len(given)
+
+    def fallback(reason: str, **kw) -> tuple[np.ndarray, RefineResult]:
+        warnings.warn(f"pose refinement kept the given poses: {reason}", RuntimeWarning, stacklevel=3)
+        base = dict(refined=False, reason=reason, num_frames=n, num_refined_frames=0, num_pairs=0,
+                    num_points3d=0, mean_reproj_error_px=None, sim3_scale=None)
+        base.update(kw)
+        base["seconds"] = time.perf_counter() - t_start
+        return given.copy(), RefineResult(**base)
+
+    if n < 3:
+        return fallback(f"only {n} frames (need at least 3)")
+    try:
+        import pycolmap
+    except ImportError:
+        raise UserInputError("refine-poses needs pycolmap (pip install pycolmap)") from None
+
+    work = Path(tempfile.mkdtemp(prefix="real2sim-colmap-"))
+    log_level = pycolmap.logging.minloglevel
+    # COLMAP's INFO log is hundreds of lines per run; keep its warnings and errors.
+    pycolmap.logging.minloglevel = max(log_level, 1) if cfg.quiet else log_level
+    try:
+        try:
+            refined_cfw, counts, num_pairs, num_pts, reproj, timings = _run_colmap(ds, cfg, work, progress)
+        except _ColmapFailure as exc:
+            return fallback(str(exc))
+        except Exception as exc:  # COLMAP raises plain RuntimeErrors/ValueErrors on degenerate input
+            return fallback(f"COLMAP failed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
+    finally:
+        pycolmap.logging.minloglevel = log_level
+        shutil.rmtree(work, ignore_errors=True)
+
+    names = [f.file_path for f in ds.frames]
+    ok = np.array([names[i] in refined_cfw and counts.get(names[i], 0) >= cfg.min_observations
+                   for i in range(n)])
+    info = dict(num_pairs=num_pairs, num_points3d=num_pts, mean_reproj_error_px=reproj, timings_s=timings)
+    if ok.sum() < max(3, cfg.min_refined_fraction * n):
+        return fallback(f"only {int(ok.sum())} of {n} frames have >= {cfg.min_observations} triangulated "
+                        "observations", **info)
+    est = np.stack([_c2w_gl_from_cfw(refined_cfw[names[i]]) if ok[i] else given[i] for i in range(n)])
+
+    # Align COLMAP's frame back to the robot frame using the refined frames only.
+    noise = {**{"pose_noise_mm": 5.0, "pose_noise_deg": 1.0}, **ds.extra.get("real2sim", {})}
+    noise_mm = cfg.prior_noise_mm if cfg.prior_noise_mm is not None else float(noise["pose_noise_mm"])
+    noise_deg = cfg.prior_noise_deg if cfg.prior_noise_deg is not None else float(noise["pose_noise_deg"])
+    if cfg.align == "centres":
+        s, r, t, _ = robust_umeyama(est[ok, :3, 3], given[ok, :3, 3])
+    else:
+        s, r, t, _ = align_poses(est[ok], given[ok], noise_mm, noise_deg)
+    aligned = given.copy()
+    idx = np.nonzero(ok)[0]
+    aligned[idx, :3, :3] = r @ est[idx, :3, :3]
+    aligned[idx, :3, 3] = s * est[idx, :3, 3] @ r.T + t
+    # A frame that moved implausibly far is a COLMAP mistake for that frame: keep its given pose.
+    rot_change, trans_change = pose_errors(aligned, given)
+    bad = ok & ((rot_change > cfg.max_change_deg) | (trans_change > cfg.max_change_mm))
+    aligned[bad] = given[bad]
+    ok &= ~bad
+    if ok.sum() < max(3, cfg.min_refined_fraction * n):
+        return fallback(f"only {int(ok.sum())} of {n} refined frames stayed within {cfg.max_change_deg} deg / "
+                        f"{cfg.max_change_mm} mm of the given poses", **info)
+    return aligned, RefineResult(refined=True, reason="ok", num_frames=n, num_refined_frames=int(ok.sum()),
+                                 sim3_scale=float(s), seconds=time.perf_counter() - t_start, **info)
+
+
+def _with_errors(result: RefineResult, gt: Dataset | None, names: list[str], before: np.ndarray,
+                 after: np.ndarray) -> RefineResult:
+    if gt is None:
+        return result
+    gt_by_name = {f.file_path: f.transform_matrix for f in gt.frames}
+    if not all(nm in gt_by_name for nm in names):
+        return result
+    ref = np.stack([gt_by_name[nm] for nm in names])
+    rb, tb = pose_errors(before, ref)
+    ra, ta = pose_errors(after, ref)
+    return replace(result, rot_error_before_deg=float(rb.mean()), trans_error_before_mm=float(tb.mean()),
+                   rot_error_after_deg=float(ra.mean()), trans_error_after_mm=float(ta.mean()))
+
+
+def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
+                 progress: ProgressFn | None = None) -> RefineResult:
+    """Refine ``dataset_dir/transforms.json`` in place; the original is kept as transforms_unrefined.json.
+
+    When a transforms_unrefined.json already exists (a second run), it is kept:
+    it still holds the robot's original poses. Errors vs ``ground_truth/`` are
+    filled in when it exists. Writes ``refine_report.json``. Files are written
+    to temporary names and renamed, so an interrupted run leaves the dataset as it was.
+    """
+    root = Path(dataset_dir)
+    ds = read_dataset(root)
+    if ds.extra.get("source") == "colmap":
+        raise UserInputError(f"{root} has no transforms.json (its poses come from COLMAP already)")
+    poses, result = refine_dataset_poses(ds, cfg, progress)
+    names = [f.file_path for f in ds.frames]
+    result = _with_errors(result, read_ground_truth(root), names, ds.poses_c2w_gl(), poses)
+    if progress:
+        progress("writing", 1.0)
+    unrefined = root / "transforms_unrefined.json"
+    if not unrefined.exists():
+        write_json_atomic(unrefined, __import__("json").loads((root / "transforms.json").read_text()))
+    if result.refined:
+        extra = dict(ds.extra)
+        extra["real2sim_refinement"] = {k: v for k, v in result.to_json().items() if k != "timings_s"}
+        new = replace(ds, frames=tuple(replace(f, transform_matrix=poses[i]) for i, f in enumerate(ds.frames)),
+                      extra=extra)
+        write_transforms(root / "transforms.json", new)
+    write_json_atomic(root / "refine_report.json", result.to_json())
+    return result

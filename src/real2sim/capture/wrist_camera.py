@@ -1,0 +1,487 @@
+"""Simulated wrist-camera capture of an object on a table, rendered by Drake's VTK engine.
+
+World frame (metres): the table top is the plane z = 0, the object stands on it
+with the centre of its footprint at the origin; z is up. The robot arm's base
+sits at one side of the table (``ReachabilityModel.base_xy_m``), so its wrist
+camera reaches the far side of the object only from high elevations -- the
+uneven coverage of the paper's Fig. 4.
+
+Output (a nerfstudio dataset, see ``docs/capture.md``)::
+
+    OUT/
+      transforms.json           poses as the robot reports them (exact poses + calibration noise)
+      images/frame_00000.png    colour, 8-bit RGB
+      masks/frame_00000.png     rendered object mask, 255 = object
+      background/frame_00000.png  (with_background) the empty table from the same poses
+      ground_truth/
+        transforms.json         the exact poses, same file_paths (relative to OUT, not to ground_truth/)
+        depth/frame_00000.png   16-bit depth in millimetres along the optical axis, 0 = no return
+        masks/frame_00000.png   copy of the rendered masks (reference for other maskers)
+        mesh.obj (+ .mtl, .png) the object in its own frame
+        object_pose.json        4x4 world_from_mesh placing mesh.obj in the world frame
+        capture_config.json     the CaptureConfig used
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import trimesh
+
+from real2sim.formats.dataset import (
+    CV_FROM_GL,
+    CameraIntrinsics,
+    Dataset,
+    Frame,
+    realsense_d435_intrinsics,
+    write_transforms,
+)
+from real2sim.formats.errors import UserInputError
+from real2sim.formats.outputs import atomic_output_dir
+
+OBJECT_LABEL = 1
+TABLE_LABEL = 2
+
+ProgressFn = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class ReachabilityModel:
+    """Which camera positions a wrist camera on a table-side arm (Franka-like) can reach.
+
+    A camera position p (world frame, metres) is reachable when its distance from
+    the arm's shoulder (base + ``shoulder_height_m`` up) lies in [r_min_m, r_max_m]
+    and its elevation seen from the object's look-at point lies in
+    [min_elevation_deg, max_elevation_deg]. Orientation is not limited: the wrist
+    is assumed to point the camera at the object from anywhere it can reach.
+    """
+
+    base_xy_m: tuple[float, float] = (-0.55, 0.0)
+    shoulder_height_m: float = 0.33
+    r_min_m: float = 0.25
+    r_max_m: float = 0.85
+    min_elevation_deg: float = 8.0
+    max_elevation_deg: float = 88.0
+
+    def reachable(self, positions_m: np.ndarray, target_m: np.ndarray) -> np.ndarray:
+        """(N,) bool for (N, 3) camera positions in the world frame."""
+        shoulder = np.array([self.base_xy_m[0], self.base_xy_m[1], self.shoulder_height_m])
+        r = np.linalg.norm(positions_m - shoulder, axis=1)
+        rel = positions_m - target_m
+        elev = np.degrees(np.arctan2(rel[:, 2], np.linalg.norm(rel[:, :2], axis=1)))
+        return ((r >= self.r_min_m) & (r <= self.r_max_m)
+                & (elev >= self.min_elevation_deg) & (elev <= self.max_elevation_deg)
+                & (positions_m[:, 2] > 0.0))
+
+
+@dataclass(frozen=True)
+class CaptureConfig:
+    """How to capture. Image sizes in pixels; noise is the RMS magnitude per pose.
+
+    ``intrinsics`` default: a RealSense D435-like colour camera (fx = fy = 615 px at
+    640x480, scaled with the size), principal point at the image centre.
+    ``distance_factors`` scale the camera distance at which the object's bounding
+    sphere fills ``fill_fraction`` of the vertical field of view.
+    ``elevations_deg``: the rings of the camera path, seen from the look-at point.
+    """
+
+    views: int = 200
+    width: int = 640
+    height: int = 480
+    intrinsics: CameraIntrinsics | None = None
+    pose_noise_mm: float = 5.0
+    pose_noise_deg: float = 1.0
+    seed: int = 0
+    with_background: bool = False
+    elevations_deg: tuple[float, ...] = (12.0, 25.0, 38.0, 51.0, 64.0, 76.0, 86.0)
+    distance_factors: tuple[float, ...] = (1.0, 1.35)
+    fill_fraction: float = 0.75
+    reach: ReachabilityModel = field(default_factory=ReachabilityModel)
+    table_size_m: float = 1.6
+    texture_seed: int = 7
+
+    def camera(self) -> CameraIntrinsics:
+        if self.intrinsics is not None:
+            if (self.intrinsics.width, self.intrinsics.height) != (self.width, self.height):
+                return self.intrinsics.scaled(self.width, self.height)
+            return self.intrinsics
+        return realsense_d435_intrinsics(self.width, self.height)
+
+    def validate(self) -> None:
+        if int(self.views) < 1:
+            raise UserInputError(f"--views must be at least 1 (got {self.views})")
+        if self.width < 16 or self.height < 16 or self.width > 8192 or self.height > 8192:
+            raise UserInputError(f"image size {self.width}x{self.height} out of range (16..8192 px)")
+        for name in ("pose_noise_mm", "pose_noise_deg"):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v < 0:
+                raise UserInputError(f"--{name.replace('_', '-')} must be >= 0 (got {v})")
+
+
+@dataclass(frozen=True)
+class CaptureResult:
+    out_dir: Path
+    num_views: int
+    render_seconds: float
+    total_seconds: float
+
+
+# ----------------------------------------------------------------------------- textures
+
+
+def procedural_texture(size_px: int, seed: int, contrast: float = 1.0) -> np.ndarray:
+    """(size, size, 3) uint8 colourful multi-scale noise with sharp blobs: rich in SIFT features."""
+    from PIL import Image
+
+    rng = np.random.default_rng(seed)
+    img = np.zeros((size_px, size_px, 3))
+    # Band-limited noise at several octaves gives features at many scales.
+    for octave, weight in ((8, 0.5), (32, 0.35), (128, 0.25)):
+        grid = Image.fromarray((255 * rng.random((octave, octave, 3))).astype(np.uint8))
+        img += weight / 255.0 * np.asarray(grid.resize((size_px, size_px), Image.BICUBIC), dtype=float)
+    img = (img - img.min()) / (np.ptp(img) + 1e-9)
+    # Hard-edged discs and bars: corners and blobs for the detector (drawn in local windows).
+    for _ in range(size_px // 6):
+        cx, cy = rng.integers(0, size_px, 2)
+        r = int(rng.integers(size_px // 150 + 2, size_px // 30 + 4))
+        col = rng.random(3)
+        y0, y1, x0, x1 = max(cy - r, 0), min(cy + r + 1, size_px), max(cx - r, 0), min(cx + r + 1, size_px)
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        if rng.random() < 0.5:
+            sel = (xx - cx) ** 2 + (yy - cy) ** 2 < r * r
+        else:
+            sel = np.abs(yy - cy) < r // 2 + 1
+        img[y0:y1, x0:x1][sel] = col
+    img = 0.5 + contrast * (img - 0.5)
+    return (255 * np.clip(img, 0, 1)).astype(np.uint8)
+
+
+def has_texture(mesh: trimesh.Trimesh) -> bool:
+    vis = mesh.visual
+    return (getattr(vis, "kind", None) == "texture" and getattr(vis, "uv", None) is not None
+            and getattr(getattr(vis, "material", None), "image", None) is not None)
+
+
+def with_procedural_texture(mesh: trimesh.Trimesh, seed: int = 0) -> trimesh.Trimesh:
+    """A copy of ``mesh`` with a cylindrical UV map and a procedural texture (for untextured meshes)."""
+    from PIL import Image
+
+    m = mesh.copy()
+    v = m.vertices
+    c = v.mean(axis=0)
+    z0, z1 = v[:, 2].min(), v[:, 2].max()
+    u = np.arctan2(v[:, 1] - c[1], v[:, 0] - c[0]) / (2 * np.pi) + 0.5
+    w = (v[:, 2] - z0) / max(z1 - z0, 1e-9)
+    image = Image.fromarray(procedural_texture(512, seed))
+    m.visual = trimesh.visual.TextureVisuals(uv=np.c_[u, w], image=image)
+    return m
+
+
+def export_textured_obj(mesh: trimesh.Trimesh, path: Path) -> Path:
+    """Write ``mesh`` as OBJ with normals + MTL + PNG beside it, white diffuse so the texture shows as is."""
+    from real2sim.formats.mesh_io import export_textured_mesh
+
+    path = export_textured_mesh(mesh, Path(path))
+    for mtl in path.parent.glob("*.mtl"):
+        lines = []
+        for line in mtl.read_text().splitlines():
+            key = line.split(" ", 1)[0]
+            if key == "Kd":
+                line = "Kd 1.0 1.0 1.0"
+            elif key in ("Ks", "Ka"):
+                line = f"{key} 0.0 0.0 0.0"
+            lines.append(line)
+        mtl.write_text("\n".join(lines) + "\n")
+    return path
+
+
+# ----------------------------------------------------------------------------- poses
+
+
+def look_at_c2w_gl(positions_m: np.ndarray, target_m: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) camera-to-world poses (OpenGL axes) at ``positions_m`` looking at ``target_m``, no roll.
+
+    Image "up" is world +z where defined; for cameras straight above the target it
+    is the horizontal direction pointing away from the camera's azimuth.
+    """
+    fwd = target_m - positions_m
+    fwd /= np.linalg.norm(fwd, axis=1, keepdims=True)
+    z_up = np.array([0.0, 0.0, 1.0])
+    right = np.cross(fwd, z_up)
+    n = np.linalg.norm(right, axis=1)
+    degenerate = n < 1e-6
+    if np.any(degenerate):
+        right[degenerate] = [0.0, -1.0, 0.0]
+        n[degenerate] = 1.0
+    right /= n[:, None]
+    up = np.cross(right, fwd)
+    c2w = np.tile(np.eye(4), (len(positions_m), 1, 1))
+    c2w[:, :3, 0] = right
+    c2w[:, :3, 1] = up
+    c2w[:, :3, 2] = -fwd
+    c2w[:, :3, 3] = positions_m
+    return c2w
+
+
+def object_frame(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, float]:
+    """(world_from_mesh 4x4, look-at target in world, bounding radius m): footprint centre at origin, bottom at z=0."""
+    lo, hi = mesh.bounds
+    world_from_mesh = np.eye(4)
+    world_from_mesh[:3, 3] = [-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -lo[2]]
+    height = hi[2] - lo[2]
+    target = np.array([0.0, 0.0, 0.45 * height])
+    radius = 0.5 * float(np.linalg.norm(hi - lo))
+    return world_from_mesh, target, radius
+
+
+def camera_poses(config: CaptureConfig, target_m: np.ndarray, radius_m: float) -> np.ndarray:
+    """(views, 4, 4) exact camera-to-world poses (OpenGL axes): rings filtered by the arm's reach.
+
+    Rings at ``config.elevations_deg`` and distances ``distance_factors`` x the
+    distance at which the object fills ``fill_fraction`` of the vertical field of
+    view; azimuths spaced evenly (count per ring proportional to its circumference),
+    densified until at least ``views`` candidates are reachable, then ``views`` of
+    them taken evenly along the ring order.
+    """
+    cam = config.camera()
+    half_fov_y = np.arctan(0.5 * cam.height / cam.fl_y)
+    base_dist = radius_m / np.tan(config.fill_fraction * half_fov_y)
+    dists = base_dist * np.asarray(config.distance_factors, dtype=float)
+    elevs = np.radians(np.asarray(config.elevations_deg, dtype=float))
+    per_unit = max(config.views / (len(dists) * len(elevs)), 1.0)
+    while True:
+        cands = []
+        for di, d in enumerate(dists):
+            for ei, e in enumerate(elevs):
+                n_az = max(1, int(np.ceil(per_unit * max(np.cos(e), 0.08) * 1.5)))
+                # Stagger rings so that consecutive rings do not line up in azimuth.
+                az = 2 * np.pi * (np.arange(n_az) + 0.5 * ((ei + di) % 2)) / n_az
+                pos = np.c_[d * np.cos(e) * np.cos(az), d * np.cos(e) * np.sin(az), np.full(n_az, d * np.sin(e))]
+                cands.append(target_m + pos)
+        cands = np.concatenate(cands)
+        ok = config.reach.reachable(cands, target_m)
+        if ok.sum() >= config.views:
+            break
+        if len(cands) > max(20000, 50 * config.views) or (ok.sum() == 0 and len(cands) > 2000):
+            raise UserInputError(
+                f"the arm cannot reach {config.views} views of this object (only {int(ok.sum())} reachable); "
+                "the object may be too large for the workspace")
+        per_unit *= 1.5
+    reach = cands[ok]
+    pick = np.round(np.linspace(0, len(reach) - 1, config.views)).astype(int)
+    return look_at_c2w_gl(reach[pick], target_m)
+
+
+def perturb_poses(c2w: np.ndarray, noise_mm: float, noise_deg: float, seed: int) -> np.ndarray:
+    """Calibration-like noise: each pose rotated about its camera centre and shifted, independently.
+
+    The rotation vector and the translation are Gaussian with RMS magnitude
+    ``noise_deg`` and ``noise_mm`` (isotropic, per-axis sigma = value / sqrt(3)).
+    """
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    n = len(c2w)
+    rotvec = rng.normal(0.0, np.radians(noise_deg) / np.sqrt(3), (n, 3))
+    shift_m = rng.normal(0.0, 1e-3 * noise_mm / np.sqrt(3), (n, 3))
+    out = c2w.copy()
+    out[:, :3, :3] = Rotation.from_rotvec(rotvec).as_matrix() @ c2w[:, :3, :3]
+    out[:, :3, 3] += shift_m
+    return out
+
+
+# ----------------------------------------------------------------------------- rendering
+
+
+def _lights():
+    from pydrake.geometry import LightParameter
+    from pydrake.geometry import Rgba
+
+    lights = []
+    # A ring light above the table (as in the paper's rig) + a weak headlight: even, shadow-free light.
+    for k in range(8):
+        a = 2 * np.pi * k / 8
+        lights.append(LightParameter(type="point", frame="world", intensity=0.09,
+                                     position=[0.5 * np.cos(a), 0.5 * np.sin(a), 0.9],
+                                     color=Rgba(1, 1, 1, 1)))
+    # Low fill lights (walls / room light) so that vertical faces are not left dark.
+    for k in range(6):
+        a = 2 * np.pi * (k + 0.5) / 6
+        lights.append(LightParameter(type="point", frame="world", intensity=0.07,
+                                     position=[1.2 * np.cos(a), 1.2 * np.sin(a), 0.3],
+                                     color=Rgba(1, 1, 1, 1)))
+    lights.append(LightParameter(type="directional", frame="camera", intensity=0.3, direction=[0, 0, 1]))
+    return lights
+
+
+class _Scene:
+    """A SceneGraph with the textured table and object, and a VTK renderer."""
+
+    def __init__(self, obj_path: Path, world_from_mesh: np.ndarray, table_texture: Path,
+                 table_size_m: float, cam: CameraIntrinsics):
+        from pydrake.geometry import (
+            Box,
+            ClippingRange,
+            ColorRenderCamera,
+            DepthRange,
+            DepthRenderCamera,
+            GeometryInstance,
+            MakeRenderEngineVtk,
+            Mesh,
+            PerceptionProperties,
+            RenderCameraCore,
+            RenderEngineVtkParams,
+            SceneGraph,
+        )
+        from pydrake.geometry import RenderLabel
+        from pydrake.math import RigidTransform
+        from pydrake.systems.framework import DiagramBuilder
+        from pydrake.systems.sensors import CameraInfo
+
+        builder = DiagramBuilder()
+        self.sg = builder.AddSystem(SceneGraph())
+        params = RenderEngineVtkParams()
+        params.default_clear_color = [0.25, 0.25, 0.27]
+        params.lights = _lights()
+        self.sg.AddRenderer("vtk", MakeRenderEngineVtk(params))
+        self.source = self.sg.RegisterSource("capture")
+
+        table_thickness = 0.04
+        table = GeometryInstance(RigidTransform([0, 0, -table_thickness / 2]),
+                                 Box(table_size_m, table_size_m, table_thickness), "table")
+        props = PerceptionProperties()
+        props.AddProperty("label", "id", RenderLabel(TABLE_LABEL))
+        props.AddProperty("phong", "diffuse_map", str(table_texture))
+        table.set_perception_properties(props)
+        self.table_id = self.sg.RegisterAnchoredGeometry(self.source, table)
+
+        obj = GeometryInstance(RigidTransform(world_from_mesh), Mesh(str(obj_path)), "object")
+        props = PerceptionProperties()
+        props.AddProperty("label", "id", RenderLabel(OBJECT_LABEL))
+        obj.set_perception_properties(props)
+        self.object_id = self.sg.RegisterAnchoredGeometry(self.source, obj)
+
+        self.diagram = builder.Build()
+        self.context = self.diagram.CreateDefaultContext()
+        self.sg_context = self.sg.GetMyContextFromRoot(self.context)
+        info = CameraInfo(cam.width, cam.height, cam.fl_x, cam.fl_y, cam.cx, cam.cy)
+        core = RenderCameraCore("vtk", info, ClippingRange(0.01, 10.0), RigidTransform())
+        self.color_cam = ColorRenderCamera(core, False)
+        self.depth_cam = DepthRenderCamera(core, DepthRange(0.02, 9.0))
+        self._RigidTransform = RigidTransform
+
+    def remove_object(self) -> None:
+        from pydrake.geometry import Role
+
+        self.sg.RemoveRole(self.sg_context, self.source, self.object_id, Role.kPerception)
+
+    def render(self, c2w_gl: np.ndarray, depth: bool = True, label: bool = True):
+        """RGB uint8 (H,W,3), depth float32 metres (inf = none), label int (H,W) for one OpenGL c2w pose."""
+        query = self.sg.get_query_output_port().Eval(self.sg_context)
+        x_wc = self._RigidTransform(c2w_gl @ CV_FROM_GL)  # Drake cameras look along +z, y down
+        world = self.sg.world_frame_id()
+        rgb = query.RenderColorImage(self.color_cam, world, x_wc).data[:, :, :3].copy()
+        d = query.RenderDepthImage(self.depth_cam, world, x_wc).data[:, :, 0].copy() if depth else None
+        lab = query.RenderLabelImage(self.color_cam, world, x_wc).data[:, :, 0].copy() if label else None
+        return rgb, d, lab
+
+
+def _save_png(path: Path, array: np.ndarray) -> None:
+    from PIL import Image
+
+    Image.fromarray(array).save(path, compress_level=1)
+
+
+def _frame_name(i: int) -> str:
+    return f"frame_{i:05d}.png"
+
+
+def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: CaptureConfig = CaptureConfig(),
+            progress: ProgressFn | None = None, overwrite: bool = False) -> CaptureResult:
+    """Render a posed-image dataset of ``mesh`` standing on a textured table; write it to ``out_dir``.
+
+    ``mesh``: a trimesh (metres; textured or not -- untextured meshes get a
+    procedural texture so feature matching has something to hold on to) or a
+    mesh file path. The folder appears whole or not at all. ``progress(done, total)``
+    is called after each rendered view.
+    """
+    from real2sim.formats.mesh_io import load_mesh, validate_mesh
+
+    t_start = time.perf_counter()
+    config.validate()
+    if not isinstance(mesh, trimesh.Trimesh):
+        mesh = load_mesh(mesh)
+    validate_mesh(mesh)
+    if not has_texture(mesh):
+        mesh = with_procedural_texture(mesh, seed=config.texture_seed + 1)
+    cam = config.camera()
+    world_from_mesh, target, radius = object_frame(mesh)
+    exact = camera_poses(config, target, radius)
+    noisy = perturb_poses(exact, config.pose_noise_mm, config.pose_noise_deg, config.seed)
+
+    with atomic_output_dir(Path(out_dir), overwrite=overwrite) as tmp:
+        gt = tmp / "ground_truth"
+        for sub in ("images", "masks", "ground_truth/depth", "ground_truth/masks"):
+            (tmp / sub).mkdir(parents=True)
+        if config.with_background:
+            (tmp / "background").mkdir()
+        export_textured_obj(mesh, gt / "mesh.obj")
+        (gt / "object_pose.json").write_text(json.dumps({
+            "world_from_mesh": world_from_mesh.tolist(),
+            "note": "4x4 placing ground_truth/mesh.obj in the world frame (table top z=0), metres"}, indent=2))
+        # The rendered copy splits vertices at sharp edges (30 deg) so that caps do not darken
+        # the sides through averaged normals; the ground-truth mesh.obj stays as given.
+        render_dir = Path(tempfile.mkdtemp(prefix="render-", dir=tmp))
+        export_textured_obj(trimesh.graph.smooth_shade(mesh, angle=np.radians(30)), render_dir / "object.obj")
+        table_tex = render_dir / "table_texture.png"
+        _save_png(table_tex, procedural_texture(2048, config.texture_seed))
+
+        scene = _Scene(render_dir / "object.obj", world_from_mesh, table_tex, config.table_size_m, cam)
+        n = len(exact)
+        total = n * (2 if config.with_background else 1)
+        t_render = time.perf_counter()
+        frames_noisy, frames_exact = [], []
+        for i in range(n):
+            name = _frame_name(i)
+            rgb, depth_m, label = scene.render(exact[i])
+            mask = np.where(label == OBJECT_LABEL, 255, 0).astype(np.uint8)
+            _save_png(tmp / "images" / name, rgb)
+            _save_png(tmp / "masks" / name, mask)
+            shutil.copyfile(tmp / "masks" / name, gt / "masks" / name)
+            depth_mm = np.where(np.isfinite(depth_m), np.round(depth_m * 1000.0), 0)
+            _save_png(gt / "depth" / name, np.clip(depth_mm, 0, 65535).astype(np.uint16))
+            fp, mp = f"images/{name}", f"masks/{name}"
+            frames_noisy.append(Frame(file_path=fp, transform_matrix=noisy[i], mask_path=mp))
+            frames_exact.append(Frame(file_path=fp, transform_matrix=exact[i], mask_path=mp))
+            if progress:
+                progress(i + 1, total)
+        if config.with_background:
+            scene.remove_object()
+            for i in range(n):
+                rgb, _, _ = scene.render(exact[i], depth=False, label=False)
+                _save_png(tmp / "background" / _frame_name(i), rgb)
+                if progress:
+                    progress(n + i + 1, total)
+        render_s = time.perf_counter() - t_render
+        del scene
+        shutil.rmtree(render_dir)
+
+        cfg = asdict(config)
+        cfg["intrinsics"] = asdict(cam)
+        extra = {"real2sim": {"source": "simulated capture (Drake VTK)", "pose_noise_mm": config.pose_noise_mm,
+                              "pose_noise_deg": config.pose_noise_deg, "seed": config.seed,
+                              "world_frame": "table top z=0, z up, metres"}}
+        write_transforms(tmp / "transforms.json", Dataset(tmp, cam, tuple(frames_noisy), extra))
+        # Same file_paths as the top level: they are relative to the dataset folder, not to ground_truth/.
+        write_transforms(gt / "transforms.json", Dataset(tmp, cam, tuple(frames_exact), {"real2sim": {
+            "source": "exact poses of the simulated capture", "paths_relative_to": ".."}}))
+        (gt / "capture_config.json").write_text(json.dumps(cfg, indent=2, default=list))
+    return CaptureResult(out_dir=Path(out_dir).resolve(), num_views=n, render_seconds=render_s,
+                         total_seconds=time.perf_counter() - t_start)

@@ -1,0 +1,167 @@
+"""`real2sim asset`: mesh -> simulation asset folder (URDF/SDFormat, inertia, collision geometry)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from real2sim.cli import positive_float
+
+DEFAULT_SPECS = ("cylinders:10",)
+
+
+def add_contact_arguments(p: argparse.ArgumentParser) -> None:
+    """Drake proximity properties written into every collision element (see real2sim.formats.contact)."""
+    g = p.add_argument_group("contact properties (Drake proximity properties of the object)")
+    g.add_argument("--hydroelastic", choices=["compliant", "rigid", "none"], default="compliant",
+                   help="hydroelastic type of the collision shapes (default: compliant, as the paper)")
+    g.add_argument("--hydroelastic-modulus", type=positive_float, default=1.0e7, metavar="PA",
+                   help="hydroelastic modulus, Pa (default 1e7)")
+    g.add_argument("--point-stiffness", type=positive_float, default=1.0e4, metavar="N_PER_M",
+                   help="point-contact stiffness, N/m (default 1e4)")
+    g.add_argument("--dissipation", type=positive_float, default=1.0, metavar="S_PER_M",
+                   help="Hunt-Crossley dissipation, s/m (default 1.0)")
+    g.add_argument("--mu-static", type=positive_float, default=0.5, help="static friction coefficient (default 0.5)")
+    g.add_argument("--mu-dynamic", type=positive_float, default=0.5, help="dynamic friction coefficient (default 0.5)")
+    g.add_argument("--resolution-hint", type=positive_float, default=0.01, metavar="M",
+                   help="edge length Drake meshes curved compliant primitives with, m (default 0.01)")
+
+
+def add_asset_arguments(p: argparse.ArgumentParser) -> None:
+    """Flags shared by `asset` and verbs that build assets (demo, run)."""
+    p.add_argument("--mass", type=positive_float, required=True, metavar="KG", help="measured mass of the object, kg")
+    p.add_argument("--collision", action="append", metavar="SPEC",
+                   help="collision representation, repeatable: spheres:128, boxes:100, rotated_boxes:50, "
+                   "cylinders:10, ellipsoids:64, capsules:16, superquadrics:2 (written as convex mesh pieces), "
+                   "mixes like boxes:20+cylinders:20, or the "
+                   f"baselines coacd, vhacd, mesh (default: {' '.join(DEFAULT_SPECS)})")
+    p.add_argument("--flat-bottom", action="store_true",
+                   help="crop below the support plane and close the bottom flat (paper IV-C1)")
+    p.add_argument("--support-height", type=float, default=0.0, metavar="M",
+                   help="support (table) height in the input mesh frame, +z up, m (default 0)")
+    p.add_argument("--keep-up", action="store_true",
+                   help="keep the input's +z as the asset's up axis instead of the longest principal axis "
+                   "(for squat objects such as mugs)")
+    p.add_argument("--format", action="append", choices=["urdf", "sdf"], dest="formats",
+                   help="model formats to write (repeatable; URDF always)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of sampling and fitting (default 0)")
+    p.add_argument("--device", default="cpu", help="torch device for primitive fitting: cpu, cuda, cuda:N (default cpu)")
+    g = p.add_argument_group("primitive fitting (paper IV-C3)")
+    g.add_argument("--iterations", type=int, default=None, metavar="N", help="maximum fitting iterations (default 1000)")
+    g.add_argument("--fit-parameterization", choices=["direct", "network"], default=None,
+                   help="optimise the primitive parameters directly (default, measured better) or through the "
+                   "paper's over-parameterized network g_theta()")
+    g.add_argument("--fit-paper-loss", action="store_true",
+                   help="use eq. 9's linear hinge inside the object instead of the squared hinge (default)")
+    g.add_argument("--sdf-cache", default=None, metavar="DIR",
+                   help="cache signed-distance samples across runs in DIR ('auto': $REAL2SIM_CACHE or "
+                   "~/.cache/real2sim); default: within this build only")
+    p.add_argument("--coacd-threshold", type=positive_float, default=0.05,
+                   help="CoACD concavity threshold (default 0.05, the paper's setting)")
+    p.add_argument("--coacd-max-hulls", type=int, default=-1, help="CoACD maximum convex hulls (-1: no limit)")
+    p.add_argument("--vhacd-max-hulls", type=int, default=32, help="V-HACD maximum convex hulls (default 32)")
+    add_contact_arguments(p)
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "asset",
+        help="turn an object mesh into a simulation asset folder (URDF, inertia, collision geometry)",
+        description="Build a simulation asset from a mesh (OBJ, PLY, STL, GLB, OFF; metres): canonical pose, "
+        "optional flat bottom, mass properties for the given mass (uniform density), and one folder per "
+        "collision representation with model.urdf (Drake loads it as it is), collision.json and fit_report.json.",
+        epilog="example: real2sim objects export bottle bottle.obj && "
+        "real2sim asset bottle.obj --mass 0.6 --out bottle_asset --collision coacd --collision cylinders:10",
+    )
+    p.add_argument("mesh", type=Path, help="object mesh in metres")
+    p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR", help="output asset folder (must not exist)")
+    p.add_argument("--overwrite", action="store_true", help="replace ASSETDIR if it exists")
+    add_asset_arguments(p)
+    p.set_defaults(func=run)
+
+
+def config_from_args(args: argparse.Namespace):
+    """AssetConfig from parsed flags; raises UserInputError on a bad SPEC."""
+    from real2sim.asset.build import AssetConfig
+    from real2sim.formats.contact import ContactProperties
+    from real2sim.formats.spec import parse_spec
+
+    specs = tuple(parse_spec(s) for s in (args.collision or DEFAULT_SPECS))
+    if args.device.startswith("cuda"):
+        import torch
+
+        if not torch.cuda.is_available():
+            from real2sim.formats.errors import UserInputError
+
+            raise UserInputError(f"--device {args.device} asked for, but torch sees no CUDA GPU here; use --device cpu")
+    contact = ContactProperties(
+        hydroelastic=args.hydroelastic,
+        hydroelastic_modulus_pa=args.hydroelastic_modulus,
+        point_contact_stiffness_n_per_m=args.point_stiffness,
+        hunt_crossley_dissipation_s_per_m=args.dissipation,
+        mu_static=args.mu_static,
+        mu_dynamic=args.mu_dynamic,
+        resolution_hint_m=args.resolution_hint,
+    )
+    fit_config = coacd_config = vhacd_config = None
+    fit_overrides = {}
+    if args.iterations is not None:
+        if args.iterations < 1:
+            from real2sim.formats.errors import UserInputError
+
+            raise UserInputError(f"--iterations must be at least 1, got {args.iterations}")
+        fit_overrides["max_iterations"] = args.iterations
+        fit_overrides["min_iterations"] = min(args.iterations, 300)
+    if args.fit_parameterization:
+        fit_overrides["parameterization"] = args.fit_parameterization
+    if args.fit_paper_loss:
+        fit_overrides["inside_loss"] = "hinge"
+    if any(s.is_primitive_fit for s in specs) and fit_overrides:
+        from real2sim.collision.fit.fitting import FitConfig
+
+        fit_config = FitConfig(**fit_overrides)
+    if any(s.baseline == "coacd" for s in specs):
+        from real2sim.collision.decomposition import CoacdConfig
+
+        coacd_config = CoacdConfig(threshold=args.coacd_threshold, max_convex_hull=args.coacd_max_hulls)
+    if any(s.baseline == "vhacd" for s in specs):
+        from real2sim.collision.decomposition import VhacdConfig
+
+        vhacd_config = VhacdConfig(max_convex_hulls=args.vhacd_max_hulls)
+    formats = tuple(dict.fromkeys(["urdf", *(args.formats or [])]))
+    return AssetConfig(
+        mass_kg=args.mass,
+        specs=specs,
+        flat_bottom=args.flat_bottom,
+        support_height_m=args.support_height,
+        keep_up=args.keep_up,
+        formats=formats,
+        seed=args.seed,
+        device=args.device,
+        contact=contact,
+        fit_config=fit_config,
+        coacd_config=coacd_config,
+        vhacd_config=vhacd_config,
+        sdf_cache_dir=args.sdf_cache,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from real2sim.asset.build import build_asset
+    from real2sim.formats.outputs import check_output_dir
+
+    config = config_from_args(args)
+    check_output_dir(args.out, args.overwrite)  # fail before any heavy work
+    console = Console(stderr=True)
+    with console.status("building asset") as status:
+        def log(msg: str) -> None:
+            status.update(msg)
+            console.log(msg)
+
+        result = build_asset(args.mesh, args.out, config, overwrite=args.overwrite, log=log)
+    print(f"asset: {result.asset_dir}")
+    for rep in result.representations:
+        print(f"  {rep.name:28s} {rep.urdf_path}")
+    return 0

@@ -1,0 +1,173 @@
+"""`real2sim capture`, `refine-poses`, `mask`: posed-image datasets (simulated capture, COLMAP, masks)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from real2sim.cli import positive_int
+
+
+def _nonneg_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (0 <= value < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return value
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "capture",
+        help="render a posed-image dataset of a mesh on a table, as a robot's wrist camera would see it",
+        description="Simulated robot capture (Drake VTK, headless): the object stands on a textured table; a "
+        "wrist camera (RealSense D435-like, fx = fy = 615 px at 640x480) looks at it from rings of poses the arm "
+        "can reach (its base at one side of the table, so the far side is seen only from above). Writes a "
+        "nerfstudio dataset: transforms.json (poses with calibration noise), images/, masks/, and ground_truth/ "
+        "(exact poses, depth in mm, the mesh and its pose).",
+        epilog="example: real2sim capture bottle --out bottle_ds --views 120   (a bundled object name or a mesh file)",
+    )
+    p.add_argument("mesh", help="object mesh in metres (standing on z = 0 is not required), or a bundled object "
+                   "name (bottle, can, mug)")
+    p.add_argument("--out", type=Path, required=True, metavar="DATASET", help="output dataset folder (must not exist)")
+    p.add_argument("--overwrite", action="store_true", help="replace DATASET if it exists")
+    p.add_argument("--views", type=int, default=200, help="number of images (default 200)")
+    p.add_argument("--width", type=int, default=640, help="image width, px (default 640)")
+    p.add_argument("--height", type=int, default=480, help="image height, px (default 480)")
+    p.add_argument("--pose-noise-mm", type=_nonneg_float, default=5.0, metavar="MM",
+                   help="RMS camera-position error of the robot poses, mm (default 5)")
+    p.add_argument("--pose-noise-deg", type=_nonneg_float, default=1.0, metavar="DEG",
+                   help="RMS camera-orientation error of the robot poses, degrees (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the pose noise (default 0)")
+    p.add_argument("--with-background", action="store_true",
+                   help="also render the empty table from the same poses into background/ (for mask --method background)")
+    p.set_defaults(func=run_capture)
+
+    p = sub.add_parser(
+        "refine-poses",
+        help="refine a dataset's camera poses with COLMAP, keeping the robot frame",
+        description="COLMAP (pycolmap) seeded with the dataset's poses: SIFT features, matching of each view with "
+        "its nearest views, triangulation, bundle adjustment, then a similarity alignment back onto the given "
+        "camera centres. Rewrites transforms.json (the original is kept as transforms_unrefined.json) and writes "
+        "refine_report.json; when COLMAP fails, the poses are kept and a warning says why.",
+    )
+    p.add_argument("dataset", type=Path, help="dataset folder with transforms.json")
+    p.add_argument("--neighbors", type=int, default=10, metavar="K", help="views matched with each view (default 10)")
+    p.add_argument("--features", choices=["all", "object"], default="all",
+                   help="where to detect features: the whole image (default; the table helps) or the object masks")
+    p.add_argument("--max-features", type=int, default=4096, help="SIFT features per image (default 4096)")
+    p.add_argument("--align", choices=["poses", "centres"], default="poses",
+                   help="how the refined model is put back onto the robot frame: similarity from camera centres "
+                   "and orientations weighted by the pose noise (default), or centres only (COLMAP's model aligner)")
+    p.add_argument("--pose-noise-mm", type=_nonneg_float, default=None, metavar="MM",
+                   help="RMS position noise of the given poses, mm, weighting --align poses "
+                   "(default: from transforms.json's real2sim block, else 5)")
+    p.add_argument("--pose-noise-deg", type=_nonneg_float, default=None, metavar="DEG",
+                   help="RMS orientation noise of the given poses, degrees (default: from transforms.json, else 1)")
+    p.add_argument("--seed", type=int, default=0, help="COLMAP random seed (default 0)")
+    p.set_defaults(func=run_refine)
+
+    p = sub.add_parser(
+        "mask",
+        help="make or check object masks of a dataset",
+        description="Object masks (255 = object) for the frames of a dataset: 'provided' checks the masks the "
+        "frames name (or masks/<image stem>.png); 'maskrcnn' runs torchvision's Mask R-CNN from a local weights "
+        "file (pixels with probability > 0.5); 'background' differences each image with background/<image name> "
+        "(the empty scene from the same pose). Computed masks go to masks_<method>/ and transforms.json points "
+        "to them; IoU against ground_truth/masks is printed when present.",
+    )
+    p.add_argument("dataset", type=Path, help="dataset folder with transforms.json")
+    p.add_argument("--method", choices=["provided", "maskrcnn", "background"], required=True)
+    p.add_argument("--weights", type=Path, default=None, metavar="PATH",
+                   help="Mask R-CNN (torchvision ResNet-50 FPN) weights file, for --method maskrcnn")
+    p.add_argument("--threshold", type=_nonneg_float, default=12.0,
+                   help="background difference threshold, 0-255 (default 12)")
+    p.add_argument("--device", default="cpu", help="torch device for Mask R-CNN (default cpu)")
+    p.add_argument("--maskrcnn-min-size", type=positive_int, default=800, metavar="PX",
+                   help="Mask R-CNN resizes the shorter image side to this, px (default 800, as trained; "
+                   "smaller is faster on a CPU)")
+    p.add_argument("--maskrcnn-max-size", type=positive_int, default=1333, metavar="PX",
+                   help="upper bound on the longer side after resizing, px (default 1333)")
+    p.add_argument("--maskrcnn-max-instances", type=positive_int, default=100, metavar="N",
+                   help="detections kept per image before choosing the object (default 100)")
+    p.set_defaults(func=run_mask)
+
+
+def _resolve_mesh(text: str):
+    """A mesh file path, or the textured bundled object of that name when no such file exists."""
+    path = Path(text)
+    if not path.exists() and path.suffix == "":
+        from real2sim.geometry.objects import OBJECTS, make_textured_object
+
+        if text in OBJECTS:
+            return make_textured_object(text)
+    return path
+
+
+def run_capture(args: argparse.Namespace) -> int:
+    from rich.progress import Progress
+
+    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.formats.outputs import check_output_dir
+
+    cfg = CaptureConfig(views=args.views, width=args.width, height=args.height, pose_noise_mm=args.pose_noise_mm,
+                        pose_noise_deg=args.pose_noise_deg, seed=args.seed, with_background=args.with_background)
+    cfg.validate()
+    check_output_dir(args.out, args.overwrite)
+    mesh = _resolve_mesh(args.mesh)
+    with Progress(transient=True) as bar:
+        task = bar.add_task("rendering", total=None)
+        result = capture(mesh, args.out, cfg, progress=lambda done, total: bar.update(task, completed=done, total=total),
+                         overwrite=args.overwrite)
+    print(f"dataset: {result.out_dir} ({result.num_views} views, rendered in {result.render_seconds:.1f} s)")
+    return 0
+
+
+def run_refine(args: argparse.Namespace) -> int:
+    import warnings
+
+    from rich.console import Console
+
+    from real2sim.formats.errors import UserInputError
+    from real2sim.capture.pose_refinement import RefineConfig, refine_poses
+
+    if args.neighbors < 1:
+        raise UserInputError(f"--neighbors must be at least 1 (got {args.neighbors})")
+    if args.max_features < 64:
+        raise UserInputError(f"--max-features must be at least 64 (got {args.max_features})")
+    cfg = RefineConfig(k_neighbors=args.neighbors, feature_region=args.features, max_num_features=args.max_features,
+                       align=args.align, prior_noise_mm=args.pose_noise_mm, prior_noise_deg=args.pose_noise_deg,
+                       seed=args.seed)
+    console = Console(stderr=True)
+    with warnings.catch_warnings(record=True) as caught, console.status("refining poses") as status:
+        warnings.simplefilter("always", RuntimeWarning)
+        result = refine_poses(args.dataset, cfg, progress=lambda msg, frac: status.update(f"refine-poses: {msg}"))
+    for w in caught:
+        console.print(f"warning: {w.message}")
+    print(f"refined {result.num_refined_frames}/{result.num_frames} frames ({result.reason}); "
+          f"{result.num_pairs} pairs, {result.num_points3d} points, {result.seconds:.1f} s")
+    if result.rot_error_before_deg is not None:
+        print(f"pose error vs ground truth: rotation {result.rot_error_before_deg:.3f} -> {result.rot_error_after_deg:.3f} deg, "
+              f"position {result.trans_error_before_mm:.2f} -> {result.trans_error_after_mm:.2f} mm")
+    return 0
+
+
+def run_mask(args: argparse.Namespace) -> int:
+    from rich.progress import Progress
+
+    from real2sim.capture.masking import MaskConfig, compute_masks
+
+    cfg = MaskConfig(threshold=args.threshold, weights=args.weights, device=args.device,
+                     maskrcnn_min_size_px=args.maskrcnn_min_size, maskrcnn_max_size_px=args.maskrcnn_max_size,
+                     maskrcnn_max_instances=args.maskrcnn_max_instances)
+    with Progress(transient=True) as bar:
+        task = bar.add_task(f"masks ({args.method})", total=None)
+        result = compute_masks(args.dataset, args.method, cfg,
+                               progress=lambda done, total: bar.update(task, completed=done, total=total))
+    line = f"masks: {result.num_frames} frames in {result.mask_dir}/, object covers {100 * result.mean_object_fraction:.1f}% of pixels"
+    if result.mean_iou is not None:
+        line += f"; IoU vs ground truth mean {result.mean_iou:.4f}, min {result.min_iou:.4f}"
+    print(line)
+    return 0

@@ -1,0 +1,133 @@
+"""`real2sim evaluate` (the simulation sweep) and `real2sim report` (rebuild plots and report.html)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def _csv_list(text: str) -> tuple[str, ...]:
+    return tuple(t.strip() for t in text.split(",") if t.strip())
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "evaluate",
+        help="simulate every representation of the given assets against the reference mesh; "
+        "write runs.csv, summary.csv (Table I layout), Pareto plots and report.html",
+        description="Evaluation sweep (paper V-C). For every asset folder, task and run the reference mesh "
+        "is simulated once with hydroelastic contact; every representation (each subfolder holding model.urdf) "
+        "is then simulated with each contact model from the same initial state and scored: ATE and OCAE (m) "
+        "against the reference with equation error (state reset to the reference every 0.1 s), CPD (m/s), and "
+        "wall-clock simulation time (s). If RESULTS already holds runs.csv, the sweep resumes: rows without an "
+        "error are kept and not simulated again (failed rows are retried); pass --overwrite to start afresh. "
+        "RESULTS is replaced only when the sweep completes; progress is kept in .RESULTS.partial meanwhile.",
+        epilog="example: real2sim evaluate bottle_asset can_asset --out results --runs 10 --jobs 2",
+    )
+    p.add_argument("assets", nargs="+", type=Path, metavar="ASSETDIR", help="asset folders made by `real2sim asset`")
+    p.add_argument("--out", type=Path, required=True, metavar="RESULTS", help="results folder")
+    p.add_argument("--reference", type=Path, metavar="MESH",
+                   help="ground-truth mesh (metres) in the frame of the mesh the assets were built from; it is "
+                   "moved into each asset's frame with canonical_transform.json (default: each asset's own closed mesh, "
+                   "visual/collision_reference.obj, else visual/model.obj)")
+    p.add_argument("--tasks", default="push,ramp", metavar="LIST", help="comma-separated tasks: push, ramp (default both)")
+    p.add_argument("--contact", default="point,hydroelastic", metavar="LIST",
+                   help="comma-separated contact models: point, hydroelastic (default both)")
+    p.add_argument("--runs", type=int, default=10, metavar="N", help="runs per object and task (default 10, as the paper)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the runs' initial conditions (default 0)")
+    p.add_argument("--jobs", type=int, default=None, metavar="N", help="simulations in parallel (default: CPU count); simulation times are measured under this load, "
+                   "so use --jobs 1 on an idle machine for timings to publish")
+    p.add_argument("--executor", choices=["local", "ray"], default="local",
+                   help="local process pool (default) or Ray tasks")
+    p.add_argument("--ray-address", default=None, metavar="ADDR",
+                   help="Ray cluster to join (default $RAY_ADDRESS, else a local Ray); assets and RESULTS must be "
+                   "on a file system the workers share")
+    p.add_argument("--simulation-error", action="store_true",
+                   help="free roll-outs from the same initial state instead of equation error (no resets)")
+    p.add_argument("--duration-scale", type=float, default=1.0, metavar="K",
+                   help="multiply the push duration and the ramp's total duration by K (default 1; < 1 for quick looks)")
+    p.add_argument("--recommend", choices=["accuracy", "speed", "smoothness"], default=None,
+                   help="print the recommended representation for this preference (all three are in report.html)")
+    p.add_argument("--overwrite", action="store_true", help="discard existing results in RESULTS and start afresh")
+    p.set_defaults(func=run)
+
+    r = sub.add_parser(
+        "report",
+        help="rebuild summary.csv, the Pareto plots and report.html from RESULTS/runs.csv",
+        description="Rebuild summary.csv, pareto_*.png and the self-contained report.html of a results folder "
+        "from its runs.csv (and the protocol recorded in config.json).",
+    )
+    r.add_argument("results", type=Path, metavar="RESULTS", help="results folder written by `real2sim evaluate`")
+    r.set_defaults(func=run_report)
+
+
+def config_from_args(args: argparse.Namespace):
+    """EvaluationConfig from parsed flags; UserInputError on bad values."""
+    import dataclasses
+    import math
+
+    from real2sim.formats.errors import UserInputError
+    from real2sim.evaluate.sweep import EvaluationConfig, _default_jobs
+    from real2sim.evaluate.scenes import SceneConfig
+
+    if args.runs < 1:
+        raise UserInputError(f"--runs must be >= 1, got {args.runs}")
+    if args.jobs is not None and args.jobs < 1:
+        raise UserInputError(f"--jobs must be >= 1, got {args.jobs}")
+    k = float(args.duration_scale)
+    if not (math.isfinite(k) and k > 0):
+        raise UserInputError(f"--duration-scale must be a finite number > 0, got {args.duration_scale}")
+    scene = SceneConfig()
+    if k != 1.0:
+        scene = dataclasses.replace(scene, push_duration_s=scene.push_duration_s * k,
+                                    total_duration_s=scene.total_duration_s * k)
+    return EvaluationConfig(
+        tasks=_csv_list(args.tasks), contact_models=_csv_list(args.contact), runs=args.runs, seed=args.seed,
+        jobs=args.jobs or _default_jobs(), executor=args.executor, ray_address=args.ray_address,
+        simulation_error=args.simulation_error, scene=scene,
+    )
+
+
+def _print_summary(summary, recommend_pref: str | None) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    from real2sim.report.pareto import PREFERENCES, RECOMMENDATION_RULES, recommend
+
+    console = Console()
+    table = Table(title="summary (means over objects, tasks and runs)")
+    for col in ("representation", "OCAE [m]", "ATE [m]", "CPD [m/s]", "ST [s]", "ok/failed"):
+        table.add_column(col, justify="left" if col == "representation" else "right")
+    for r in summary:
+        table.add_row(str(r["representation"]), f"{r['ocae_m']:.4f}", f"{r['ate_m']:.4f}", f"{r['cpd_m_per_s']:.4f}",
+                      f"{r['sim_time_s']:.3f}", f"{r['runs_ok']}/{r['runs_failed']}")
+    console.print(table)
+    for pref in ([recommend_pref] if recommend_pref else PREFERENCES):
+        row = recommend(summary, pref)
+        name = row["representation"] if row else "(none: no complete rows)"
+        console.print(f"recommended for {pref}: [bold]{name}[/bold]  ({RECOMMENDATION_RULES[pref]})")
+
+
+def run(args: argparse.Namespace) -> int:
+    from real2sim.formats.errors import UserInputError
+    from real2sim.evaluate.sweep import evaluate
+
+    config = config_from_args(args)
+    if args.reference is not None and not args.reference.is_file():
+        raise UserInputError(f"reference mesh not found: {args.reference}")
+    result = evaluate(args.assets, args.out, config, reference_mesh=args.reference, progress=True,
+                      overwrite=args.overwrite, log=lambda m: print(m, flush=True))
+    _print_summary(result.summary, args.recommend)
+    print(f"{result.simulated} simulations run, {result.skipped} reused, {result.failed} failed; "
+          f"results in {result.out_dir} (report: {result.report_path})")
+    return 0
+
+
+def run_report(args: argparse.Namespace) -> int:
+    from real2sim.evaluate.sweep import read_summary_csv
+    from real2sim.report.html import write_report
+
+    path = write_report(args.results)
+    _print_summary(read_summary_csv(Path(args.results) / "summary.csv"), None)
+    print(f"report: {path}")
+    return 0

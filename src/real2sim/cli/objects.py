@@ -1,0 +1,43 @@
+"""`real2sim objects`: list the bundled objects, or export one as a textured OBJ."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "objects",
+        help="list the bundled objects, or export one as a textured mesh",
+        description="Bundled objects are made by code (no downloads): a mustard-like squeeze bottle, "
+        "a soup can and a mug. `real2sim objects` lists them with their suggested mass; "
+        "`real2sim objects export NAME PATH.obj` writes one (OBJ + MTL + PNG, metres, standing on z = 0).",
+    )
+    p.add_argument("action", nargs="?", choices=["list", "export"], default="list")
+    p.add_argument("name", nargs="?", help="object to export (bottle, can, mug)")
+    p.add_argument("path", nargs="?", type=Path, help="output .obj path")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from real2sim.formats.errors import UserInputError
+    from real2sim.geometry.objects import OBJECTS, export_object
+
+    if args.action == "list":
+        for obj in OBJECTS.values():
+            print(f"{obj.name:8s} mass {obj.mass_kg:.2f} kg  {obj.description}")
+        return 0
+    if not args.name or not args.path:
+        raise UserInputError("usage: real2sim objects export NAME PATH.obj")
+    if args.name not in OBJECTS:
+        raise UserInputError(f"unknown bundled object {args.name!r}; known: {', '.join(OBJECTS)}")
+    path: Path = args.path
+    if path.suffix.lower() != ".obj":
+        raise UserInputError(f"export path must end in .obj, got {path}")
+    if path.exists() and not args.overwrite:
+        raise UserInputError(f"{path} exists; pass --overwrite to replace it")
+    export_object(args.name, path)
+    print(f"wrote {path} ({OBJECTS[args.name].mass_kg} kg suggested: real2sim asset {path} --mass {OBJECTS[args.name].mass_kg} ...)")
+    return 0

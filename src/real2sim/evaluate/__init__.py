@@ -1,0 +1,20 @@
+"""Evaluate stage: assets -> RESULTS (Drake pushing and ramp tasks, reference against every
+representation and contact model, equation-error metrics, the resumable sweep).
+"""
+
+from real2sim._lazy import lazy_exports
+
+_EXPORTS = {
+    "EvaluationConfig": "sweep",
+    "EvaluationResult": "sweep",
+    "evaluate": "sweep",
+    "score": "sweep",
+    "Trajectory": "simulate",
+    "simulate_reference": "simulate",
+    "simulate_candidate": "simulate",
+    "SceneConfig": "scenes",
+    "RunSpec": "scenes",
+    "make_run_specs": "scenes",
+}
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -1,0 +1,340 @@
+"""Simulate the paper's ground truth and candidate assets in the evaluation scenes.
+
+The ground truth (paper V-C) is the full visual mesh as a rigid hydroelastic body
+against the compliant floor/table/pusher (:func:`simulate_reference`). A candidate is a
+URDF from ``ASSETDIR/<representation>/model.urdf`` simulated with point or hydroelastic
+contact (:func:`simulate_candidate`). Equation error: every ``reset_interval_s`` the
+candidate's state (object pose + spatial velocity, and the pusher's / table's joint
+state) is set to the reference's state at that step, then one interval is simulated.
+
+Each simulation runs twice on the same diagram:
+1. the timed run: bare ``Simulator.AdvanceTo`` from reset to reset, with no Python
+   per step; ``sim_time_s`` is its wall time (resets included: they cost microseconds);
+2. the instrumented run: one ``AdvanceTo`` per step, reading the state and the plant's
+   contact results; its wall time is ``instrumented_time_s``.
+Both runs execute the same discrete updates on the same states; their final states agree
+bit for bit (checked on every run: a RuntimeWarning if not).
+
+Times: sample n is at n * time_step_s, n = 0..num_steps. At a reset step the logged
+candidate state is the *prediction* (before the reset), so equation error measures one
+interval's drift; sample 0 is the shared initial state.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from real2sim.formats.physical import read_physical_properties
+from real2sim.evaluate.scenes import (RunSpec, Scene, SceneConfig, build_scene, initial_object_pose,
+                              reference_object_adder, urdf_object_adder)
+
+
+class SimulationError(RuntimeError):
+    """A simulation failed (solver failure, non-finite or exploded state); the message
+    names the task, run, contact model, representation and simulated time."""
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """One simulated run, as arrays over the T = num_steps + 1 samples.
+
+    times_s: (T,) sample times, s (step index * time_step_s).
+    object_position_m: (T, 3) world position of the object's asset-frame origin, m.
+    object_quaternion_wxyz: (T, 4) world orientation of the asset frame: Drake's state as
+        is (so a reset restores it bit for bit): unit only to ~1e-12, sign not canonical;
+        normalise before building a rotation matrix.
+    object_spatial_velocity: (T, 6) [angular rad/s, linear m/s] of the asset-frame origin,
+        both in world (Drake's free-body velocity state).
+    actuated_positions: (T, k) the pusher's (x, y, m) or the table's (angle, rad) joint positions.
+    actuated_velocities: (T, k) their time derivatives.
+    contact_points_object_m: per sample, (k_t, 3) points where the object touches anything,
+        expressed in the object's (asset) frame, m: point contact -> each point pair's
+        contact point; hydroelastic -> each contact surface's centroid. They are the
+        contacts of that sample's state (what the next step's contact forces act at;
+        Drake's unsampled contact-results port), at a reset step those of the prediction.
+    contact_forces_object_n: per sample, (k_t, 3) the contact force on the object at each
+        of those points, N, expressed in the object frame (point contact: the pair's
+        force; hydroelastic: the surface's net force). Only used to weight the
+        force-weighted CPD; empty in trajectories saved before it existed.
+    sim_time_s: wall seconds of the bare timed run (see module docstring).
+    sim_duration_s: simulated seconds.
+    instrumented_time_s: wall seconds of the per-step logging run.
+    reset_steps: (r,) step indices where the state was reset to the reference (multiples of
+        the reset interval, 0 < step < num_steps; the shared start at step 0 is not counted).
+    task, contact_model, representation, run: identification.
+    """
+
+    times_s: np.ndarray
+    object_position_m: np.ndarray
+    object_quaternion_wxyz: np.ndarray
+    object_spatial_velocity: np.ndarray
+    actuated_positions: np.ndarray
+    actuated_velocities: np.ndarray
+    contact_points_object_m: list
+    sim_time_s: float
+    sim_duration_s: float
+    instrumented_time_s: float
+    reset_steps: np.ndarray
+    task: str
+    contact_model: str
+    representation: str
+    run: int
+    contact_forces_object_n: list = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class _State:
+    """Object and actuator state at one step, in Drake's own layouts."""
+
+    object_q: np.ndarray   # (7,) qw qx qy qz px py pz
+    object_v: np.ndarray   # (6,) wx wy wz vx vy vz (world)
+    actuated_q: np.ndarray
+    actuated_v: np.ndarray
+
+
+def _state_at(traj: Trajectory, step: int) -> _State:
+    return _State(np.concatenate([traj.object_quaternion_wxyz[step], traj.object_position_m[step]]),
+                  traj.object_spatial_velocity[step].copy(),
+                  traj.actuated_positions[step].copy(), traj.actuated_velocities[step].copy())
+
+
+def _set_state(scene: Scene, plant_context, state: _State, label: str = "", t_s: float = 0.0) -> None:
+    plant = scene.plant
+    if not all(np.all(np.isfinite(x)) for x in (state.object_q, state.object_v, state.actuated_q,
+                                                 state.actuated_v)):
+        # Drake would abort the process on a non-finite state; say which sample was bad instead.
+        raise SimulationError(f"{label}: the state to set at t = {t_s:.3f} s is not finite")
+    plant.SetPositions(plant_context, scene.object_instance, state.object_q)
+    plant.SetVelocities(plant_context, scene.object_instance, state.object_v)
+    plant.SetPositions(plant_context, scene.actuated_instance, state.actuated_q)
+    plant.SetVelocities(plant_context, scene.actuated_instance, state.actuated_v)
+
+
+def _check_object_instance(scene: Scene) -> None:
+    plant = scene.plant
+    nq = plant.num_positions(scene.object_instance)
+    nv = plant.num_velocities(scene.object_instance)
+    if (nq, nv) != (7, 6):
+        raise ValueError(f"the object model must be one free rigid body (7 positions, 6 "
+                         f"velocities); got {nq} positions, {nv} velocities")
+
+
+def _initial_state(scene: Scene, X_WO) -> _State:
+    q = np.concatenate([X_WO.rotation().ToQuaternion().wxyz(), X_WO.translation()])
+    na = len(scene.actuated_initial_positions)
+    return _State(q, np.zeros(6), np.asarray(scene.actuated_initial_positions, float), np.zeros(na))
+
+
+def _check_finite(scene: Scene, plant_context, label: str, t_s: float) -> None:
+    q = scene.plant.GetPositions(plant_context, scene.object_instance)
+    v = scene.plant.GetVelocities(plant_context, scene.object_instance)
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
+        raise SimulationError(f"{label}: non-finite object state at t = {t_s:.3f} s")
+    if np.abs(q[4:]).max() > 1e3 or np.abs(v).max() > 1e3:
+        raise SimulationError(f"{label}: object state exploded at t = {t_s:.3f} s "
+                              f"(|position| {np.abs(q[4:]).max():.3g} m, |velocity| "
+                              f"{np.abs(v).max():.3g}); the contact solver diverged")
+
+
+def _advance(simulator, step: int, dt: float, label: str) -> None:
+    try:
+        simulator.AdvanceTo(step * dt)
+    except Exception as e:  # Drake raises RuntimeError (and sometimes others) from C++
+        t = simulator.get_context().get_time()
+        raise SimulationError(f"{label}: Drake failed near t = {t:.3f} s: "
+                              f"{str(e).splitlines()[0] if str(e) else type(e).__name__}") from e
+
+
+def _intervals(num_steps: int, interval: int | None) -> list[tuple[int, int]]:
+    """[start, end) step ranges between resets; every interval simulated, the last included."""
+    if not interval:
+        return [(0, num_steps)]
+    starts = list(range(0, num_steps, interval))
+    return [(a, min(a + interval, num_steps)) for a in starts]
+
+
+def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: SceneConfig,
+              label: str, representation: str, run: int) -> Trajectory:
+    from pydrake.common.eigen_geometry import Quaternion
+    from pydrake.math import RotationMatrix
+    from pydrake.systems.analysis import Simulator
+
+    _check_object_instance(scene)
+    plant = scene.plant
+    dt = cfg.time_step_s
+    n = cfg.num_steps(scene.task)
+    interval = cfg.reset_interval_steps() if reference is not None else None
+    if reference is not None:
+        if len(reference.times_s) != n + 1 or reference.task != scene.task:
+            raise ValueError(f"{label}: the reference has {len(reference.times_s)} samples of task "
+                             f"{reference.task!r}; expected {n + 1} of {scene.task!r} "
+                             "(same SceneConfig and task)")
+    spans = _intervals(n, interval)
+    reset_steps = np.array([a for a, _ in spans if a > 0], dtype=int)
+
+    # 1. Timed run: bare AdvanceTo between resets.
+    simulator = Simulator(scene.diagram)
+    ctx = simulator.get_mutable_context()
+    pctx = plant.GetMyMutableContextFromRoot(ctx)
+    _set_state(scene, pctx, initial, label, 0.0)
+    simulator.Initialize()
+    sim_time_s = 0.0
+    for a, b in spans:
+        if a > 0:
+            _set_state(scene, pctx, _state_at(reference, a), label, a * dt)
+        t0 = time.perf_counter()
+        _advance(simulator, b, dt, label)
+        sim_time_s += time.perf_counter() - t0
+        _check_finite(scene, pctx, label, b * dt)
+    timed_final_q = plant.GetPositions(pctx).copy()
+
+    # 2. Instrumented run: one AdvanceTo per step, logging state and contacts.
+    simulator = Simulator(scene.diagram)
+    ctx = simulator.get_mutable_context()
+    pctx = plant.GetMyMutableContextFromRoot(ctx)
+    _set_state(scene, pctx, initial, label, 0.0)
+    simulator.Initialize()
+    na = plant.num_positions(scene.actuated_instance)
+    oq = np.empty((n + 1, 7))
+    ov = np.empty((n + 1, 6))
+    aq = np.empty((n + 1, na))
+    av = np.empty((n + 1, na))
+    contacts_w: list[np.ndarray] = []
+    forces_w: list[np.ndarray] = []
+    obj_index = scene.object_body.index()
+    obj_geoms = scene.object_geometry_ids
+    port = plant.get_contact_results_output_port()
+    reset_set = set(int(r) for r in reset_steps)
+
+    def log(i: int) -> None:
+        oq[i] = plant.GetPositions(pctx, scene.object_instance)
+        ov[i] = plant.GetVelocities(pctx, scene.object_instance)
+        aq[i] = plant.GetPositions(pctx, scene.actuated_instance)
+        av[i] = plant.GetVelocities(pctx, scene.actuated_instance)
+
+    def log_contacts() -> None:
+        results = port.Eval(pctx)
+        pts, forces = [], []
+        for k in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(k)
+            # contact_force() acts on body B; the object feels minus that when it is body A.
+            if info.bodyB_index() == obj_index:
+                pts.append(info.contact_point())
+                forces.append(info.contact_force())
+            elif info.bodyA_index() == obj_index:
+                pts.append(info.contact_point())
+                forces.append(-info.contact_force())
+        for k in range(results.num_hydroelastic_contacts()):
+            info = results.hydroelastic_contact_info(k)
+            surface = info.contact_surface()
+            # F_Ac_W acts on the body of geometry M at the centroid; N's body feels minus it.
+            if surface.id_M() in obj_geoms:
+                pts.append(surface.centroid())
+                forces.append(info.F_Ac_W().translational())
+            elif surface.id_N() in obj_geoms:
+                pts.append(surface.centroid())
+                forces.append(-info.F_Ac_W().translational())
+        contacts_w.append(np.asarray(pts, dtype=float).reshape(-1, 3))
+        forces_w.append(np.asarray(forces, dtype=float).reshape(-1, 3))
+
+    log(0)
+    log_contacts()
+    t0 = time.perf_counter()
+    for i in range(n):
+        if i in reset_set:
+            _set_state(scene, pctx, _state_at(reference, i), label, i * dt)
+        _advance(simulator, i + 1, dt, label)
+        log(i + 1)
+        log_contacts()
+        if (i + 1) % 100 == 0 or i + 1 == n:
+            _check_finite(scene, pctx, label, (i + 1) * dt)
+    instrumented_time_s = time.perf_counter() - t0
+    if not np.array_equal(plant.GetPositions(pctx), timed_final_q):
+        # Same diagram, same states, same discrete updates: they should agree bit for bit.
+        # The logged run is still valid; only sim_time_s timed a (slightly) different rollout.
+        warnings.warn(f"{label}: timed and instrumented runs ended apart (max |dq| "
+                      f"{np.abs(plant.GetPositions(pctx) - timed_final_q).max():.3g}); "
+                      "sim_time_s timed a different rollout", RuntimeWarning, stacklevel=3)
+
+    contacts_o, forces_o = [], []
+    for i, (pw, fw) in enumerate(zip(contacts_w, forces_w)):
+        if len(pw) == 0:
+            contacts_o.append(np.zeros((0, 3)))
+            forces_o.append(np.zeros((0, 3)))
+            continue
+        R = RotationMatrix(Quaternion(oq[i, :4] / np.linalg.norm(oq[i, :4]))).matrix()
+        contacts_o.append((pw - oq[i, 4:]) @ R)
+        forces_o.append(fw @ R)
+    return Trajectory(times_s=np.arange(n + 1) * dt, object_position_m=oq[:, 4:].copy(),
+                      object_quaternion_wxyz=oq[:, :4].copy(), object_spatial_velocity=ov,
+                      actuated_positions=aq, actuated_velocities=av,
+                      contact_points_object_m=contacts_o, contact_forces_object_n=forces_o, sim_time_s=sim_time_s,
+                      sim_duration_s=n * dt, instrumented_time_s=instrumented_time_s,
+                      reset_steps=reset_steps, task=scene.task, contact_model=scene.contact_model,
+                      representation=representation, run=run)
+
+
+def _mesh_vertices(mesh_path: Path) -> np.ndarray:
+    from real2sim.formats.mesh_io import load_mesh
+
+    return np.asarray(load_mesh(Path(mesh_path)).vertices, dtype=float)
+
+
+def simulate_reference(reference_mesh_path: Path, physical_properties, run_spec: RunSpec,
+                       scene_config: SceneConfig, object_contact=None) -> Trajectory:
+    """The ground truth: the mesh at ``reference_mesh_path`` (asset frame, m; usually
+    ``ASSETDIR/visual/model.obj``) as a rigid hydroelastic body with ``physical_properties``
+    (a real2sim.formats.physical.PhysicalProperties), hydroelastic contact, no resets.
+    ``object_contact``: real2sim.formats.contact.ContactProperties for friction/dissipation
+    (defaults when None)."""
+    scene = build_scene(run_spec.task, "hydroelastic",
+                        reference_object_adder(reference_mesh_path, physical_properties, object_contact),
+                        run_spec, scene_config)
+    X_WO = initial_object_pose(_mesh_vertices(reference_mesh_path), run_spec, scene_config,
+                               com_m=physical_properties.com_m)
+    label = f"reference {run_spec.task} run {run_spec.run}"
+    return _simulate(scene, _initial_state(scene, X_WO), None, scene_config, label, "reference",
+                     run_spec.run)
+
+
+def representation_name(urdf_path: Path) -> str:
+    """The representation's canonical name: its folder under ASSETDIR."""
+    return Path(urdf_path).resolve().parent.name
+
+
+def simulate_candidate(representation_urdf_path: Path, contact_model: str, run_spec: RunSpec,
+                       scene_config: SceneConfig, reference: Trajectory | None = None,
+                       initial_mesh_path: Path | None = None) -> Trajectory:
+    """Simulate a candidate URDF with ``contact_model`` ("point" | "hydroelastic").
+
+    With ``reference``: it starts from the reference's initial state and, when
+    ``scene_config.reset_interval_s`` is set, is reset to the reference's state every
+    interval (equation error); with ``reset_interval_s`` None/0 it is one rollout from the
+    reference's start (simulation error). Without ``reference``: one rollout (simulation
+    error) from the initial pose computed from ``initial_mesh_path`` (default: the asset's
+    ``visual/model.obj`` two folders up from the URDF) and the CoM in the asset's
+    ``physical_properties.json`` when present, so it matches :func:`simulate_reference`
+    on that mesh.
+    """
+    urdf = Path(representation_urdf_path)
+    scene = build_scene(run_spec.task, contact_model, urdf_object_adder(urdf), run_spec, scene_config)
+    name = representation_name(urdf)
+    label = f"{name} {contact_model} {run_spec.task} run {run_spec.run}"
+    if reference is not None:
+        if reference.run != run_spec.run:
+            raise ValueError(f"{label}: reference is run {reference.run}")
+        initial = _state_at(reference, 0)
+    else:
+        mesh = Path(initial_mesh_path) if initial_mesh_path else urdf.resolve().parent.parent / "visual" / "model.obj"
+        if not mesh.is_file():
+            raise FileNotFoundError(f"{label}: no reference given and no mesh for the initial pose at {mesh}")
+        props_path = urdf.resolve().parent.parent / "physical_properties.json"
+        com_m = read_physical_properties(props_path).com_m if props_path.is_file() else None
+        initial = _initial_state(scene, initial_object_pose(_mesh_vertices(mesh), run_spec, scene_config,
+                                                            com_m=com_m))
+    return _simulate(scene, initial, reference, scene_config, label, name, run_spec.run)

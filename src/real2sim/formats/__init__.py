@@ -1,0 +1,34 @@
+"""The on-disk contracts between stages: dataset, collision SPEC, collision geometry,
+physical properties, contact material, results CSVs, atomic outputs, mesh I/O, user errors.
+
+Importable without torch or Drake (an import-linter contract keeps it so): every
+stage reads and writes its files through these modules, never through another
+stage's internals.
+"""
+
+from real2sim._lazy import lazy_exports
+
+_EXPORTS = {
+    "UserInputError": "errors",
+    "CollisionSpec": "spec",
+    "parse_spec": "spec",
+    "CollisionGeometry": "collision",
+    "CollisionShape": "collision",
+    "read_collision_json": "collision",
+    "write_collision_json": "collision",
+    "PhysicalProperties": "physical",
+    "read_physical_properties": "physical",
+    "write_physical_properties": "physical",
+    "ContactProperties": "contact",
+    "Dataset": "dataset",
+    "Frame": "dataset",
+    "read_dataset": "dataset",
+    "atomic_output_dir": "outputs",
+    "check_output_dir": "outputs",
+    "publish_dir": "outputs",
+    "load_mesh": "mesh_io",
+    "validate_mesh": "mesh_io",
+    "export_textured_mesh": "mesh_io",
+}
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -1,0 +1,347 @@
+"""Posed-image datasets in nerfstudio's ``transforms.json`` layout: read, write, validate.
+
+A dataset is a folder::
+
+    DATASET/
+      transforms.json      intrinsics + one entry per frame (nerfstudio layout)
+      images/              the colour images the frames point to
+      masks/               optional object masks (255 = object, 0 = ignore)
+
+``transforms.json`` holds the pinhole intrinsics in pixels (``fl_x, fl_y, cx,
+cy, w, h``, ``camera_model`` "OPENCV" with distortion ``k1 k2 p1 p2``) and, per
+frame, ``file_path`` (relative to the folder), ``transform_matrix`` -- the 4x4
+camera-to-world pose in metres in the OpenGL camera convention (x right, y up,
+the camera looks along -z) -- and optionally ``mask_path``.
+
+Pixel coordinates follow nerfstudio and COLMAP: the image spans [0, w] x [0, h]
+and the centre of pixel (u, v) is at (u + 0.5, v + 0.5), so a centred principal
+point is (w / 2, h / 2). Drake's ``CameraInfo`` uses the same convention.
+
+A real capture may come as ``images/`` + ``transforms.json`` (any tool that
+writes nerfstudio's format), or as ``images/`` + a COLMAP model in
+``sparse/0`` (cameras/images .bin or .txt); :func:`read_dataset` converts the
+latter on the fly (its poses are then in COLMAP's arbitrary frame and scale).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from real2sim.formats.errors import UserInputError
+
+# OpenCV camera (x right, y down, z forward) <-> OpenGL camera (x right, y up, z backward):
+# both are a flip of the camera's y and z axes, applied on the right of camera-to-world.
+CV_FROM_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics in pixels (pixel centres at u + 0.5), with OpenCV radial-tangential distortion."""
+
+    width: int
+    height: int
+    fl_x: float
+    fl_y: float
+    cx: float
+    cy: float
+    k1: float = 0.0
+    k2: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+
+    def matrix(self) -> np.ndarray:
+        """3x3 calibration matrix K (continuous pixel coordinates, centre of pixel u at u + 0.5)."""
+        return np.array([[self.fl_x, 0.0, self.cx], [0.0, self.fl_y, self.cy], [0.0, 0.0, 1.0]])
+
+    def scaled(self, width: int, height: int) -> "CameraIntrinsics":
+        sx, sy = width / self.width, height / self.height
+        return replace(self, width=width, height=height, fl_x=self.fl_x * sx, fl_y=self.fl_y * sy,
+                       cx=self.cx * sx, cy=self.cy * sy)
+
+
+def realsense_d435_intrinsics(width: int = 640, height: int = 480) -> CameraIntrinsics:
+    """A RealSense D435-like colour camera: fx = fy = 615 px at 640x480, principal point at the centre."""
+    fl = 615.0 * width / 640.0
+    return CameraIntrinsics(width=width, height=height, fl_x=fl, fl_y=615.0 * height / 480.0,
+                            cx=width / 2.0, cy=height / 2.0)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One posed image. ``transform_matrix``: 4x4 camera-to-world, OpenGL camera axes, metres."""
+
+    file_path: str
+    transform_matrix: np.ndarray
+    mask_path: str | None = None
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A posed-image dataset rooted at ``root`` (paths in frames are relative to it)."""
+
+    root: Path
+    intrinsics: CameraIntrinsics
+    frames: tuple[Frame, ...]
+    extra: dict = field(default_factory=dict)
+
+    def poses_c2w_gl(self) -> np.ndarray:
+        """(N, 4, 4) camera-to-world poses, OpenGL camera axes."""
+        return np.stack([f.transform_matrix for f in self.frames])
+
+    def poses_c2w_cv(self) -> np.ndarray:
+        """(N, 4, 4) camera-to-world poses, OpenCV camera axes (x right, y down, z forward)."""
+        return self.poses_c2w_gl() @ CV_FROM_GL
+
+
+def check_rigid(matrix: Any, label: str, tol: float = 1e-3) -> np.ndarray:
+    """Return ``matrix`` as a (4, 4) float array; UserInputError unless it is a finite rigid transform."""
+    try:
+        m = np.asarray(matrix, dtype=float)
+    except (TypeError, ValueError):
+        raise UserInputError(f"{label}: transform_matrix is not a numeric 4x4 matrix") from None
+    if m.shape == (3, 4):
+        m = np.vstack([m, [0.0, 0.0, 0.0, 1.0]])
+    if m.shape != (4, 4):
+        raise UserInputError(f"{label}: transform_matrix has shape {m.shape}, expected 4x4")
+    if not np.all(np.isfinite(m)):
+        raise UserInputError(f"{label}: transform_matrix has non-finite entries")
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=tol):
+        raise UserInputError(f"{label}: transform_matrix last row is {m[3].tolist()}, expected [0, 0, 0, 1]")
+    r = m[:3, :3]
+    ortho_err = float(np.abs(r.T @ r - np.eye(3)).max())
+    if ortho_err > tol or np.linalg.det(r) < 0:
+        raise UserInputError(
+            f"{label}: transform_matrix is not rigid (rotation part off orthonormal by {ortho_err:.3g}, "
+            f"det {np.linalg.det(r):.3g})")
+    return m
+
+
+def _intrinsics_from_json(data: dict, label: str) -> CameraIntrinsics:
+    missing = [k for k in ("fl_x", "fl_y", "cx", "cy", "w", "h") if k not in data]
+    if missing and "fl_x" in data and missing == ["fl_y"]:
+        data = {**data, "fl_y": data["fl_x"]}
+        missing = []
+    if missing:
+        raise UserInputError(f"{label}: missing camera intrinsics {', '.join(missing)}")
+    model = data.get("camera_model", "OPENCV")
+    if model not in ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE"):
+        raise UserInputError(f"{label}: camera_model {model!r} not supported (use OPENCV or PINHOLE)")
+    try:
+        vals = {k: float(data.get(k, 0.0)) for k in ("fl_x", "fl_y", "cx", "cy", "k1", "k2", "p1", "p2")}
+        w, h = int(data["w"]), int(data["h"])
+    except (TypeError, ValueError):
+        raise UserInputError(f"{label}: camera intrinsics are not numbers") from None
+    if w <= 0 or h <= 0 or vals["fl_x"] <= 0 or vals["fl_y"] <= 0 or not all(np.isfinite(list(vals.values()))):
+        raise UserInputError(f"{label}: invalid camera intrinsics (w={w}, h={h}, fl_x={vals['fl_x']}, fl_y={vals['fl_y']})")
+    return CameraIntrinsics(width=w, height=h, **vals)
+
+
+def intrinsics_to_json(k: CameraIntrinsics) -> dict:
+    return {"camera_model": "OPENCV", "fl_x": k.fl_x, "fl_y": k.fl_y, "cx": k.cx, "cy": k.cy,
+            "w": k.width, "h": k.height, "k1": k.k1, "k2": k.k2, "p1": k.p1, "p2": k.p2}
+
+
+def dataset_to_json(ds: Dataset) -> dict:
+    out = dict(ds.extra)
+    out.update(intrinsics_to_json(ds.intrinsics))
+    frames = []
+    for f in ds.frames:
+        entry = dict(f.extra)
+        entry["file_path"] = f.file_path
+        entry["transform_matrix"] = np.asarray(f.transform_matrix, dtype=float).tolist()
+        if f.mask_path is not None:
+            entry["mask_path"] = f.mask_path
+        frames.append(entry)
+    out["frames"] = frames
+    return out
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write JSON to a temporary file beside ``path`` and rename it into place."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(data, fh, indent=2)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_transforms(path: Path, ds: Dataset) -> None:
+    """Write ``ds`` as nerfstudio ``transforms.json`` at ``path`` (atomically)."""
+    write_json_atomic(Path(path), dataset_to_json(ds))
+
+
+def read_transforms(path: Path, root: Path | None = None, check_files: bool = True) -> Dataset:
+    """Read and validate a nerfstudio ``transforms.json``; frame paths are relative to ``root`` (its folder)."""
+    path = Path(path)
+    root = Path(root) if root is not None else path.parent
+    label = str(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise UserInputError(f"dataset file not found: {path}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise UserInputError(f"{label} is not readable JSON: {str(exc).splitlines()[0]}") from None
+    if not isinstance(data, dict):
+        raise UserInputError(f"{label}: expected a JSON object at the top level")
+    raw_frames = data.get("frames")
+    if not isinstance(raw_frames, list) or not raw_frames:
+        raise UserInputError(f"{label}: no frames")
+    if "fl_x" not in data and isinstance(raw_frames[0], dict) and "fl_x" in raw_frames[0]:
+        # nerfstudio allows per-frame intrinsics; we support one camera, so all must agree.
+        intr = _intrinsics_from_json(raw_frames[0], f"{label} frame 0")
+        for i, fr in enumerate(raw_frames[1:], 1):
+            if _intrinsics_from_json(fr, f"{label} frame {i}") != intr:
+                raise UserInputError(f"{label}: frames have different intrinsics; one camera is supported")
+    else:
+        intr = _intrinsics_from_json(data, label)
+    frames = []
+    seen = set()
+    frame_keys = {"file_path", "transform_matrix", "mask_path"}
+    for i, fr in enumerate(raw_frames):
+        flabel = f"{label} frame {i}"
+        if not isinstance(fr, dict) or "file_path" not in fr or "transform_matrix" not in fr:
+            raise UserInputError(f"{flabel}: needs file_path and transform_matrix")
+        fp = str(fr["file_path"])
+        if fp in seen:
+            raise UserInputError(f"{flabel}: duplicate file_path {fp}")
+        seen.add(fp)
+        m = check_rigid(fr["transform_matrix"], f"{flabel} ({fp})")
+        mp = fr.get("mask_path")
+        if check_files:
+            if not (root / fp).is_file():
+                raise UserInputError(f"{flabel}: image {root / fp} not found")
+            if mp is not None and not (root / mp).is_file():
+                raise UserInputError(f"{flabel}: mask {root / mp} not found")
+        frames.append(Frame(file_path=fp, transform_matrix=m, mask_path=None if mp is None else str(mp),
+                            extra={k: v for k, v in fr.items() if k not in frame_keys}))
+    extra = {k: v for k, v in data.items() if k not in ("frames", "camera_model", "fl_x", "fl_y", "cx", "cy",
+                                                         "w", "h", "k1", "k2", "p1", "p2")}
+    return Dataset(root=root, intrinsics=intr, frames=tuple(frames), extra=extra)
+
+
+def _colmap_intrinsics(camera) -> CameraIntrinsics:
+    p = np.asarray(camera.params, dtype=float)
+    name = camera.model.name if hasattr(camera.model, "name") else str(camera.model)
+    w, h = int(camera.width), int(camera.height)
+    if name == "SIMPLE_PINHOLE":
+        return CameraIntrinsics(w, h, p[0], p[0], p[1], p[2])
+    if name == "PINHOLE":
+        return CameraIntrinsics(w, h, p[0], p[1], p[2], p[3])
+    if name == "SIMPLE_RADIAL":
+        return CameraIntrinsics(w, h, p[0], p[0], p[1], p[2], k1=p[3])
+    if name == "RADIAL":
+        return CameraIntrinsics(w, h, p[0], p[0], p[1], p[2], k1=p[3], k2=p[4])
+    if name == "OPENCV":
+        return CameraIntrinsics(w, h, *p[:8])
+    raise UserInputError(f"COLMAP camera model {name} not supported (use PINHOLE, SIMPLE_RADIAL, RADIAL or OPENCV)")
+
+
+def read_colmap_model(root: Path, model_dir: Path | None = None, images_dir: str = "images") -> Dataset:
+    """Build a Dataset from ``images/`` + a COLMAP model (default ``root/sparse/0``), poses in COLMAP's frame."""
+    root = Path(root)
+    model_dir = Path(model_dir) if model_dir is not None else root / "sparse" / "0"
+    try:
+        import pycolmap
+    except ImportError:
+        raise UserInputError("reading a COLMAP model needs pycolmap (pip install pycolmap)") from None
+    try:
+        rec = pycolmap.Reconstruction(str(model_dir))
+    except Exception as exc:  # pycolmap raises generic errors on bad files
+        raise UserInputError(f"could not read COLMAP model {model_dir}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+    if rec.num_cameras() != 1:
+        raise UserInputError(f"COLMAP model {model_dir} has {rec.num_cameras()} cameras; one camera is supported")
+    intr = _colmap_intrinsics(next(iter(rec.cameras.values())))
+    frames = []
+    for image_id in sorted(rec.reg_image_ids(), key=lambda i: rec.image(i).name):
+        img = rec.image(image_id)
+        cam_from_world = np.eye(4)
+        cam_from_world[:3, :] = img.cam_from_world().matrix()
+        c2w_gl = np.linalg.inv(cam_from_world) @ CV_FROM_GL
+        fp = f"{images_dir}/{img.name}"
+        if not (root / fp).is_file():
+            raise UserInputError(f"COLMAP model names image {img.name}, but {root / fp} is missing")
+        mp = f"masks/{Path(img.name).stem}.png"
+        frames.append(Frame(file_path=fp, transform_matrix=c2w_gl,
+                            mask_path=mp if (root / mp).is_file() else None))
+    if not frames:
+        raise UserInputError(f"COLMAP model {model_dir} has no registered images")
+    return Dataset(root=root, intrinsics=intr, frames=tuple(frames), extra={"source": "colmap"})
+
+
+def read_dataset(path: Path | str, check_files: bool = True) -> Dataset:
+    """Open a dataset folder (or its transforms.json): nerfstudio transforms.json, else images + sparse/0.
+
+    Raises UserInputError with one line for anything unreadable: a missing folder,
+    no transforms.json and no COLMAP model, bad JSON, missing frames or images,
+    non-rigid or non-finite poses, bad intrinsics.
+    """
+    path = Path(path)
+    if path.is_file() and path.suffix == ".json":
+        return read_transforms(path, check_files=check_files)
+    if not path.exists():
+        raise UserInputError(f"dataset not found: {path}")
+    if not path.is_dir():
+        raise UserInputError(f"dataset {path} is not a folder or a transforms.json")
+    if (path / "transforms.json").exists():
+        return read_transforms(path / "transforms.json", check_files=check_files)
+    if (path / "sparse" / "0").is_dir():
+        return read_colmap_model(path)
+    raise UserInputError(f"{path} holds neither transforms.json nor a COLMAP model sparse/0")
+
+
+def load_image_rgb(path: Path) -> np.ndarray:
+    """(H, W, 3) uint8 RGB; UserInputError when unreadable."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im.convert("RGB"))
+    except (OSError, ValueError) as exc:
+        raise UserInputError(f"cannot read image {path}: {str(exc).splitlines()[0]}") from None
+
+
+def load_mask(path: Path) -> np.ndarray:
+    """(H, W) bool, True where the object is (pixel value > 127)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im.convert("L")) > 127
+    except (OSError, ValueError) as exc:
+        raise UserInputError(f"cannot read mask {path}: {str(exc).splitlines()[0]}") from None
+
+
+def rotation_angle_deg(r_a: np.ndarray, r_b: np.ndarray) -> np.ndarray:
+    """Angle(s) in degrees of the rotation(s) r_a^T r_b; broadcasts over leading axes."""
+    rel = np.swapaxes(r_a, -1, -2) @ r_b
+    cos = (np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def pose_errors(c2w_est: np.ndarray, c2w_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame rotation error (deg) and camera-centre error (mm) between (N,4,4) camera-to-world poses."""
+    rot = rotation_angle_deg(c2w_est[:, :3, :3], c2w_ref[:, :3, :3])
+    trans_mm = 1000.0 * np.linalg.norm(c2w_est[:, :3, 3] - c2w_ref[:, :3, 3], axis=1)
+    return rot, trans_mm
+
+
+def read_ground_truth(root: Path | str) -> Dataset | None:
+    """The exact poses in ``root/ground_truth/transforms.json`` (paths relative to ``root``), or None."""
+    path = Path(root) / "ground_truth" / "transforms.json"
+    if not path.is_file():
+        return None
+    return read_transforms(path, root=Path(root), check_files=False)

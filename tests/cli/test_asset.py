@@ -1,0 +1,158 @@
+"""`real2sim asset` from the command line: bad input gives one line and exit 2, nothing written;
+good input gives an asset folder whose URDFs Drake loads."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from real2sim.cli import main
+from real2sim.geometry.objects import OBJECTS, export_object
+
+
+@pytest.fixture(scope="module")
+def can_obj(tmp_path_factory) -> Path:
+    return export_object("can", tmp_path_factory.mktemp("objects") / "can" / "model.obj")
+
+
+def run_cli(capsys, *argv) -> tuple[int, str, str]:
+    """Run the CLI in-process; argparse usage errors exit through SystemExit."""
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exc:
+        code = exc.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def assert_one_line_error(code: int, err: str) -> None:
+    assert code == 2
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+
+
+def bad_cases(tmp_path: Path, can_obj: Path):
+    garbage = tmp_path / "garbage.obj"
+    garbage.write_bytes(b"\x00\xff\x13 not a mesh at all" * 20)
+    empty = tmp_path / "empty.obj"
+    empty.write_text("# an OBJ with no faces\nv 0 0 0\n")
+    text = tmp_path / "readme.txt"
+    text.write_text("hello")
+    exists = tmp_path / "exists"
+    exists.mkdir()
+    return {
+        "missing file": [tmp_path / "nope.obj", "--mass", "0.3", "--out", tmp_path / "o1"],
+        "not a mesh": [garbage, "--mass", "0.3", "--out", tmp_path / "o2"],
+        "not a mesh suffix": [text, "--mass", "0.3", "--out", tmp_path / "o3"],
+        "empty mesh": [empty, "--mass", "0.3", "--out", tmp_path / "o4"],
+        "zero mass": [can_obj, "--mass", "0", "--out", tmp_path / "o5"],
+        "negative mass": [can_obj, "--mass", "-1", "--out", tmp_path / "o6"],
+        "nan mass": [can_obj, "--mass", "nan", "--out", tmp_path / "o7"],
+        "inf mass": [can_obj, "--mass", "inf", "--out", tmp_path / "o8"],
+        "word mass": [can_obj, "--mass", "heavy", "--out", tmp_path / "o9"],
+        "unknown spec": [can_obj, "--mass", "0.3", "--out", tmp_path / "o10", "--collision", "pyramids:3"],
+        "zero count": [can_obj, "--mass", "0.3", "--out", tmp_path / "o11", "--collision", "boxes:0"],
+        "too many": [can_obj, "--mass", "0.3", "--out", tmp_path / "o12", "--collision", "spheres:2001"],
+        "malformed mix": [can_obj, "--mass", "0.3", "--out", tmp_path / "o13", "--collision", "boxes:3+"],
+        "output exists": [can_obj, "--mass", "0.3", "--out", exists, "--collision", "mesh"],
+    }
+
+
+CASES = ["missing file", "not a mesh", "not a mesh suffix", "empty mesh", "zero mass", "negative mass", "nan mass",
+         "inf mass", "word mass", "unknown spec", "zero count", "too many", "malformed mix", "output exists"]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_bad_input_is_one_line_exit_2_nothing_written(case, tmp_path, can_obj, capsys):
+    argv = bad_cases(tmp_path, can_obj)[case]
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code, _, err = run_cli(capsys, "asset", *argv)
+    assert_one_line_error(code, err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written, no temp folders left
+    if case == "output exists":
+        assert list((tmp_path / "exists").iterdir()) == []
+
+
+def test_module_entry_point_and_console_script_help():
+    out = subprocess.run([sys.executable, "-m", "real2sim", "--help"], capture_output=True, text=True, check=True).stdout
+    for verb in ("asset", "objects", "demo", "evaluate"):
+        assert verb in out
+    exe = Path(sys.executable).with_name("real2sim")
+    if exe.exists():
+        assert "--mass" in subprocess.run([exe, "asset", "--help"], capture_output=True, text=True, check=True).stdout
+
+
+def _check_asset_folder(asset: Path, names: list[str], mass_kg: float) -> None:
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    props = json.loads((asset / "physical_properties.json").read_text())
+    assert props["mass_kg"] == pytest.approx(mass_kg)
+    assert np.asarray(props["inertia_kg_m2"]).shape == (3, 3)
+    transform = np.asarray(json.loads((asset / "canonical_transform.json").read_text())["T_asset_from_input"])
+    assert transform.shape == (4, 4)
+    np.testing.assert_allclose(transform[:3, :3] @ transform[:3, :3].T, np.eye(3), atol=1e-9)
+    assert (asset / "visual" / "model.obj").exists()
+    for name in names:
+        rep = asset / name
+        for f in ("model.urdf", "collision.json", "fit_report.json"):
+            assert (rep / f).exists(), rep / f
+        report = json.loads((rep / "fit_report.json").read_text())
+        assert report["num_primitives"] >= 1
+        assert 0.5 < report["iou"] <= 1.0
+        assert report["chamfer_mm"] >= 0
+        plant = MultibodyPlant(0.001)
+        Parser(plant).AddModels(str(rep / "model.urdf"))
+        plant.Finalize()
+        masses = [plant.GetBodyByName("base_link").default_mass()]
+        assert max(masses) == pytest.approx(mass_kg, rel=1e-6)
+
+
+def test_asset_end_to_end_small(tmp_path, can_obj, capsys):
+    out = tmp_path / "can_asset"
+    code, stdout, err = run_cli(capsys, "asset", can_obj, "--mass", OBJECTS["can"].mass_kg, "--out", out,
+                                "--collision", "mesh", "--collision", "vhacd", "--collision", "cylinders:2",
+                                "--collision", "boxes:1+spheres:2", "--iterations", "150", "--format", "sdf")
+    assert code == 0, err
+    assert str(out) in stdout
+    _check_asset_folder(out, ["mesh", "vhacd", "cylinders_2", "boxes_1_spheres_2"], OBJECTS["can"].mass_kg)
+    assert (out / "vhacd" / "model.sdf").exists()
+    fit = json.loads((out / "cylinders_2" / "fit_report.json").read_text())
+    assert fit["device"] == "cpu" and fit["final_loss"] >= 0 and fit["num_primitives"] <= 2
+    assert fit["iou"] > 0.85  # a can is two stacked cylinders at most
+    kinds = {s["type"] for s in json.loads((out / "boxes_1_spheres_2" / "collision.json").read_text())["shapes"]}
+    assert kinds <= {"box", "sphere"} and "box" in kinds
+    assert not (out / ".sdf_cache").exists()
+    leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert leftovers == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(OBJECTS))
+def test_asset_every_object_every_baseline(name, tmp_path, capsys):
+    mesh = export_object(name, tmp_path / name / "model.obj")
+    out = tmp_path / f"{name}_asset"
+    code, _, err = run_cli(capsys, "asset", mesh, "--mass", OBJECTS[name].mass_kg, "--out", out,
+                           "--collision", "coacd", "--collision", "vhacd", "--collision", "mesh")
+    assert code == 0, err
+    _check_asset_folder(out, ["coacd", "vhacd", "mesh"], OBJECTS[name].mass_kg)
+
+
+def test_rewrite_models_changes_contact_without_refitting(tmp_path, can_obj, capsys):
+    from real2sim.asset.build import rewrite_models
+    from real2sim.formats.contact import ContactProperties
+
+    out = tmp_path / "can_asset"
+    assert run_cli(capsys, "asset", can_obj, "--mass", "0.35", "--out", out, "--collision", "mesh")[0] == 0
+    before = (out / "mesh" / "collision.json").read_text()
+    [urdf] = rewrite_models(out, ContactProperties(mu_static=0.9, mu_dynamic=0.8, point_contact_stiffness_n_per_m=5e4))
+    text = urdf.read_text()
+    assert 'mu_static value="0.9"' in text and 'point_contact_stiffness value="50000.0"' in text
+    assert (out / "mesh" / "collision.json").read_text() == before
+    _check_asset_folder(out, ["mesh"], 0.35)
