@@ -22,17 +22,11 @@ from real2sim.asset.writers import write_representation
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.errors import UserInputError
-from real2sim.evaluate.sweep import (
-    RUN_COLUMNS,
-    EvaluationConfig,
-    discover_representations,
-    evaluate,
-    load_trajectory,
-    place_reference_mesh,
-    read_runs_csv,
-    save_trajectory,
-    score,
-)
+from real2sim.evaluate.discovery import discover_representations, place_reference_mesh
+from real2sim.evaluate.scoring import score
+from real2sim.evaluate.sweep import EvaluationConfig, evaluate
+from real2sim.formats.results import RUN_COLUMNS, read_runs_csv
+from real2sim.formats.trajectory import load_trajectory, save_trajectory
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
 from real2sim.evaluate.scenes import SceneConfig
 
@@ -147,7 +141,7 @@ def test_place_reference_mesh_applies_canonical_transform(tmp_path):
 
 
 def _traj(pos, quat, contacts, dt=0.001, sim_time_s=0.5):
-    from real2sim.evaluate.simulate import Trajectory
+    from real2sim.formats.trajectory import Trajectory
 
     n = len(pos)
     return Trajectory(
@@ -388,7 +382,7 @@ def test_pool_survives_a_worker_dying_in_native_code():
     keep the spawned workers from importing this test module."""
     import os as _os
 
-    from real2sim.evaluate.sweep import _PoolExecutor, _Retry
+    from real2sim.evaluate.executors import _PoolExecutor, _Retry
 
     executor = _PoolExecutor(2)
     jobs = [(math.sqrt, 4.0), (_os._exit, 13), (math.sqrt, 9.0), (math.sqrt, 16.0)]

@@ -67,7 +67,8 @@ def config_from_args(args: argparse.Namespace):
     import math
 
     from real2sim.formats.errors import UserInputError
-    from real2sim.evaluate.sweep import EvaluationConfig, _default_jobs
+    from real2sim.evaluate.executors import _default_jobs
+    from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.evaluate.scenes import SceneConfig
 
     if args.runs < 1:
@@ -124,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_report(args: argparse.Namespace) -> int:
-    from real2sim.evaluate.sweep import read_summary_csv
+    from real2sim.formats.results import read_summary_csv
     from real2sim.report.html import write_report
 
     path = write_report(args.results)

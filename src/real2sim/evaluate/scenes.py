@@ -33,8 +33,9 @@ from typing import Callable
 
 import numpy as np
 
+from real2sim.formats.contact import CONTACT_MODELS
+
 TASKS = ("push", "ramp")
-CONTACT_MODELS = ("point", "hydroelastic")
 
 
 @dataclass(frozen=True)

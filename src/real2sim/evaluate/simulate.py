@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from real2sim.formats.physical import read_physical_properties
+from real2sim.formats.trajectory import Trajectory
 from real2sim.evaluate.scenes import (RunSpec, Scene, SceneConfig, build_scene, initial_object_pose,
                               reference_object_adder, urdf_object_adder)
 
@@ -37,54 +38,6 @@ from real2sim.evaluate.scenes import (RunSpec, Scene, SceneConfig, build_scene, 
 class SimulationError(RuntimeError):
     """A simulation failed (solver failure, non-finite or exploded state); the message
     names the task, run, contact model, representation and simulated time."""
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """One simulated run, as arrays over the T = num_steps + 1 samples.
-
-    times_s: (T,) sample times, s (step index * time_step_s).
-    object_position_m: (T, 3) world position of the object's asset-frame origin, m.
-    object_quaternion_wxyz: (T, 4) world orientation of the asset frame: Drake's state as
-        is (so a reset restores it bit for bit): unit only to ~1e-12, sign not canonical;
-        normalise before building a rotation matrix.
-    object_spatial_velocity: (T, 6) [angular rad/s, linear m/s] of the asset-frame origin,
-        both in world (Drake's free-body velocity state).
-    actuated_positions: (T, k) the pusher's (x, y, m) or the table's (angle, rad) joint positions.
-    actuated_velocities: (T, k) their time derivatives.
-    contact_points_object_m: per sample, (k_t, 3) points where the object touches anything,
-        expressed in the object's (asset) frame, m: point contact -> each point pair's
-        contact point; hydroelastic -> each contact surface's centroid. They are the
-        contacts of that sample's state (what the next step's contact forces act at;
-        Drake's unsampled contact-results port), at a reset step those of the prediction.
-    contact_forces_object_n: per sample, (k_t, 3) the contact force on the object at each
-        of those points, N, expressed in the object frame (point contact: the pair's
-        force; hydroelastic: the surface's net force). Only used to weight the
-        force-weighted CPD; empty in trajectories saved before it existed.
-    sim_time_s: wall seconds of the bare timed run (see module docstring).
-    sim_duration_s: simulated seconds.
-    instrumented_time_s: wall seconds of the per-step logging run.
-    reset_steps: (r,) step indices where the state was reset to the reference (multiples of
-        the reset interval, 0 < step < num_steps; the shared start at step 0 is not counted).
-    task, contact_model, representation, run: identification.
-    """
-
-    times_s: np.ndarray
-    object_position_m: np.ndarray
-    object_quaternion_wxyz: np.ndarray
-    object_spatial_velocity: np.ndarray
-    actuated_positions: np.ndarray
-    actuated_velocities: np.ndarray
-    contact_points_object_m: list
-    sim_time_s: float
-    sim_duration_s: float
-    instrumented_time_s: float
-    reset_steps: np.ndarray
-    task: str
-    contact_model: str
-    representation: str
-    run: int
-    contact_forces_object_n: list = field(default_factory=list)
 
 
 @dataclass(frozen=True)

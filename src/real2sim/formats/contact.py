@@ -10,6 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
+# "hydroelastic" means Drake's hydroelastic_with_fallback (strict hydroelastic refuses rigid-rigid pairs).
+CONTACT_MODELS = ("point", "hydroelastic")
+
+
 @dataclass(frozen=True)
 class ContactProperties:
     """Contact material of the object's collision geometry.

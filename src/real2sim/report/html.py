@@ -64,7 +64,7 @@ def read_paper_table() -> dict[str, dict]:
 
 def build_outputs(results_dir: Path, rows: Sequence[dict]) -> tuple[list[dict], list[Path], Path]:
     """Write summary.csv, the Pareto PNGs and report.html for ``rows`` into ``results_dir``."""
-    from real2sim.evaluate.sweep import SUMMARY_COLUMNS, summarize, write_csv_atomic
+    from real2sim.formats.results import SUMMARY_COLUMNS, summarize, write_csv_atomic
     from real2sim.report.pareto import write_pareto_plots
 
     results_dir = Path(results_dir)
@@ -83,7 +83,7 @@ def build_outputs(results_dir: Path, rows: Sequence[dict]) -> tuple[list[dict], 
 
 def write_report(results_dir: Path | str) -> Path:
     """Rebuild summary.csv, the plots and report.html of ``results_dir`` from its runs.csv."""
-    from real2sim.evaluate.sweep import read_runs_csv
+    from real2sim.formats.results import read_runs_csv
 
     results_dir = Path(results_dir)
     if not results_dir.is_dir():

@@ -1,0 +1,115 @@
+"""One reference simulation or one candidate simulation, as a picklable job.
+
+Jobs are module-level functions over frozen dataclasses so that they run unchanged in
+this process, in a spawned worker or on Ray. A job never raises: a failure becomes the
+error text of its rows.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from real2sim.evaluate.discovery import Asset
+from real2sim.evaluate.scenes import RunSpec, SceneConfig
+from real2sim.evaluate.scoring import score
+from real2sim.formats.results import FLOAT_COLUMNS, KEY_COLUMNS
+from real2sim.formats.trajectory import load_trajectory, save_trajectory
+
+
+@dataclass(frozen=True)
+class ReferenceJob:
+    object: str
+    task: str
+    run: int
+    mesh_path: Path
+    physical_properties_path: Path
+    run_spec: RunSpec
+    scene: SceneConfig
+    cache_path: Path | None = None
+
+
+@dataclass(frozen=True)
+class CandidateJob:
+    object: str
+    representation: str
+    contact_model: str
+    task: str
+    run: int
+    urdf_path: Path
+    run_spec: RunSpec
+    scene: SceneConfig
+    simulation_error: bool
+    reference: Any  # Trajectory
+
+    @property
+    def key(self) -> tuple:
+        return (self.object, self.representation, self.contact_model, self.task, self.run)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = f"{type(exc).__name__}: {exc}".strip().replace("\r", " ").replace("\n", " | ")
+    return text[:500]
+
+
+def run_reference_job(job: ReferenceJob) -> tuple[str, Any]:
+    """Simulate (or load from the cache) one reference trajectory: ("ok", Trajectory) or ("error", text)."""
+    try:
+        if job.cache_path is not None and job.cache_path.is_file():
+            try:
+                return "ok", load_trajectory(job.cache_path)
+            except Exception:
+                pass  # a damaged cache file is simulated again
+        from real2sim.formats.physical import read_physical_properties
+        from real2sim.evaluate.simulate import simulate_reference
+
+        props = read_physical_properties(job.physical_properties_path)
+        traj = simulate_reference(job.mesh_path, props, job.run_spec, job.scene)
+        if job.cache_path is not None:
+            save_trajectory(traj, job.cache_path)
+        return "ok", traj
+    except Exception as exc:  # recorded in the rows of every candidate of this run
+        return "error", _one_line(exc)
+
+
+def _row(job_key: tuple, **values) -> dict:
+    row = dict(zip(KEY_COLUMNS, job_key))
+    for col in FLOAT_COLUMNS:
+        row[col] = float(values.get(col, math.nan))
+    row["error"] = values.get("error", "")
+    return row
+
+
+def run_candidate_job(job: CandidateJob) -> dict:
+    """Simulate one (representation, contact model, task, run) and score it: a runs.csv row.
+
+    Never raises: a failure becomes the row's ``error`` text (one line).
+    """
+    try:
+        from real2sim.evaluate.simulate import simulate_candidate
+
+        # The candidate always starts from the reference's initial state; simulation error is
+        # the same call with resets switched off (``job.scene`` has reset_interval_s None then).
+        traj = simulate_candidate(job.urdf_path, job.contact_model, job.run_spec, job.scene, job.reference)
+        values = score(job.reference, traj)
+        return _row(job.key, **values)
+    except Exception as exc:
+        return _row(job.key, error=_one_line(exc))
+
+
+def _sha1_file(path: Path) -> str:
+    h = hashlib.sha1()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _reference_cache_name(asset: Asset, mesh_path: Path, spec: RunSpec, scene: SceneConfig) -> str:
+    h = hashlib.sha1()
+    for part in (_sha1_file(mesh_path), _sha1_file(asset.physical_properties_path), repr(spec), repr(scene)):
+        h.update(part.encode())
+    return f"{asset.name}_{spec.task}_{spec.run}_{h.hexdigest()[:12]}.npz"
