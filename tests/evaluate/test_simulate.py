@@ -10,10 +10,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from real2sim.evaluate.scenes import SceneConfig, make_run_specs
+from real2sim.evaluate.scene_config import SceneConfig
+from real2sim.evaluate.tasks import make_run_specs
 from real2sim.evaluate.simulate import SimulationError, simulate_candidate, simulate_reference
 
-from tests.evaluate.test_scenes import CAN_H, CAN_R, write_can_asset
+from tests.evaluate.test_world import CAN_H, CAN_R, write_can_asset
 
 # A RuntimeWarning (e.g. the timed and the logged run ending apart) fails the test.
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")

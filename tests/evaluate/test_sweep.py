@@ -28,7 +28,7 @@ from real2sim.evaluate.sweep import EvaluationConfig, evaluate
 from real2sim.formats.results import RUN_COLUMNS, read_runs_csv
 from real2sim.formats.trajectory import load_trajectory, save_trajectory
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
-from real2sim.evaluate.scenes import SceneConfig
+from real2sim.evaluate.scene_config import SceneConfig
 
 BOX_EXTENTS_M = np.array([0.04, 0.05, 0.08])
 SHORT_SCENE = SceneConfig(settle_s=0.05, push_duration_s=0.25, pusher_start_distance_m=0.11,

@@ -69,7 +69,7 @@ def config_from_args(args: argparse.Namespace):
     from real2sim.formats.errors import UserInputError
     from real2sim.evaluate.executors import _default_jobs
     from real2sim.evaluate.sweep import EvaluationConfig
-    from real2sim.evaluate.scenes import SceneConfig
+    from real2sim.evaluate.scene_config import SceneConfig
 
     if args.runs < 1:
         raise UserInputError(f"--runs must be >= 1, got {args.runs}")

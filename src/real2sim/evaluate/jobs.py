@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from real2sim.evaluate.discovery import Asset
-from real2sim.evaluate.scenes import RunSpec, SceneConfig
+from real2sim.evaluate.scene_config import SceneConfig
+from real2sim.evaluate.tasks import RunSpec
 from real2sim.evaluate.scoring import score
 from real2sim.formats.results import FLOAT_COLUMNS, KEY_COLUMNS
 from real2sim.formats.trajectory import load_trajectory, save_trajectory

@@ -31,8 +31,10 @@ import numpy as np
 
 from real2sim.formats.physical import read_physical_properties
 from real2sim.formats.trajectory import Trajectory
-from real2sim.evaluate.scenes import (RunSpec, Scene, SceneConfig, build_scene, initial_object_pose,
-                              reference_object_adder, urdf_object_adder)
+from real2sim.evaluate.placement import initial_object_pose
+from real2sim.evaluate.scene_config import SceneConfig
+from real2sim.evaluate.tasks import RunSpec
+from real2sim.evaluate.world import Scene, build_scene, reference_object_adder, urdf_object_adder
 
 
 class SimulationError(RuntimeError):

@@ -3,7 +3,7 @@
 For each asset folder, task and run, the *reference* (the asset's own closed mesh,
 or ``--reference MESH``, simulated with hydroelastic contact) is simulated once;
 then every ``(representation, contact model)`` is simulated on the same
-:class:`~real2sim.evaluate.scenes.RunSpec` and scored against it with
+:class:`~real2sim.evaluate.tasks.RunSpec` and scored against it with
 :mod:`real2sim.evaluate.metrics` (equation error: the candidate is reset to the reference
 state every 0.1 s, unless ``simulation_error`` asks for free roll-outs).
 
@@ -51,7 +51,8 @@ from real2sim.evaluate.discovery import (Asset, Representation, discover_assets,
                                          place_reference_mesh, read_canonical_transform)
 from real2sim.evaluate.executors import EXECUTORS, _default_jobs, _make_executor, _Retry
 from real2sim.evaluate.jobs import CandidateJob, ReferenceJob, _reference_cache_name, _row, run_candidate_job, run_reference_job
-from real2sim.evaluate.scenes import TASKS, SceneConfig, make_run_specs
+from real2sim.evaluate.scene_config import SceneConfig
+from real2sim.evaluate.tasks import TASKS, make_run_specs
 from real2sim.formats.contact import CONTACT_MODELS
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import publish_dir
@@ -68,7 +69,7 @@ class EvaluationConfig:
 
     tasks: subset of ("push", "ramp"); contact_models: subset of ("point", "hydroelastic");
     runs: runs per (object, task) -- the paper uses 10; seed: seeds the run
-    randomisation (:func:`real2sim.evaluate.scenes.make_run_specs`); jobs: parallel
+    randomisation (:func:`real2sim.evaluate.tasks.make_run_specs`); jobs: parallel
     simulations (local pool size, or Ray tasks in flight); executor: "local" or "ray";
     ray_address: Ray cluster address (None: ``$RAY_ADDRESS``, else a local Ray);
     simulation_error: free roll-outs instead of equation error (resets every 0.1 s);
