@@ -52,7 +52,8 @@ def _prepare(name: str, sampling_seed: int):
 
 def _run_one(mesh, samples, spec_text: str, config, seed: int) -> dict:
     from real2sim.geometry.fidelity import measure_fidelity
-    from real2sim.collision.fit.fitting import fit_primitives, to_collision_geometry
+    from real2sim.collision.fit.convert import to_collision_geometry
+    from real2sim.collision.fit.loop import fit_primitives
     from real2sim.formats.spec import parse_spec
 
     spec = parse_spec(spec_text)
@@ -111,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from real2sim.collision.fit.fitting import FitConfig
+    from real2sim.collision.fit.config import FitConfig
 
     torch.set_num_threads(args.threads)
     base = FitConfig(device=args.device)

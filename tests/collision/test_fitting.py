@@ -11,15 +11,10 @@ import torch
 
 from real2sim.formats.collision import quaternion_to_matrix
 from real2sim.geometry.collision_mesh import inside_collision
-from real2sim.collision.fit.fitting import (
-    FitConfig,
-    FitResult,
-    fit_primitives,
-    prune_dead,
-    result_sdf,
-    rotation_penalty,
-    to_collision_geometry,
-)
+from real2sim.collision.fit.config import FitConfig, FitResult
+from real2sim.collision.fit.convert import prune_dead, result_sdf, to_collision_geometry
+from real2sim.collision.fit.loop import fit_primitives
+from real2sim.collision.fit.losses import rotation_penalty
 
 # Small and fast: few samples, small batches, few iterations; direct parameters unless tested.
 FAST = FitConfig(parameterization="direct", batch_size=2048, max_iterations=250, min_iterations=250, revive_dead=False)
@@ -248,7 +243,7 @@ def test_fit_collision_on_a_mesh_gives_metres_in_the_asset_frame():
     import trimesh
 
     from real2sim.collision.sdf_sampling import SdfSamplingConfig
-    from real2sim.collision.fit.fitting import fit_collision
+    from real2sim.collision.fit.stage import fit_collision
     from real2sim.formats.spec import parse_spec
 
     mesh = trimesh.creation.box(extents=(0.04, 0.06, 0.1))
@@ -266,6 +261,23 @@ def test_fit_collision_on_a_mesh_gives_metres_in_the_asset_frame():
     hi = np.max([np.asarray(s.position_m) + 0.5 * np.asarray(s.size_m) for s in geo.shapes], axis=0)
     np.testing.assert_allclose(lo, mesh.bounds[0], atol=0.004)  # metres, the box's own frame
     np.testing.assert_allclose(hi, mesh.bounds[1], atol=0.004)
+
+
+def test_fit_leaves_torch_global_state_as_found(box_samples):
+    pts, sdf, _, _ = box_samples
+    torch.manual_seed(1234)
+    rng_before = torch.get_rng_state().clone()
+    threads_before = torch.get_num_threads()
+    deterministic_before = torch.are_deterministic_algorithms_enabled()
+    cuda_before = torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None
+    other_threads = 1 if threads_before != 1 else 2
+    config = dataclasses.replace(FAST, max_iterations=20, min_iterations=20, num_threads=other_threads)
+    fit_primitives(pts, sdf, (("boxes", 2),), config, seed=7)
+    assert torch.are_deterministic_algorithms_enabled() == deterministic_before
+    assert torch.get_num_threads() == threads_before
+    assert torch.equal(torch.get_rng_state(), rng_before)
+    if cuda_before is not None:
+        assert all(torch.equal(a, b) for a, b in zip(torch.cuda.get_rng_state_all(), cuda_before))
 
 
 def test_bad_config_rejected():

@@ -12,7 +12,9 @@ import trimesh
 
 from real2sim.formats.collision import CollisionGeometry, quaternion_to_matrix
 from real2sim.geometry.collision_mesh import union_mesh
-from real2sim.collision.fit.fitting import FitConfig, fit_primitives, to_collision_geometry
+from real2sim.collision.fit.config import FitConfig
+from real2sim.collision.fit.convert import to_collision_geometry
+from real2sim.collision.fit.loop import fit_primitives
 from real2sim.geometry.inside import signed_distance
 from real2sim.collision.primitive_sdf import ellipsoid_sdf, primitive_sdf, superquadric_sdf
 from real2sim.formats.spec import parse_spec
@@ -114,7 +116,7 @@ def test_fit_finds_a_box_and_a_cylinder_by_their_exponents():
 
 
 def test_conversion_writes_posed_convex_pieces_in_metres(tmp_path):
-    from real2sim.collision.fit.fitting import FitResult
+    from real2sim.collision.fit.config import FitResult
 
     row = (0.1, 0.0, -0.2, 0.2, 0.1, 0.3, 0.3, 1.0) + tuple(Q)
     res = FitResult(kinds=("superquadric", "sphere"), parameters=(row, (0.0, 0.0, 0.0, 0.1)), final_loss=0.0,
@@ -173,7 +175,7 @@ def test_a_box_of_two_superquadrics_rests_on_the_floor_in_drake(tmp_path, contac
 
     from real2sim.asset.writers import write_representation
     from real2sim.formats.contact import ContactProperties
-    from real2sim.collision.fit.fitting import FitResult
+    from real2sim.collision.fit.config import FitResult
     from real2sim.formats.physical import PhysicalProperties
 
     quarter_z = (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4))
@@ -201,7 +203,7 @@ def test_a_box_of_two_superquadrics_rests_on_the_floor_in_drake(tmp_path, contac
 
 
 def test_exponents_stay_in_the_convex_range_whatever_the_raw_parameters():
-    from real2sim.collision.fit.fitting import _constrain
+    from real2sim.collision.fit.params import _constrain
 
     raw = torch.tensor([[0.0, 0.0, 0.0, 0.1, 0.1, 0.1, -50.0, 50.0, 1.0, 0.0, 0.0, 0.0]], dtype=torch.float64)
     packed = _constrain("superquadric", raw, 0.004, FitConfig().superquadric_exponent_gain)

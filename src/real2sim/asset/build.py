@@ -119,7 +119,8 @@ def build_collision(
         geometry = decompose(mesh_canonical, spec.baseline, rep_dir, seed=config.seed, **kwargs)
         report = {"method": spec.baseline, "final_loss": None, "device": "cpu"}
     else:
-        from real2sim.collision.fit.fitting import FitConfig, fit_collision
+        from real2sim.collision.fit.config import FitConfig
+        from real2sim.collision.fit.stage import fit_collision
 
         geometry, report = fit_collision(
             mesh_canonical,

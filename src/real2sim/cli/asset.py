@@ -117,7 +117,7 @@ def config_from_args(args: argparse.Namespace):
     if args.fit_paper_loss:
         fit_overrides["inside_loss"] = "hinge"
     if any(s.is_primitive_fit for s in specs) and fit_overrides:
-        from real2sim.collision.fit.fitting import FitConfig
+        from real2sim.collision.fit.config import FitConfig
 
         fit_config = FitConfig(**fit_overrides)
     if any(s.baseline == "coacd" for s in specs):

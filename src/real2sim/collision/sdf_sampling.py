@@ -1,6 +1,6 @@
 """Signed-distance samples of a mesh in unit-sphere coordinates (paper IV-C2).
 
-The fitter (:mod:`real2sim.collision.fit.fitting`) needs many points near the object's surface
+The fitter (:mod:`real2sim.collision.fit`) needs many points near the object's surface
 with the signed distance of the mesh at each, negative inside. This stage
 
 1. scales the mesh into the unit sphere: ``asset_point = centre_m + scale_m * unit_point``

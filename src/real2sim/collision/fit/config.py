@@ -1,0 +1,113 @@
+"""Settings (:class:`FitConfig`) and result (:class:`FitResult`) of the primitive fit."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from real2sim.collision.primitive_sdf import PARAM_DIM, SUPERQUADRIC_EXPONENT_RANGE
+
+
+ProgressFn = Callable[[int, int, float], None]
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """Settings of the primitive fit; defaults follow the paper where it gives them.
+
+    Lengths are in unit-sphere coordinates. ``learning_rate=None`` picks the
+    default of the parameterization (the network's output moves by roughly
+    ``lr * hidden_dim`` per step, so it needs a much smaller step than ``direct``).
+    """
+
+    parameterization: str = "direct"  # "direct" or "network" (the paper's eq. 10, Fig. 3); see docs/benchmarks/fitting.md
+    init: str = "kmeans"  # "kmeans" (beyond the paper) or "random"
+    learning_rate: float | None = None
+    lr_schedule: str = "cosine"  # "cosine" (to final_lr_fraction * lr) or "constant"
+    final_lr_fraction: float = 0.02
+    batch_size: int = 8192
+    max_iterations: int = 1000
+    min_iterations: int = 300  # no early stop before this
+    patience: int = 150  # early stop when the smoothed loss has not improved for this many steps
+    plateau_tolerance: float = 2e-3  # relative improvement that counts as progress
+    inside_loss: str = "squared"  # eq. 9 inside term: "hinge" max(d, 0) (paper) or "squared" max(d, 0)^2
+    weight_centre: float = 1e-3  # w_c, eq. 11
+    weight_quaternion: float = 1e-3  # w_q, eq. 12
+    weight_rotation: float = 0.1  # w_r, eq. 13
+    rotation_range_kinds: tuple[str, ...] = ("rotated_box", "cylinder")  # eq. 13 applies to these
+    min_size: float = 0.004  # smallest half-size / radius (unit sphere), added to a softplus
+    # Samples whose closest primitive is a superquadric compare min(distance, this) (unit sphere):
+    # its distance is a first-order estimate, too small away from the surface near edges, and
+    # fitting those far values rounds boxes off (a box's samples pulled e2 to 0.38, not ~0).
+    superquadric_truncation: float = 0.1
+    # Raw superquadric exponents are multiplied by this before their sigmoid, i.e. they take larger
+    # steps than the sizes: only samples near edges and corners inform them, so their minibatch
+    # gradient is noisy and Adam moves them slowly.
+    superquadric_exponent_gain: float = 4.0
+    # Both exponents of a new superquadric; 1 would start it as an ellipsoid. The box-like 0.3 ties
+    # on IoU (fitting_superquadric_ablations_*.md) but simulates better: in the Table I protocol,
+    # superquadrics:10 from 0.3 scored OCAE 0.0087 m against 0.0118 m from 1 (table1_superquadrics*.md).
+    superquadric_init_exponent: float = 0.3
+    latent_dim: int = 128  # Fig. 3: latent vector ...
+    hidden_dim: int = 512  # ... through FC layers of this width, with a dense (concat) skip
+    fill_interior: bool = True  # add labelled-inside points in the enclosed interior (beyond the paper)
+    fill_resolution: int = 64  # voxels along the longest side of the interior's bounding box
+    revive_dead: bool = True  # re-seed dead primitives during the fit (beyond the paper)
+    revive_every: int = 200
+    remove_dead: bool = True  # drop primitives that are still dead at the end
+    seed: int = 0
+    device: str = "cpu"
+    num_threads: int | None = None  # torch CPU threads during the fit; None leaves torch's setting
+
+    def __post_init__(self) -> None:
+        if self.parameterization not in ("network", "direct"):
+            raise ValueError(f"parameterization must be 'network' or 'direct', got {self.parameterization!r}")
+        if self.init not in ("kmeans", "random"):
+            raise ValueError(f"init must be 'kmeans' or 'random', got {self.init!r}")
+        if self.lr_schedule not in ("cosine", "constant"):
+            raise ValueError(f"lr_schedule must be 'cosine' or 'constant', got {self.lr_schedule!r}")
+        if self.inside_loss not in ("hinge", "squared"):
+            raise ValueError(f"inside_loss must be 'hinge' or 'squared', got {self.inside_loss!r}")
+        if self.batch_size < 1 or self.max_iterations < 0:
+            raise ValueError("batch_size must be >= 1 and max_iterations >= 0")
+        if not self.superquadric_truncation > 0 or not self.superquadric_exponent_gain > 0:
+            raise ValueError("superquadric_truncation and superquadric_exponent_gain must be positive")
+        lo, hi = SUPERQUADRIC_EXPONENT_RANGE
+        if not lo < self.superquadric_init_exponent < hi:
+            raise ValueError(f"superquadric_init_exponent must lie in ({lo}, {hi})")
+
+    @property
+    def lr(self) -> float:
+        if self.learning_rate is not None:
+            return self.learning_rate
+        return 1e-4 if self.parameterization == "network" else 2e-2
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Fitted primitives in UNIT-SPHERE coordinates.
+
+    ``parameters[i]`` is primitive i's packed row (layout in
+    :mod:`real2sim.collision.primitive_sdf`; sizes are half-extents / radii / half-lengths,
+    quaternions unit w, x, y, z); ``kinds[i]`` its kind. ``history`` is the
+    minibatch loss (eq. 14) every ``history_every`` iterations.
+    """
+
+    kinds: tuple[str, ...]
+    parameters: tuple[tuple[float, ...], ...]
+    final_loss: float  # eq. 9 mean over all samples after dead removal
+    iterations: int
+    fit_seconds: float
+    effective_count: int
+    requested_count: int
+    device: str
+    history: tuple[float, ...] = ()
+    history_every: int = 10
+    revived: int = 0  # re-seedings of dead primitives during the fit
+
+    def packed(self, kind: str) -> np.ndarray:
+        """(P_kind, D) array of the rows of one kind, in order."""
+        rows = [p for k, p in zip(self.kinds, self.parameters) if k == kind]
+        return np.asarray(rows, dtype=np.float64).reshape(len(rows), PARAM_DIM[kind])

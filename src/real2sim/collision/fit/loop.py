@@ -1,0 +1,239 @@
+"""The optimisation loop (eq. 14) with dead-primitive revival; torch's global state is left as found."""
+
+from __future__ import annotations
+
+import math
+import time
+from contextlib import contextmanager
+
+import numpy as np
+import torch
+
+from real2sim.collision.primitive_sdf import HAS_ROTATION, PARAM_DIM, SIZE_DIM
+from real2sim.collision.fit.config import FitConfig, FitResult, ProgressFn
+from real2sim.collision.fit.params import _Layout, _unconstrain, _constrain_all, _PrimitiveNet, _DirectParams
+from real2sim.collision.fit.initialization import interior_fill_points, _initial_packed, _packed_from_blobs
+from real2sim.collision.fit.losses import sdf_loss, _regularizers
+from real2sim.collision.fit.union import _closest, _paired_distance, _truncate_estimates, _alive
+
+
+@contextmanager
+def _deterministic():
+    """Deterministic kernels for the fit only: on 2 CPU threads, the accumulating scatter in the
+    backward of the per-sample parameter gather otherwise differs in the last bit between runs,
+    and 1000 Adam steps amplify that into visibly different fits."""
+    before = torch.are_deterministic_algorithms_enabled()
+    warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(before, warn_only=warn_only)
+
+
+@contextmanager
+def _threads(n: int | None):
+    if n is None:
+        yield
+        return
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def fit_primitives(
+    samples_points_unit,
+    samples_sdf,
+    parts: tuple[tuple[str, int], ...],
+    config: FitConfig = FitConfig(),
+    *,
+    device: str | None = None,
+    seed: int | None = None,
+    progress: ProgressFn | None = None,
+) -> FitResult:
+    """Fit one union of primitives (all families of ``parts`` jointly) to SDF samples.
+
+    ``samples_points_unit`` (N, 3) and ``samples_sdf`` (N,) are in unit-sphere coordinates
+    (numpy or torch). ``parts`` are (family, count) pairs as in :class:`real2sim.formats.spec.CollisionSpec`
+    (``"boxes"`` or the kind ``"box"``). ``device``/``seed`` override the config's.
+    ``progress(iteration, max_iterations, loss)`` is called every few iterations.
+    Deterministic for a given seed, device and thread count.
+    """
+    device = device or config.device
+    seed = config.seed if seed is None else seed
+    layout = _Layout.of(tuple(parts))
+    if layout.total < 1:
+        raise ValueError("at least one primitive is needed")
+    t0 = time.perf_counter()
+    points_np = np.asarray(samples_points_unit, dtype=np.float32)
+    target_np = np.asarray(samples_sdf, dtype=np.float32).reshape(-1)
+    if points_np.ndim != 2 or points_np.shape[1] != 3 or len(points_np) != len(target_np) or len(points_np) == 0:
+        raise ValueError("samples must be (N, 3) points with N signed distances, N > 0")
+    n_samples = len(points_np)
+    if config.fill_interior:
+        fill = interior_fill_points(points_np, target_np, config.fill_resolution, seed)
+        points_np = np.concatenate((points_np, fill))
+        target_np = np.concatenate((target_np, np.full(len(fill), -1e-3, dtype=np.float32)))
+    points = torch.as_tensor(points_np).to(device)
+    target = torch.as_tensor(target_np).to(device)
+
+    # Seed only the generators this fit draws from, inside a fork that restores them: a library
+    # call must leave the caller's RNG streams (CPU and every CUDA device) as it found them.
+    cuda_devices = list(range(torch.cuda.device_count())) if points.device.type == "cuda" else []
+    with _threads(config.num_threads), _deterministic(), torch.random.fork_rng(devices=cuda_devices):
+        torch.random.default_generator.manual_seed(seed)
+        if cuda_devices:
+            torch.cuda.manual_seed_all(seed)
+        gen = torch.Generator(device="cpu").manual_seed(seed)
+        init = _initial_packed(layout, points, target, config, gen)
+        base = torch.cat([_unconstrain(k, p, config.min_size, config.superquadric_exponent_gain).reshape(-1) for k, p in zip(layout.kinds, init)])
+        if config.parameterization == "network":
+            model: torch.nn.Module = _PrimitiveNet(base.cpu(), config.latent_dim, config.hidden_dim).to(device)
+        else:
+            model = _DirectParams(base.cpu()).to(device)
+        optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
+        total_steps = max(1, config.max_iterations)
+
+        def lr_at(it: int) -> float:
+            if config.lr_schedule == "constant":
+                return config.lr
+            f = config.final_lr_fraction
+            return config.lr * (f + (1 - f) * 0.5 * (1 + math.cos(math.pi * it / total_steps)))
+
+        n = len(points)
+        batch = min(config.batch_size, n)
+        history: list[float] = []
+        smooth = best = float("inf")
+        since_best = 0
+        revived = 0
+        cover_counts = torch.zeros(layout.total, dtype=torch.long, device=device)
+        iteration = 0
+        for iteration in range(1, config.max_iterations + 1):
+            for group in optimiser.param_groups:
+                group["lr"] = lr_at(iteration - 1)
+            idx = torch.randint(n, (batch,), generator=gen).to(device)
+            x, s = points[idx], target[idx]
+            raw = model()
+            raws = layout.split(raw)
+            packed = _constrain_all(layout, raws, config)
+            dist, arg = _closest(layout, [p.detach() for p in packed], x)
+            d = _paired_distance(layout, packed, x, arg)
+            if "superquadric" in layout.kinds:
+                d, s = _truncate_estimates(layout, arg, d, s, config.superquadric_truncation)
+            loss = sdf_loss(d, s, config.inside_loss).mean() + _regularizers(layout, raws, config)
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+
+            value = float(loss.detach())
+            covered = (s < 0) & (dist <= 0)
+            cover_counts += torch.bincount(arg[covered], minlength=layout.total)
+            if config.revive_dead and iteration % config.revive_every == 0 and iteration < 0.7 * config.max_iterations:
+                revived += _revive(model, layout, cover_counts, points, target, config, gen)
+                cover_counts.zero_()
+            if iteration % 10 == 0:
+                history.append(value)
+                if progress is not None:
+                    progress(iteration, config.max_iterations, value)
+            smooth = value if smooth == float("inf") else 0.95 * smooth + 0.05 * value
+            if smooth < best * (1 - config.plateau_tolerance):
+                best, since_best = smooth, 0
+            else:
+                since_best += 1
+            if iteration >= config.min_iterations and since_best >= config.patience:
+                break
+
+        with torch.no_grad():
+            raws = layout.split(model())
+            packed = _constrain_all(layout, raws, config)
+            dist, arg = _closest(layout, packed, points)
+            keep = _alive(arg, dist, target, layout.total) if config.remove_dead else torch.ones(layout.total, dtype=torch.bool, device=device)
+            if not bool(keep.any()):
+                keep[0] = True  # never return an empty representation
+            kept_layout, kept = _subset(layout, packed, keep)
+            final_dist, _ = _closest(kept_layout, kept, points)
+            final_loss = float(sdf_loss(final_dist[:n_samples], target[:n_samples]).mean())
+
+    kinds: list[str] = []
+    rows: list[tuple[float, ...]] = []
+    for kind, p in zip(kept_layout.kinds, kept):
+        p = p.detach().double().cpu().clone()
+        if HAS_ROTATION[kind]:
+            q = p[:, -4:]
+            q = q / q.norm(dim=1, keepdim=True)
+            p[:, -4:] = torch.where(q[:, :1] < 0, -q, q)  # w >= 0: same rotation, canonical sign
+        for row in p.numpy():
+            kinds.append(kind)
+            rows.append(tuple(float(v) for v in row))
+    return FitResult(
+        kinds=tuple(kinds),
+        parameters=tuple(rows),
+        final_loss=final_loss,
+        iterations=iteration,
+        fit_seconds=time.perf_counter() - t0,
+        effective_count=len(rows),
+        requested_count=layout.total,
+        device=str(device),
+        history=tuple(history),
+        revived=revived,
+    )
+
+
+def _subset(layout: _Layout, packed: list[torch.Tensor], keep: torch.Tensor) -> tuple[_Layout, list[torch.Tensor]]:
+    parts, kept = [], []
+    for kind, p, off, count in zip(layout.kinds, packed, layout.offsets, layout.counts):
+        m = keep[off : off + count]
+        if bool(m.any()):
+            parts.append((kind, int(m.sum())))
+            kept.append(p[m])
+    return _Layout.of(tuple(parts)), kept
+
+
+@torch.no_grad()
+def _revive(
+    model: torch.nn.Module,
+    layout: _Layout,
+    cover_counts: torch.Tensor,
+    points: torch.Tensor,
+    target: torch.Tensor,
+    config: FitConfig,
+    gen: torch.Generator,
+) -> int:
+    """Re-seed primitives that covered no interior sample since the last call at the interior
+    samples that are worst covered, as small primitives (beyond the paper). Returns how many."""
+    dead = (cover_counts == 0).nonzero().squeeze(1)
+    if len(dead) == 0:
+        return 0
+    probe = torch.randint(len(points), (min(len(points), 65_536),), generator=gen).to(points.device)
+    x, s = points[probe], target[probe]
+    raws = layout.split(model())
+    packed = _constrain_all(layout, raws, config)
+    dist, _ = _closest(layout, packed, x)
+    miss = torch.where(s < 0, dist, torch.zeros_like(dist))  # how far an interior sample is from being covered
+    order = miss.argsort(descending=True)
+    order = order[miss[order] > 0]
+    if len(order) == 0:
+        return 0
+    dead = dead[: len(order)]
+    seeds = x[order[: len(dead)]]
+    # Spread out the seeds a little: the worst samples often sit in one uncovered pocket.
+    size = torch.clamp(miss[order[: len(dead)]], min=2 * config.min_size)
+    count = 0
+    for kind, off, ro, n in zip(layout.kinds, layout.offsets, layout.raw_offsets, layout.counts):
+        sel = ((dead >= off) & (dead < off + n)).nonzero().squeeze(1)
+        if len(sel) == 0:
+            continue
+        sigma = size[sel, None].expand(-1, 3) / math.sqrt(3.0)
+        new_packed = _packed_from_blobs(kind, seeds[sel], sigma, config.superquadric_init_exponent)
+        s_dim = SIZE_DIM[kind]
+        new_packed[:, 3 : 3 + s_dim] = new_packed[:, 3 : 3 + s_dim].clamp(min=2 * config.min_size)
+        new_raw = _unconstrain(kind, new_packed, config.min_size, config.superquadric_exponent_gain)
+        d = PARAM_DIM[kind]
+        rows = dead[sel] - off
+        flat = (ro + rows[:, None] * d + torch.arange(d, device=rows.device)[None, :]).reshape(-1)
+        model.reset_rows(flat, new_raw.reshape(-1))
+        count += len(sel)
+    return count
