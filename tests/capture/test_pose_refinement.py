@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import warnings
 
 import numpy as np
 import pytest
@@ -75,7 +76,9 @@ def test_refine_small_capture_improves_or_falls_back(small_capture, tmp_path):
     root = tmp_path / "ds"
     shutil.copytree(small_capture, root)
     original = (root / "transforms.json").read_bytes()
-    result = refine_poses(root, RefineConfig(k_neighbors=6))  # may warn when it falls back
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = refine_poses(root, RefineConfig(k_neighbors=6))  # warns when it falls back
     assert (root / "transforms_unrefined.json").read_bytes() != b""
     assert np.allclose(read_transforms(root / "transforms_unrefined.json").poses_c2w_gl(),
                        read_transforms(small_capture / "transforms.json").poses_c2w_gl())
@@ -83,8 +86,12 @@ def test_refine_small_capture_improves_or_falls_back(small_capture, tmp_path):
     assert report["num_frames"] == 16
     assert result.rot_error_before_deg is not None
     if not result.refined:
+        # 16 small views may register too few frames: then the fallback contract must hold instead.
         assert (root / "transforms.json").read_bytes() == original
-        pytest.skip(f"COLMAP fell back on this small capture: {result.reason}")
+        assert result.reason and report["refined"] is False and report["reason"] == result.reason
+        assert any(issubclass(w.category, RuntimeWarning) and "kept the given poses" in str(w.message) for w in caught)
+        assert not [p for p in root.iterdir() if p.name.startswith(".")]
+        return
     assert result.num_refined_frames >= 8
     assert result.mean_reproj_error_px < 2.0
     assert result.rot_error_after_deg <= result.rot_error_before_deg

@@ -432,3 +432,26 @@ def test_bundled_can_full_scenes_right_primitive_beats_wrong_one(tmp_path):
     for cm in ("point", "hydroelastic"):
         assert summary[f"cylinders_1_{cm}"]["ocae_m"] < 0.5 * summary[f"boxes_1_{cm}"]["ocae_m"]
         assert summary[f"cylinders_1_{cm}"]["ate_m"] < 0.5 * summary[f"boxes_1_{cm}"]["ate_m"]
+
+
+def test_reference_uses_the_assets_own_contact_properties(tmp_path):
+    # An asset built with non-default friction: its own mesh representation must still be the
+    # reference (the reference takes the asset's contact material from asset_config.json).
+    from real2sim.asset.build import AssetConfig, build_asset
+    from real2sim.formats.spec import parse_spec
+
+    mesh_path = tmp_path / "box.obj"
+    trimesh.creation.box(extents=BOX_EXTENTS_M).export(mesh_path, include_normals=True)
+    contact = ContactProperties(mu_static=0.9, mu_dynamic=0.9)
+    asset_dir = tmp_path / "box"
+    build_asset(mesh_path, asset_dir, AssetConfig(mass_kg=0.3, specs=(parse_spec("mesh"),), contact=contact))
+    recorded = json.loads((asset_dir / "asset_config.json").read_text())
+    assert recorded["contact"]["mu_static"] == 0.9 and recorded["collision"] == ["mesh"]
+
+    config = EvaluationConfig(tasks=("push",), contact_models=("hydroelastic",), runs=1, jobs=1, scene=SHORT_SCENE)
+    result = evaluate([asset_dir], tmp_path / "res", config, progress=False)
+    (row,) = [r for r in result.runs if r["representation"] == "mesh"]
+    assert not row["error"]
+    assert row["ate_m"] < 1e-6 and row["ocae_m"] < 1e-6
+    saved = json.loads((tmp_path / "res" / "config.json").read_text())
+    assert saved["reference_contact"]["box"]["mu_dynamic"] == 0.9

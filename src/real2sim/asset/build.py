@@ -5,6 +5,7 @@ representation per SPEC -> URDF/SDFormat + fidelity report. The folder layout
 is the contract of DESIGN.md ("Files on disk"):
 
     ASSETDIR/
+      asset_config.json          the configuration it was built with (contact, fit, seed, versions)
       physical_properties.json   mass_kg, com_m, inertia_kg_m2 (about the CoM, asset axes)
       canonical_transform.json   4x4 from the input mesh frame to the asset frame
       visual/model.obj           textured visual mesh with normals (asset frame)
@@ -23,6 +24,7 @@ from typing import Callable
 import numpy as np
 import trimesh
 
+from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
 from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.errors import UserInputError
@@ -90,6 +92,43 @@ class AssetResult:
     physical: PhysicalProperties
     canonical_transform: np.ndarray
     representations: tuple[RepresentationResult, ...]
+
+
+def _software_versions() -> dict[str, str]:
+    from importlib import metadata
+
+    versions = {}
+    for package in ("real2sim", "numpy", "torch", "trimesh", "drake", "coacd", "vhacdx", "manifold3d", "libigl"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            versions[package] = "not installed"
+    return versions
+
+
+def config_record(config: AssetConfig) -> dict:
+    """What asset_config.json holds: every setting of the build, the stages' effective defaults
+    included, and the package versions (so that an asset can be rebuilt and compared)."""
+    import platform
+
+    from real2sim.collision.decomposition import CoacdConfig, VhacdConfig
+    from real2sim.collision.fit.config import FitConfig
+
+    return {
+        "mass_kg": config.mass_kg,
+        "collision": [spec.text for spec in config.specs],
+        "flat_bottom": config.flat_bottom,
+        "support_height_m": config.support_height_m,
+        "keep_up": config.keep_up,
+        "formats": list(config.formats),
+        "seed": config.seed,
+        "device": config.device,
+        "contact": config.contact,
+        "fit_config": config.fit_config or FitConfig(),
+        "coacd_config": config.coacd_config or CoacdConfig(),
+        "vhacd_config": config.vhacd_config or VhacdConfig(),
+        "software": {"python": platform.python_version(), **_software_versions()},
+    }
 
 
 def geometry_only(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
@@ -161,6 +200,7 @@ def build_asset(
     from real2sim.asset.inertia import estimate_physical_properties
 
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        write_asset_config(config_record(config), tmp / ASSET_CONFIG_NAME)
         if config.flat_bottom:
             from real2sim.asset.bottom import close_flat_bottom
 

@@ -9,17 +9,21 @@ from typing import Sequence
 
 import numpy as np
 
+from real2sim.formats.asset_config import read_asset_contact
+from real2sim.formats.contact import ContactProperties
 from real2sim.formats.errors import UserInputError
 
 
 @dataclass(frozen=True)
 class Asset:
-    """One asset folder: its name in the results (``object``), physical properties, reference mesh."""
+    """One asset folder: its name in the results (``object``), physical properties, reference mesh,
+    and the contact material it was built with (None: built before asset_config.json, defaults)."""
 
     name: str
     asset_dir: Path
     physical_properties_path: Path
     reference_mesh_path: Path
+    contact: ContactProperties | None = None
 
 
 @dataclass(frozen=True)
@@ -55,7 +59,7 @@ def discover_assets(asset_dirs: Sequence[Path | str]) -> list[Asset]:
         if d.name in seen:
             continue
         seen[d.name] = d
-        assets.append(Asset(d.name, d, props, _asset_reference_mesh(d)))
+        assets.append(Asset(d.name, d, props, _asset_reference_mesh(d), read_asset_contact(d)))
     return assets
 
 

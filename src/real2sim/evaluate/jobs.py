@@ -17,6 +17,7 @@ from real2sim.evaluate.discovery import Asset
 from real2sim.evaluate.scene_config import SceneConfig
 from real2sim.evaluate.tasks import RunSpec
 from real2sim.evaluate.scoring import score
+from real2sim.formats.contact import ContactProperties
 from real2sim.formats.results import FLOAT_COLUMNS, KEY_COLUMNS
 from real2sim.formats.trajectory import load_trajectory, save_trajectory
 
@@ -31,6 +32,7 @@ class ReferenceJob:
     run_spec: RunSpec
     scene: SceneConfig
     cache_path: Path | None = None
+    contact: ContactProperties | None = None  # the asset's own material, so the reference is the same object
 
 
 @dataclass(frozen=True)
@@ -68,7 +70,7 @@ def run_reference_job(job: ReferenceJob) -> tuple[str, Any]:
         from real2sim.evaluate.simulate import simulate_reference
 
         props = read_physical_properties(job.physical_properties_path)
-        traj = simulate_reference(job.mesh_path, props, job.run_spec, job.scene)
+        traj = simulate_reference(job.mesh_path, props, job.run_spec, job.scene, object_contact=job.contact)
         if job.cache_path is not None:
             save_trajectory(traj, job.cache_path)
         return "ok", traj
@@ -111,6 +113,7 @@ def _sha1_file(path: Path) -> str:
 
 def _reference_cache_name(asset: Asset, mesh_path: Path, spec: RunSpec, scene: SceneConfig) -> str:
     h = hashlib.sha1()
-    for part in (_sha1_file(mesh_path), _sha1_file(asset.physical_properties_path), repr(spec), repr(scene)):
+    for part in (_sha1_file(mesh_path), _sha1_file(asset.physical_properties_path), repr(spec), repr(scene),
+                 repr(asset.contact)):
         h.update(part.encode())
     return f"{asset.name}_{spec.task}_{spec.run}_{h.hexdigest()[:12]}.npz"

@@ -60,7 +60,7 @@ from real2sim.formats.results import RUN_COLUMNS, read_runs_csv, row_key, write_
 
 
 # Settings that change the meaning of a row: a resumed sweep must use the same ones.
-_PINNED_SETTINGS = ("seed", "scene", "simulation_error", "reference")
+_PINNED_SETTINGS = ("seed", "scene", "simulation_error", "reference", "reference_contact")
 
 
 @dataclass(frozen=True)
@@ -139,6 +139,8 @@ def _config_record(config: EvaluationConfig, assets: Sequence[Asset], reference_
         "executor": config.executor,
         "assets": {a.name: str(a.asset_dir) for a in assets},
         "reference_meshes": {k: str(v) for k, v in reference_meshes.items()},
+        "reference_contact": {a.name: dataclasses.asdict(a.contact) if a.contact else "defaults (no asset_config.json)"
+                              for a in assets},
         "protocol": (
             "simulation error: free roll-outs from the same initial state"
             if config.simulation_error or not config.scene.reset_interval_s
@@ -324,7 +326,7 @@ def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config,
         spec = spec_by[(task, run)]
         cache = partial / "reference_cache" / _reference_cache_name(asset, reference_meshes[obj], spec, config.scene)
         job = ReferenceJob(obj, task, run, reference_meshes[obj], asset.physical_properties_path, spec, config.scene,
-                           cache)
+                           cache, asset.contact)
         pending[executor.submit(run_reference_job, job)] = ("ref", (obj, task, run), job)
 
     simulated = 0
