@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from real2sim.formats.collision import quaternion_to_matrix
+from real2sim.formats.rotations import quaternion_to_matrix
 from real2sim.geometry.collision_mesh import inside_collision
 from real2sim.collision.fit.config import FitConfig, FitResult
 from real2sim.collision.fit.convert import prune_dead, result_sdf, to_collision_geometry

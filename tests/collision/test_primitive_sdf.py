@@ -9,7 +9,7 @@ import pytest
 import torch
 import trimesh
 
-from real2sim.formats.collision import quaternion_to_matrix as np_quat_to_matrix
+from real2sim.formats.rotations import quaternion_to_matrix as np_quat_to_matrix
 from real2sim.geometry.inside import signed_distance
 from real2sim.collision.primitive_sdf import (
     EXPONENT_DIM,

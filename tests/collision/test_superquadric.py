@@ -10,7 +10,8 @@ import pytest
 import torch
 import trimesh
 
-from real2sim.formats.collision import CollisionGeometry, quaternion_to_matrix
+from real2sim.formats.collision import CollisionGeometry
+from real2sim.formats.rotations import quaternion_to_matrix
 from real2sim.geometry.collision_mesh import union_mesh
 from real2sim.collision.fit.config import FitConfig
 from real2sim.collision.fit.convert import to_collision_geometry

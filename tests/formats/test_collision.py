@@ -2,14 +2,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from real2sim.formats.collision import (
-    CollisionGeometry,
-    CollisionShape,
-    matrix_to_quaternion,
-    quaternion_to_matrix,
-    read_collision_json,
-    write_collision_json,
-)
+from real2sim.formats.collision import CollisionGeometry, CollisionShape, read_collision_json, write_collision_json
+from real2sim.formats.rotations import matrix_to_quaternion, quaternion_to_matrix
 
 
 def test_quaternion_round_trip():

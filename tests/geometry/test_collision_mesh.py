@@ -7,7 +7,8 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from real2sim.formats.collision import CollisionGeometry, CollisionShape, matrix_to_quaternion
+from real2sim.formats.collision import CollisionGeometry, CollisionShape
+from real2sim.formats.rotations import matrix_to_quaternion
 from real2sim.geometry.collision_mesh import inside_collision, shape_mesh, union_mesh
 from real2sim.geometry.inside import inside_mask
 

@@ -56,7 +56,6 @@ read back gives the same doubles that were written.
 
 from __future__ import annotations
 
-import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -64,11 +63,19 @@ import numpy as np
 
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
+from real2sim.formats.rotations import quaternion_to_rpy
 from real2sim.formats.physical import PhysicalProperties
 
+
 DRAKE_NS = "http://drake.mit.edu"
+
+
 LINK_NAME = "base_link"
+
+
 VISUAL_MESH_RELPATH = "../visual/model.obj"
+
+
 SDF_VERSION = "1.9"
 
 ET.register_namespace("drake", DRAKE_NS)
@@ -85,33 +92,6 @@ def _num(x: float) -> str:
 
 def _nums(values) -> str:
     return " ".join(_num(v) for v in values)
-
-
-def quaternion_to_rpy(q_wxyz) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (rad) of a unit quaternion (w, x, y, z) in Drake's/URDF's convention.
-
-    The returned angles satisfy R(q) = Rz(yaw) Ry(pitch) Rx(roll) (extrinsic rotations
-    about the fixed x, then y, then z axes), which is what URDF ``rpy`` and SDFormat
-    ``<pose>`` mean. Near pitch = +-90 degrees (gimbal lock) roll and yaw are not unique;
-    the composed rotation still equals R(q).
-    """
-    from scipy.spatial.transform import Rotation
-
-    w, x, y, z = (float(v) for v in q_wxyz)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # gimbal lock: angles not unique, rotation still exact
-        roll, pitch, yaw = Rotation.from_quat([x, y, z, w]).as_euler("xyz")  # lowercase = extrinsic
-    return float(roll), float(pitch), float(yaw)
-
-
-def rpy_to_matrix(rpy) -> np.ndarray:
-    """3x3 rotation Rz(yaw) Ry(pitch) Rx(roll) of roll-pitch-yaw angles (rad)."""
-    r, p, y = (float(v) for v in rpy)
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    return rz @ ry @ rx
 
 
 def _hydroelastic_type(shape: CollisionShape, contact: ContactProperties) -> str:
@@ -137,10 +117,6 @@ def _check_inputs(geometry: CollisionGeometry, props: PhysicalProperties) -> Non
         raise ValueError("inertia must be symmetric")
     if not np.all(np.isfinite(props.com_m)):
         raise ValueError("centre of mass must be finite")
-
-
-# ----------------------------------------------------------------------------------------
-# URDF
 
 
 def _urdf_proximity(parent: ET.Element, hydro: str, contact: ContactProperties) -> None:
@@ -237,10 +213,6 @@ def write_model_urdf_string(
     return _xml_text(build_urdf(geometry, props, contact, visual_mesh_relpath, model_name, link_name))
 
 
-# ----------------------------------------------------------------------------------------
-# SDFormat
-
-
 def _text(parent: ET.Element, tag: str, text: str) -> ET.Element:
     el = ET.SubElement(parent, tag)
     el.text = text
@@ -327,9 +299,6 @@ def write_model_sdf_string(
 ) -> str:
     """The SDFormat text (``xmlns:drake`` declared on ``<sdf>``)."""
     return _xml_text(build_sdf(geometry, props, contact, visual_mesh_relpath, model_name, link_name))
-
-
-# ----------------------------------------------------------------------------------------
 
 
 def write_representation(

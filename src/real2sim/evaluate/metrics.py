@@ -17,6 +17,8 @@ from typing import Sequence
 
 import numpy as np
 
+from real2sim.formats.rotations import quaternions_to_matrices
+
 # Paper V-C: "three linearly independent points ... relative to the object frame".
 # We use the points at ``lever_m`` along the object's x, y and z axes (1 m in the paper's
 # reading), which makes OCAE an orientation error expressed as a displacement at 1 m.
@@ -36,15 +38,7 @@ def quaternion_wxyz_to_matrices(quat_wxyz: np.ndarray) -> np.ndarray:
     """``(T, 4)`` quaternions (w, x, y, z) -> ``(T, 3, 3)`` rotation matrices (normalised first)."""
     q = _as_steps(quat_wxyz, 4, "quaternion")
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-        ],
-        axis=1,
-    )
+    return quaternions_to_matrices(q)
 
 
 def ate_m(ref_pos: np.ndarray, cand_pos: np.ndarray) -> float:

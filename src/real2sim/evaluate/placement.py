@@ -12,22 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from real2sim.evaluate.scene_config import SceneConfig
+from real2sim.formats.rotations import rot_y, rot_z
 from real2sim.evaluate.tasks import RunSpec, task_named
-
-
-def _rot_x(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-
-
-def _rot_y(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-
-
-def _rot_z(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
 _STABLE_CACHE: dict[bytes, list[tuple[np.ndarray, float]]] = {}
@@ -67,9 +53,9 @@ def initial_object_rotation(vertices_m: np.ndarray, run_spec: RunSpec, scene_con
     the analysis finds none.
     """
     poses = stable_rotations(vertices_m, com_m)
-    lay = _rot_y(np.pi / 2) if scene_config.object_lying else np.eye(3)
+    lay = rot_y(np.pi / 2) if scene_config.object_lying else np.eye(3)
     if not poses:
-        return _rot_z(run_spec.object_yaw_rad) @ lay @ _rot_z(run_spec.object_roll_rad)
+        return rot_z(run_spec.object_yaw_rad) @ lay @ rot_z(run_spec.object_roll_rad)
     up = np.array([R[2, 2] for R, _ in poses])  # world z component of the asset z axis
     if scene_config.object_lying:
         candidates = [k for k in range(len(poses)) if abs(up[k]) < np.sqrt(0.5)]
@@ -93,7 +79,7 @@ def initial_object_rotation(vertices_m: np.ndarray, run_spec: RunSpec, scene_con
     R = poses[best][0]
     axis = R[:, 2]
     heading = np.arctan2(axis[1], axis[0]) if np.hypot(axis[0], axis[1]) > 1e-6 else 0.0
-    return _rot_z(run_spec.object_yaw_rad - heading) @ R
+    return rot_z(run_spec.object_yaw_rad - heading) @ R
 
 
 def initial_object_pose(vertices_m: np.ndarray, run_spec: RunSpec, scene_config: SceneConfig,

@@ -28,8 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
+from real2sim.formats.rotations import quaternion_to_matrix
+
+
 SHAPE_KINDS = ("sphere", "box", "cylinder", "ellipsoid", "capsule", "convex", "mesh")
+
+
 _SIZE_LEN = {"sphere": 1, "box": 3, "cylinder": 2, "ellipsoid": 3, "capsule": 2, "convex": 0, "mesh": 0}
+
+
 IDENTITY_WXYZ = (1.0, 0.0, 0.0, 0.0)
 
 
@@ -136,27 +143,3 @@ def write_collision_json(geometry: CollisionGeometry, path: Path) -> None:
 
 def read_collision_json(path: Path) -> CollisionGeometry:
     return CollisionGeometry.from_json(json.loads(Path(path).read_text()))
-
-
-def quaternion_to_matrix(q_wxyz) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = (float(v) for v in q_wxyz)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def matrix_to_quaternion(rotation: np.ndarray) -> tuple[float, float, float, float]:
-    """Unit quaternion (w, x, y, z) with w >= 0 of a 3x3 rotation matrix."""
-    from scipy.spatial.transform import Rotation
-
-    x, y, z, w = Rotation.from_matrix(np.asarray(rotation, dtype=float)).as_quat()
-    q = np.array([w, x, y, z])
-    if q[0] < 0:
-        q = -q
-    q = q / np.linalg.norm(q)
-    return tuple(float(v) for v in q)

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from real2sim.formats.collision import CollisionGeometry, CollisionShape, quaternion_to_matrix
+from real2sim.formats.collision import CollisionGeometry, CollisionShape
+from real2sim.formats.rotations import quaternion_to_matrix
 
 # Tessellation of round primitives (manifold3d's geodesic sphere and extruded
 # circle): with 64 segments the facets lie within 0.12 % of the radius of the
