@@ -59,7 +59,7 @@ def _run_one(mesh, samples, spec_text: str, config, seed: int) -> dict:
     spec = parse_spec(spec_text)
     res = fit_primitives(samples.points, samples.sdf, spec.parts, config, seed=seed)
     with tempfile.TemporaryDirectory() as rep_dir:  # superquadrics' mesh pieces live here
-        geo = to_collision_geometry(res, samples.centre_m, samples.scale_m, spec.text, rep_dir)
+        geo = to_collision_geometry(res, samples.centre_m, samples.scale_m, spec, rep_dir)
         fid = measure_fidelity(mesh, geo, rep_dir, seed=seed)
     return {
         "spec": spec.text,

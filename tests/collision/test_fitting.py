@@ -205,7 +205,7 @@ def test_conversion_to_asset_frame_known_pose():
         ),
         final_loss=0.0, iterations=0, fit_seconds=0.0, effective_count=6, requested_count=6, device="cpu",
     )  # fmt: skip
-    geo = to_collision_geometry(res, centre_m=(1.0, 2.0, 3.0), scale_m=0.5, spec_text="boxes:1+rotated_boxes:1+cylinders:1+spheres:1+capsules:1+ellipsoids:1")
+    geo = to_collision_geometry(res, centre_m=(1.0, 2.0, 3.0), scale_m=0.5, spec="boxes:1+rotated_boxes:1+cylinders:1+spheres:1+capsules:1+ellipsoids:1")
     box, rbox, cyl, sph, cap, ell = geo.shapes
     assert geo.name == "boxes_1_rotated_boxes_1_cylinders_1_spheres_1_capsules_1_ellipsoids_1"
     assert box.kind == "box" and box.quaternion_wxyz == (1.0, 0.0, 0.0, 0.0)

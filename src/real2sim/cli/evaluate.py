@@ -5,6 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+# Light modules (numpy at most): the vocabulary of --tasks and --contact, defined once.
+from real2sim.evaluate.tasks import TASKS
+from real2sim.formats.contact import CONTACT_MODELS
+
 
 def _csv_list(text: str) -> tuple[str, ...]:
     return tuple(t.strip() for t in text.split(",") if t.strip())
@@ -30,9 +34,11 @@ def register(sub) -> None:
                    help="ground-truth mesh (metres) in the frame of the mesh the assets were built from; it is "
                    "moved into each asset's frame with canonical_transform.json (default: each asset's own closed mesh, "
                    "visual/collision_reference.obj, else visual/model.obj)")
-    p.add_argument("--tasks", default="push,ramp", metavar="LIST", help="comma-separated tasks: push, ramp (default both)")
-    p.add_argument("--contact", default="point,hydroelastic", metavar="LIST",
-                   help="comma-separated contact models: point, hydroelastic (default both)")
+    tasks, contacts = ",".join(TASKS), ",".join(CONTACT_MODELS)
+    p.add_argument("--tasks", default=tasks, metavar="LIST",
+                   help=f"comma-separated tasks: {', '.join(TASKS)} (default all)")
+    p.add_argument("--contact", default=contacts, metavar="LIST",
+                   help=f"comma-separated contact models: {', '.join(CONTACT_MODELS)} (default all)")
     p.add_argument("--runs", type=int, default=10, metavar="N", help="runs per object and task (default 10, as the paper)")
     p.add_argument("--seed", type=int, default=0, help="seed of the runs' initial conditions (default 0)")
     p.add_argument("--jobs", type=int, default=None, metavar="N", help="simulations in parallel (default: CPU count); simulation times are measured under this load, "

@@ -12,7 +12,7 @@ import torch
 from real2sim.collision.primitive_sdf import HAS_ROTATION
 from real2sim.collision.superquadric import DEFAULT_VERTICES, superquadric_hull
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
-from real2sim.formats.spec import parse_spec
+from real2sim.formats.spec import CollisionSpec, parse_spec
 from real2sim.collision.fit.config import FitResult
 from real2sim.collision.fit.params import _Layout
 from real2sim.collision.fit.losses import sdf_loss
@@ -66,7 +66,8 @@ def prune_dead(result: FitResult, points_unit, sdf) -> FitResult:
 
 
 def to_collision_geometry(
-    result: FitResult, centre_m, scale_m: float, spec_text: str, rep_dir=None, *, superquadric_vertices: int = DEFAULT_VERTICES
+    result: FitResult, centre_m, scale_m: float, spec: CollisionSpec | str, rep_dir=None, *,
+    superquadric_vertices: int = DEFAULT_VERTICES
 ) -> CollisionGeometry:
     """Primitives in metres in the asset frame (``asset = centre_m + scale_m * unit``).
 
@@ -106,7 +107,8 @@ def to_collision_geometry(
             shapes.append(CollisionShape("convex", (), pos, quat, mesh_file=rel))
         else:
             raise ValueError(f"unknown primitive kind {kind!r}")
-    spec = parse_spec(spec_text)
+    if isinstance(spec, str):  # callers holding the SPEC object pass it through unparsed
+        spec = parse_spec(spec)
     return CollisionGeometry(name=spec.name, spec=spec.text, shapes=tuple(shapes))
 
 

@@ -44,7 +44,7 @@ def fit_collision(
             result = fit_primitives(samples.points, samples.sdf, spec.parts, fit_config, device=device, seed=seed, progress=report)
     else:
         result = fit_primitives(samples.points, samples.sdf, spec.parts, fit_config, device=device, seed=seed)
-    geometry = to_collision_geometry(result, samples.centre_m, samples.scale_m, spec.text, rep_dir)
+    geometry = to_collision_geometry(result, samples.centre_m, samples.scale_m, spec, rep_dir)
     report_dict = {
         "final_loss": result.final_loss,
         "fit_seconds": result.fit_seconds,
