@@ -156,3 +156,5 @@ def test_rewrite_models_changes_contact_without_refitting(tmp_path, can_obj, cap
     assert 'mu_static value="0.9"' in text and 'point_contact_stiffness value="50000.0"' in text
     assert (out / "mesh" / "collision.json").read_text() == before
     _check_asset_folder(out, ["mesh"], 0.35)
+    # The evaluation's reference reads the material from asset_config.json: it must follow.
+    assert json.loads((out / "asset_config.json").read_text())["contact"]["mu_dynamic"] == 0.8

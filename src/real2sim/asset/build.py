@@ -266,6 +266,7 @@ def rewrite_models(asset_dir: Path | str, contact: ContactProperties, formats: t
 
     Geometry (collision.json) and mass properties (physical_properties.json) are
     kept: changing friction, stiffness or hydroelastic settings needs no refit.
+    asset_config.json records the new material, which the evaluation's reference reads.
     Returns the URDF paths written.
     """
     from real2sim.asset.writers import write_representation
@@ -280,5 +281,9 @@ def rewrite_models(asset_dir: Path | str, contact: ContactProperties, formats: t
         write_representation(rep_dir, read_collision_json(collision_json), props, contact,
                              visual_mesh_relpath=f"../{VISUAL_RELPATH}", formats=formats, model_name=rep_dir.name)
         written.append(rep_dir / "model.urdf")
+    config_path = asset_dir / ASSET_CONFIG_NAME
+    if config_path.is_file():
+        record = json.loads(config_path.read_text())
+        write_asset_config({**record, "contact": contact}, config_path)
     return written
 
