@@ -1,0 +1,242 @@
+"""The reconstruct stage: posed, masked images -> textured mesh in the dataset's world frame.
+
+``field`` (default): visual hull to bound and carve space, a voxel radiance field
+trained on the masked images, a surface extracted from it (``density``: marching
+cubes on the density, the default; ``tsdf``: the paper's TSDF fusion of rendered
+depth), clean-up, texture from the field. ``hull``: the visual hull's surface,
+textured from the images; the baseline that shows what the field buys.
+
+Held-out views (every 10th) are never used to build anything; they give the
+PSNR of the field and of the textured mesh. With ``DATASET/ground_truth/`` the
+mesh is compared with the true object (:mod:`real2sim.reconstruct.truth`).
+"""
+
+from __future__ import annotations
+
+import resource
+import sys
+import time
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import torch
+import trimesh
+
+from real2sim.formats.errors import UserInputError
+from real2sim.reconstruct.train import FieldConfig, ProgressFn
+from real2sim.reconstruct.views import PosedViews, held_out_split, load_views
+
+BACKENDS = ("field", "hull")
+EXTRACTIONS = ("density", "tsdf")
+
+
+@dataclass(frozen=True)
+class ReconstructConfig:
+    """Settings of the reconstruct stage. Lengths in metres; the table top is the plane z = ``table_z_m``."""
+
+    backend: str = "field"
+    extraction: str = "density"
+    field: FieldConfig = field(default_factory=FieldConfig)
+    hull_voxels: int = 192
+    hull_outlier_fraction: float = 0.03
+    texture_px: int = 1024
+    max_faces: int = 40_000
+    held_out_every: int = 10
+    table_z_m: float = 0.0
+    min_part_volume_fraction: float = 0.05
+
+    def validate(self) -> None:
+        if self.backend not in BACKENDS:
+            raise UserInputError(f"unknown backend {self.backend!r} (choose from {', '.join(BACKENDS)})")
+        if self.extraction not in EXTRACTIONS:
+            raise UserInputError(f"unknown extraction {self.extraction!r} (choose from {', '.join(EXTRACTIONS)})")
+        if not 16 <= self.hull_voxels <= 1024 or not 64 <= self.texture_px <= 8192:
+            raise UserInputError("hull voxels must be in 16..1024 and texture size in 64..8192 px")
+        self.field.validate()
+
+
+@dataclass(frozen=True)
+class Reconstruction:
+    """A textured mesh (world frame, metres) and the stage's report (JSON-ready)."""
+
+    mesh: trimesh.Trimesh
+    report: dict
+
+
+def resolve_device(device: str) -> str:
+    """'cpu', 'cuda' or 'cuda:N'; UserInputError when CUDA is asked for and absent."""
+    if device == "cpu":
+        return device
+    if device.startswith("cuda"):
+        if not torch.cuda.is_available():
+            raise UserInputError(f"--device {device}: this torch build sees no CUDA GPU")
+        return device
+    raise UserInputError(f"--device must be cpu or cuda (got {device!r})")
+
+
+class _StageClock:
+    """Wall seconds and the process's peak resident memory after each named step."""
+
+    def __init__(self):
+        self.stages: dict[str, dict] = {}
+
+    @contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        start = time.perf_counter()
+        yield
+        peak_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        self.stages[name] = {"seconds": round(time.perf_counter() - start, 3),
+                             "peak_memory_mb": round(peak_kb / (1024 if sys.platform != "darwin" else 1024**2), 1)}
+
+
+def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConfig(), *, device: str = "cpu",
+                seed: int = 0, progress: ProgressFn | None = None) -> Reconstruction:
+    """Run the stage on a dataset folder; see the module docstring. Raises UserInputError for unusable input."""
+    from real2sim.reconstruct.hull import VoxelGrid, carve, largest_parts, object_region, simplified, surface_from_grid
+    from real2sim.reconstruct.truth import load_truth
+
+    config.validate()
+    device = resolve_device(device)
+    clock = _StageClock()
+    report: dict = {"backend": config.backend, "device": device, "seed": seed}
+    with clock.stage("load"):
+        views = load_views(dataset)
+        train_idx, held_idx = held_out_split(views.count, config.held_out_every)
+        train, held = views.subset(train_idx), views.subset(held_idx)
+        truth = load_truth(dataset)
+    if progress:
+        progress("visual hull", 0, 0)
+    with clock.stage("visual_hull"):
+        region = object_region(train, outlier_fraction=config.hull_outlier_fraction, table_z_m=config.table_z_m)
+    if config.backend == "hull":
+        with clock.stage("hull_surface"):
+            grid = VoxelGrid.covering(*region, config.hull_voxels, config.table_z_m)
+            scores = carve(train, grid, config.hull_outlier_fraction)
+            mesh = largest_parts(surface_from_grid(scores, grid, 0.5, config.table_z_m), config.min_part_volume_fraction)
+            mesh = simplified(mesh, config.max_faces)
+        with clock.stage("texture"):
+            from real2sim.reconstruct.texture import bake_texture_from_images
+
+            if progress:
+                progress("texture", 0, 0)
+            textured = bake_texture_from_images(mesh, train, size_px=config.texture_px)
+    else:
+        from real2sim.reconstruct.extract import density_mesh, render_view, tsdf_mesh
+        from real2sim.reconstruct.texture import bake_texture
+        from real2sim.reconstruct.train import train_field
+
+        with clock.stage("train_field"):
+            trained = train_field(train, region, config.field, device=device, seed=seed, progress=progress,
+                                  table_z_m=config.table_z_m)
+        report["loss_curve"] = [[int(s), float(v)] for s, v in trained.loss_curve]
+        report["field_grid"] = list(trained.field.grid.shape)
+        report["field_voxel_mm"] = 1000.0 * trained.field.grid.voxel_m
+        with clock.stage("extract_mesh"):
+            if progress:
+                progress(f"mesh ({config.extraction})", 0, 0)
+            if config.extraction == "tsdf":
+                mesh = tsdf_mesh(trained.field, train, table_z_m=config.table_z_m, progress=progress)
+            else:
+                mesh = density_mesh(trained.field, table_z_m=config.table_z_m)
+            mesh = simplified(largest_parts(mesh, config.min_part_volume_fraction), config.max_faces)
+        with clock.stage("texture"):
+            if progress:
+                progress("texture", 0, 0)
+            textured = bake_texture(mesh, trained.field, size_px=config.texture_px)
+        if held.count:
+            with clock.stage("held_out_field_psnr"):
+                report["psnr_field_held_out_db"] = _field_psnr(trained.field, held, render_view)
+    if held.count:
+        with clock.stage("held_out_mesh_psnr"):
+            report["psnr_mesh_held_out_db"] = _mesh_psnr(textured, held)
+    report["held_out_views"] = list(held.names)
+    report["train_views"] = int(train.count)
+    report["mesh"] = {"vertices": int(len(textured.vertices)), "faces": int(len(textured.faces)),
+                      "watertight": bool(mesh.is_watertight), "bounds_m": mesh.bounds.tolist()}
+    if truth is not None:
+        from real2sim.reconstruct.truth import compare_to_truth
+
+        with clock.stage("compare_to_truth"):
+            report["truth"] = compare_to_truth(mesh, truth, seed=seed)
+    report["stages"] = clock.stages
+    report["total_seconds"] = round(sum(s["seconds"] for s in clock.stages.values()), 3)
+    report["config"] = asdict(config)
+    return Reconstruction(mesh=textured, report=report)
+
+
+def _psnr_region(views: PosedViews, i: int, covered: np.ndarray) -> np.ndarray:
+    return (views.mask[i] > 0.5) | covered
+
+
+def _field_psnr(field, held: PosedViews, render_view) -> float:
+    from real2sim.reconstruct.truth import psnr
+
+    values = []
+    for i in range(held.count):
+        rgb, opacity, _ = render_view(field, held, held.c2w_cv[i])
+        target = held.rgb[i] * held.mask[i][..., None]
+        values.append(psnr(rgb, target, _psnr_region(held, i, opacity > 0.5)))
+    return float(np.mean(values))
+
+
+def _mesh_psnr(mesh: trimesh.Trimesh, held: PosedViews) -> float:
+    from real2sim.reconstruct.texture import render_textured_mesh
+    from real2sim.reconstruct.truth import psnr
+
+    values = []
+    for i in range(held.count):
+        rgb, covered = render_textured_mesh(mesh, held.intrinsics, held.c2w_cv[i])
+        target = held.rgb[i] * held.mask[i][..., None]
+        values.append(psnr(rgb, target, _psnr_region(held, i, covered)))
+    return float(np.mean(values))
+
+
+def write_reconstruction(result: Reconstruction, out_dir: Path | str, *, overwrite: bool = False) -> Path:
+    """Write ``mesh.obj`` (+ .mtl, .png) and ``report.json`` into ``out_dir``, whole or not at all."""
+    import json
+
+    from real2sim.formats.mesh_io import export_textured_mesh
+    from real2sim.formats.outputs import atomic_output_dir
+
+    out_dir = Path(out_dir)
+    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        export_textured_mesh(result.mesh, tmp / "mesh.obj")
+        (tmp / "report.json").write_text(json.dumps(result.report, indent=2, default=_json_default))
+    return out_dir.resolve()
+
+
+def _json_default(value):
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (tuple, set)):
+        return list(value)
+    return str(value)
+
+
+def import_external(dataset: Path | str, mesh_path: Path | str, dataparser_transforms: Path | str, *,
+                    config: ReconstructConfig = ReconstructConfig()) -> Reconstruction:
+    """A nerfstudio-exported mesh put back in the dataset's world frame and cleaned, with the same report."""
+    from real2sim.formats.dataset import read_dataset
+    from real2sim.reconstruct.external import import_nerfstudio_mesh
+    from real2sim.reconstruct.truth import compare_to_truth, load_truth
+
+    clock = _StageClock()
+    with clock.stage("import"):
+        read_dataset(dataset)  # the frame the mesh is put back into must exist and be readable
+        mesh = import_nerfstudio_mesh(mesh_path, dataparser_transforms, table_z_m=config.table_z_m,
+                                      min_part_volume_fraction=config.min_part_volume_fraction)
+    report: dict = {"backend": "nerfstudio-import", "source_mesh": Path(mesh_path).name,
+                    "mesh": {"vertices": int(len(mesh.vertices)), "faces": int(len(mesh.faces)),
+                             "watertight": bool(mesh.is_watertight), "bounds_m": mesh.bounds.tolist()}}
+    truth = load_truth(dataset)
+    if truth is not None:
+        with clock.stage("compare_to_truth"):
+            report["truth"] = compare_to_truth(mesh, truth)
+    report["stages"] = clock.stages
+    report["total_seconds"] = round(sum(s["seconds"] for s in clock.stages.values()), 3)
+    return Reconstruction(mesh=mesh, report=report)

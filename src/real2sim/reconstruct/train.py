@@ -1,0 +1,205 @@
+"""Training the voxel radiance field on masked images (the paper's loss, eq. 3).
+
+Every training ray gets a random background colour: the target is the image
+where the mask is set and that colour elsewhere, the prediction is the field's
+colour composited over the same colour. So the field must be transparent
+wherever the mask is not (the table is never learned) and opaque where it is;
+this is the mask used as alpha.
+
+Empty space is carved first: the field lives only inside a relaxed, dilated
+visual hull. Training runs coarse-to-fine: a coarse grid first, then the field
+is resampled onto a finer grid and trained further.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import torch
+from scipy.ndimage import binary_dilation
+
+from real2sim.reconstruct.field import VoxelRadianceField
+from real2sim.reconstruct.hull import VoxelGrid, carve
+from real2sim.reconstruct.views import PosedViews, pixel_rays
+
+# (message, done, total): the reconstruct stage's progress; total 0 = indeterminate
+ProgressFn = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class FieldConfig:
+    """How the radiance field is trained. Grid sizes are voxels along the object's longest side."""
+
+    coarse_voxels: int = 80
+    fine_voxels: int = 160
+    coarse_steps: int = 400
+    fine_steps: int = 800
+    rays_per_step: int = 4096
+    lr_density: float = 0.1
+    lr_features: float = 0.1
+    lr_decoder: float = 3e-3
+    init_density: float = 2.0
+    feature_channels: int = 12
+    step_voxels: float = 0.5
+    hull_outlier_fraction: float = 0.03
+    carve_outlier_fraction: float = 0.1
+    carve_dilation_voxels: int = 2
+    mask_dilation_px: int = 3
+    background_ray_fraction: float = 0.05
+
+    def validate(self) -> None:
+        from real2sim.formats.errors import UserInputError
+
+        for name in ("coarse_voxels", "fine_voxels", "rays_per_step", "feature_channels"):
+            if int(getattr(self, name)) < 4:
+                raise UserInputError(f"field setting {name} must be at least 4 (got {getattr(self, name)})")
+        if self.coarse_steps < 0 or self.fine_steps < 1:
+            raise UserInputError("field training needs at least one fine step")
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    field: VoxelRadianceField
+    loss_curve: tuple[tuple[int, float], ...]  # (step, mean MSE over the last reporting window)
+    seconds: float
+
+
+@dataclass(frozen=True)
+class RayPool:
+    """Training rays: world origins/directions (R, 3), target colour (R, 3), mask (R,), float32 tensors."""
+
+    origins: torch.Tensor
+    directions: torch.Tensor
+    rgb: torch.Tensor
+    mask: torch.Tensor
+
+
+def ray_pool(views: PosedViews, *, mask_dilation_px: int, background_fraction: float,
+             rng: np.random.Generator) -> RayPool:
+    """Rays through every pixel near the object (dilated masks) plus a sample of the others."""
+    k = views.intrinsics
+    origins, dirs, rgbs, masks = [], [], [], []
+    disk = np.ones((2 * mask_dilation_px + 1,) * 2, bool)
+    for i in range(views.count):
+        near = binary_dilation(views.mask[i] > 0.5, disk)
+        far = ~near & (rng.random(near.shape) < background_fraction)
+        v_px, u_px = np.nonzero(near | far)
+        o, d = pixel_rays(k, views.c2w_cv[i], u_px + 0.5, v_px + 0.5)
+        origins.append(o)
+        dirs.append(d)
+        rgbs.append(views.rgb[i, v_px, u_px])
+        masks.append(views.mask[i, v_px, u_px])
+    cat = lambda xs: torch.from_numpy(np.concatenate(xs).astype(np.float32))
+    return RayPool(cat(origins), cat(dirs), cat(rgbs), cat(masks))
+
+
+def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> np.ndarray:
+    """The carved region the field may fill: a relaxed visual hull, dilated by a few voxels."""
+    inside = carve(views, grid, config.carve_outlier_fraction) >= 0.5
+    return binary_dilation(inside, np.ones((3, 3, 3), bool), iterations=config.carve_dilation_voxels)
+
+
+def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> np.ndarray:
+    """Initial density per voxel (``grid.shape``): ``init_density`` inside the visual hull, fading to
+    nearly nothing outside it over about a voxel (a smooth step of the silhouette score)."""
+    score = carve(views, grid, config.hull_outlier_fraction)
+    return config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
+
+
+def occupancy_ranges(field: VoxelRadianceField, pool: RayPool) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per pool ray, the distances (R,) where it first enters and last leaves the field's occupancy.
+
+    Ray-cast (embree) against the occupancy's surface, so training marches only that
+    stretch of each ray; a ray that misses gets an empty range.
+    """
+    from real2sim.reconstruct.hull import surface_from_grid
+
+    occ = field.occupancy.cpu().numpy().astype(np.float32)
+    # the surface of the occupied voxels' cells, grown by one voxel so no occupied sample is outside
+    surface = surface_from_grid(binary_dilation(occ > 0.5).astype(np.float32), field.grid, 0.5,
+                                table_z_m=float(field.grid.bounds_m[0, 2]))
+    origins = pool.origins.cpu().numpy().astype(np.float64)
+    dirs = pool.directions.cpu().numpy().astype(np.float64)
+    far = 4.0 * float(np.linalg.norm(field.grid.bounds_m[1] - field.grid.bounds_m[0])) + \
+        float(np.abs(origins - field.grid.bounds_m.mean(axis=0)).max())
+    t_in = np.zeros(len(origins))
+    t_out = np.zeros(len(origins))
+    hits, rays, _ = surface.ray.intersects_location(origins, dirs, multiple_hits=False)
+    t_in[rays] = np.einsum("nd,nd->n", hits - origins[rays], dirs[rays])
+    back_origin = origins + far * dirs
+    hits_back, rays_back, _ = surface.ray.intersects_location(back_origin, -dirs, multiple_hits=False)
+    t_out[rays_back] = far - np.einsum("nd,nd->n", hits_back - back_origin[rays_back], -dirs[rays_back])
+    entered = np.zeros(len(origins), dtype=bool)
+    entered[rays] = True
+    t_out = np.where(entered, np.maximum(t_out, t_in), 0.0)
+    t_in = np.where(entered, np.maximum(t_in - field.grid.voxel_m, 0.0), 0.0)
+    to = lambda a: torch.from_numpy(a.astype(np.float32)).to(field.device)
+    return to(t_in), to(t_out + field.grid.voxel_m)
+
+
+def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], config: FieldConfig = FieldConfig(), *,
+                device: str = "cpu", seed: int = 0, progress: ProgressFn | None = None,
+                table_z_m: float = 0.0) -> TrainResult:
+    """Fit a :class:`VoxelRadianceField` to ``views`` inside the world box ``region_m`` (metres)."""
+    config.validate()
+    t_start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    gen = torch.Generator(device="cpu").manual_seed(seed)
+    pool = ray_pool(views, mask_dilation_px=config.mask_dilation_px,
+                    background_fraction=config.background_ray_fraction, rng=rng)
+    pool = RayPool(*(x.to(device) for x in (pool.origins, pool.directions, pool.rgb, pool.mask)))
+    lo, hi = region_m
+    stages = [(config.coarse_voxels, config.coarse_steps), (config.fine_voxels, config.fine_steps)]
+    stages = [(n, s) for n, s in stages if s > 0]
+    total = sum(s for _, s in stages)
+    field, done, curve = None, 0, []
+    for voxels, steps in stages:
+        grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
+        occupancy = field_occupancy(views, grid, config)
+        if field is None:
+            field = VoxelRadianceField(grid, occupancy, feature_channels=config.feature_channels,
+                                       init_density=hull_density(views, grid, config), device=device, generator=gen)
+        else:
+            field = field.upsampled(grid, occupancy)
+        done, window = _optimise(field, pool, config, steps, done, total, gen, progress, curve)
+    return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start)
+
+
+def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
+              gen: torch.Generator, progress: ProgressFn | None, curve: list) -> tuple[int, list]:
+    t_in, t_out = occupancy_ranges(field, pool)
+    grid_opt = torch.optim.Adam([{"params": [field.density_table], "lr": config.lr_density, "base": config.lr_density},
+                                 {"params": [field.feature_table], "lr": config.lr_features, "base": config.lr_features}])
+    dec_opt = torch.optim.Adam(field.decoder.parameters(), lr=config.lr_decoder)
+    window: list[float] = []
+    report_every = max(steps // 20, 1)
+    device = field.device
+    for step in range(steps):
+        # the grid's learning rate decays tenfold over each stage
+        for group in grid_opt.param_groups:
+            group["lr"] = group["base"] * 0.1 ** (step / max(steps, 1))
+        pick = torch.randint(len(pool.origins), (config.rays_per_step,), generator=gen).to(device)
+        jitter = torch.rand(config.rays_per_step, generator=gen).to(device)
+        background = torch.rand(config.rays_per_step, 3, generator=gen).to(device)
+        out = field.render(pool.origins[pick], pool.directions[pick], step_voxels=config.step_voxels,
+                           jitter=jitter, t_range_m=(t_in[pick], t_out[pick]))
+        m = pool.mask[pick][:, None]
+        target = m * pool.rgb[pick] + (1 - m) * background
+        predicted = out.rgb + (1 - out.opacity)[:, None] * background
+        loss = torch.mean((predicted - target) ** 2)
+        grid_opt.zero_grad(set_to_none=True)
+        dec_opt.zero_grad(set_to_none=True)
+        loss.backward()
+        grid_opt.step()
+        dec_opt.step()
+        window.append(loss.item())
+        done += 1
+        if step % report_every == report_every - 1 or step == steps - 1:
+            curve.append((done, float(np.mean(window))))
+            window = []
+        if progress:
+            progress(f"training field ({field.grid.shape[0]}x{field.grid.shape[1]}x{field.grid.shape[2]})", done, total)
+    return done, window

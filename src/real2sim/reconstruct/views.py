@@ -1,0 +1,172 @@
+"""Posed views for reconstruction: images, masks and cameras as arrays, checked once.
+
+Frames (all in the dataset's world frame, metres): ``c2w_cv`` is camera-to-world
+with OpenCV camera axes (x right, y down, z forward). Pixel (u, v) has its centre
+at (u + 0.5, v + 0.5), as in the dataset format. Rays are unit directions in the
+world frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from real2sim.formats.dataset import CameraIntrinsics, Dataset, load_image_rgb, load_mask, read_dataset
+from real2sim.formats.errors import UserInputError
+
+MIN_VIEWS = 8
+
+
+@dataclass(frozen=True)
+class PosedViews:
+    """N posed images of one camera.
+
+    ``rgb``: (N, H, W, 3) float32 in [0, 1]; ``mask``: (N, H, W) float32, 1 = object;
+    ``c2w_cv``: (N, 4, 4) float64 camera-to-world, OpenCV axes, metres;
+    ``names``: the frames' ``file_path`` values.
+    """
+
+    rgb: np.ndarray
+    mask: np.ndarray
+    c2w_cv: np.ndarray
+    intrinsics: CameraIntrinsics
+    names: tuple[str, ...]
+
+    @property
+    def count(self) -> int:
+        return len(self.c2w_cv)
+
+    def subset(self, index: np.ndarray) -> "PosedViews":
+        index = np.asarray(index)
+        return PosedViews(self.rgb[index], self.mask[index], self.c2w_cv[index], self.intrinsics,
+                          tuple(self.names[i] for i in index))
+
+
+def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True) -> PosedViews:
+    """Read every image and mask of a dataset; UserInputError (one line) for anything unusable.
+
+    Checks: at least 8 frames, masks present for every frame when ``need_masks``,
+    every image readable and of the intrinsics' size, masks of the same size, and
+    cameras that look at a common region (:func:`common_look_at_point`).
+    """
+    ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
+    k = ds.intrinsics
+    if len(ds.frames) < MIN_VIEWS:
+        raise UserInputError(f"{ds.root}: {len(ds.frames)} views; reconstruction needs at least {MIN_VIEWS}")
+    missing = [f.file_path for f in ds.frames if f.mask_path is None]
+    if need_masks and missing:
+        raise UserInputError(
+            f"{ds.root}: {len(missing)} of {len(ds.frames)} frames have no mask (first: {missing[0]}); "
+            "run `real2sim mask DATASET --method ...` first")
+    rgb = np.empty((len(ds.frames), k.height, k.width, 3), dtype=np.float32)
+    mask = np.ones((len(ds.frames), k.height, k.width), dtype=np.float32)
+    for i, frame in enumerate(ds.frames):
+        image = load_image_rgb(_inside(ds.root, frame.file_path))
+        if image.shape[:2] != (k.height, k.width):
+            raise UserInputError(f"{frame.file_path}: image is {image.shape[1]}x{image.shape[0]} px but the "
+                                 f"dataset's camera is {k.width}x{k.height}; all images must have one size")
+        rgb[i] = image / np.float32(255.0)
+        if frame.mask_path is not None:
+            m = load_mask(_inside(ds.root, frame.mask_path))
+            if m.shape != (k.height, k.width):
+                raise UserInputError(f"{frame.mask_path}: mask is {m.shape[1]}x{m.shape[0]} px, image is "
+                                     f"{k.width}x{k.height}")
+            mask[i] = m
+    if need_masks and not np.any(mask.reshape(len(mask), -1).max(axis=1) > 0):
+        raise UserInputError(f"{ds.root}: every mask is empty")
+    views = PosedViews(rgb, mask, ds.poses_c2w_cv(), k, tuple(f.file_path for f in ds.frames))
+    common_look_at_point(views)
+    return views
+
+
+def _inside(root: Path, rel: str) -> Path:
+    path = (Path(root) / rel).resolve()
+    if not path.is_relative_to(Path(root).resolve()):
+        raise UserInputError(f"{rel}: path points outside the dataset folder {root}")
+    return path
+
+
+def undistorted_normalized(k: CameraIntrinsics, u_px: np.ndarray, v_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normalized image coordinates (x/z, y/z) of continuous pixel positions, undoing OpenCV distortion."""
+    x = (np.asarray(u_px, dtype=np.float64) - k.cx) / k.fl_x
+    y = (np.asarray(v_px, dtype=np.float64) - k.cy) / k.fl_y
+    if k.k1 == k.k2 == k.p1 == k.p2 == 0.0:
+        return x, y
+    xd, yd = x.copy(), y.copy()
+    for _ in range(10):  # fixed-point inversion; converges for the mild distortion of real lenses
+        r2 = x * x + y * y
+        radial = 1 + k.k1 * r2 + k.k2 * r2 * r2
+        dx = 2 * k.p1 * x * y + k.p2 * (r2 + 2 * x * x)
+        dy = k.p1 * (r2 + 2 * y * y) + 2 * k.p2 * x * y
+        x, y = (xd - dx) / radial, (yd - dy) / radial
+    return x, y
+
+
+def project_torch(k: CameraIntrinsics, w2c_cv, points_m) -> tuple:
+    """(u, v, z), each a (N_views, P) float32 tensor: pixel position and depth of world points (P, 3).
+
+    ``w2c_cv``: (N_views, 4, 4) world-to-camera tensor. Distortion is applied, so the
+    positions match the images as captured.
+    """
+    cam = points_m[None] @ w2c_cv[:, :3, :3].transpose(1, 2) + w2c_cv[:, None, :3, 3]
+    z = cam[..., 2]
+    inv_z = 1.0 / z.clamp_min(1e-9)
+    x, y = cam[..., 0] * inv_z, cam[..., 1] * inv_z
+    if not (k.k1 == k.k2 == k.p1 == k.p2 == 0.0):
+        r2 = x * x + y * y
+        radial = 1 + k.k1 * r2 + k.k2 * r2 * r2
+        x, y = (x * radial + 2 * k.p1 * x * y + k.p2 * (r2 + 2 * x * x),
+                y * radial + k.p1 * (r2 + 2 * y * y) + 2 * k.p2 * x * y)
+    return k.fl_x * x + k.cx, k.fl_y * y + k.cy, z
+
+
+def project(k: CameraIntrinsics, c2w_cv: np.ndarray, points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel positions (N_views, P, 2) and depths (N_views, P) of world points (P, 3); float32, see :func:`project_torch`."""
+    import torch
+
+    w2c = torch.from_numpy(np.linalg.inv(c2w_cv)).float()
+    u, v, z = project_torch(k, w2c, torch.from_numpy(np.asarray(points_m, dtype=np.float32)))
+    return torch.stack([u, v], dim=-1).numpy(), z.numpy()
+
+
+def pixel_rays(k: CameraIntrinsics, c2w_cv: np.ndarray, u_px: np.ndarray, v_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World-frame ray origins and unit directions (P, 3) through continuous pixel positions of one camera."""
+    x, y = undistorted_normalized(k, u_px, v_px)
+    d_cam = np.stack([x, y, np.ones_like(x)], axis=-1)
+    d = d_cam @ c2w_cv[:3, :3].T
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    return np.broadcast_to(c2w_cv[:3, 3], d.shape).copy(), d
+
+
+def common_look_at_point(views: PosedViews, min_fraction: float = 0.8) -> np.ndarray:
+    """The world point (3,) closest, in least squares, to every camera's optical axis.
+
+    UserInputError unless it lies in front of, and inside the image of, at least
+    ``min_fraction`` of the cameras: then the cameras do not share a region to reconstruct.
+    """
+    centres = views.c2w_cv[:, :3, 3]
+    axes = views.c2w_cv[:, :3, 2]
+    # sum over views of (I - a a^T) (p - c) = 0
+    proj = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]
+    a = proj.sum(axis=0)
+    b = (proj @ centres[:, :, None]).sum(axis=0)[:, 0]
+    if np.linalg.cond(a) > 1e8:
+        raise UserInputError("the cameras' optical axes are (nearly) parallel: they do not look at a common region")
+    point = np.linalg.solve(a, b)
+    uv, z = project(views.intrinsics, views.c2w_cv, point[None])
+    k = views.intrinsics
+    seen = (z[:, 0] > 0) & (uv[:, 0, 0] >= 0) & (uv[:, 0, 0] <= k.width) & (uv[:, 0, 1] >= 0) & (uv[:, 0, 1] <= k.height)
+    if seen.mean() < min_fraction:
+        raise UserInputError(
+            f"the cameras do not look at a common region: the point nearest all optical axes is in view of only "
+            f"{int(seen.sum())} of {views.count} cameras")
+    return point
+
+
+def held_out_split(count: int, every: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (train, held_out): every ``every``-th view (from the 5th) is held out, never trained on."""
+    idx = np.arange(count)
+    held = idx[(idx % every) == every // 2]
+    return np.setdiff1d(idx, held), held
