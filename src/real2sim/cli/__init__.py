@@ -16,7 +16,7 @@ from real2sim import __version__
 from real2sim.formats.errors import UserInputError
 
 # Order is the order of `real2sim --help`.
-_VERB_MODULES = ("demo", "objects", "capture", "reconstruct", "asset", "evaluate", "view")
+_VERB_MODULES = ("demo", "objects", "capture", "reconstruct", "asset", "run", "evaluate", "view")
 
 
 class OneLineErrorParser(argparse.ArgumentParser):

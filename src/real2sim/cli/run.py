@@ -1,0 +1,152 @@
+"""`real2sim run`: posed, masked images -> reconstruction -> simulation asset (-> evaluation), resumable."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from real2sim.cli import positive_int
+from real2sim.cli.asset import add_asset_arguments
+
+# The reconstruction's table plane is z = 0 of the dataset's world frame: run always closes
+# the bottom there, so these two `asset` flags are hidden (and ignored).
+_FORCED_ASSET_FLAGS = ("flat_bottom", "support_height")
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "run",
+        help="images to asset in one command: [refine poses] -> reconstruct -> asset [-> evaluate], resumable",
+        description="Chain the stages over one dataset (transforms.json, images/, masks/, table top at z = 0): "
+        "optional pose refinement (on a copy in ASSETDIR/.run/dataset; the dataset is never modified), "
+        "reconstruction (ASSETDIR/.run/reconstruct: mesh.obj, report.json), the asset (flat bottom at the table "
+        "plane, canonical pose, inertia, one folder per SPEC with model.urdf), ASSETDIR/truth.json when the "
+        "dataset has ground_truth/, and with --evaluate the Drake evaluation into ASSETDIR/results. "
+        "ASSETDIR/.run/run.json records each stage's input hashes, settings, outputs, wall seconds and peak "
+        "memory; running again skips the unchanged stages and redoes those downstream of a change "
+        "(a new --collision refits without reconstructing), and resumes an interrupted run.",
+        epilog="example: real2sim capture can.obj --out can_ds && "
+        "real2sim run can_ds --mass 0.35 --out can_asset --collision cylinders:10 --backend hull",
+    )
+    p.add_argument("dataset", type=Path, help="dataset folder (transforms.json, images/, masks/)")
+    p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR",
+                   help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
+    p.add_argument("--overwrite", action="store_true", help="discard ASSETDIR (and its cached stages) first")
+    p.add_argument("--refine-poses", action="store_true", help="refine the camera poses with COLMAP first")
+    g = p.add_argument_group("reconstruction")
+    g.add_argument("--backend", choices=["field", "hull"], default="field",
+                   help="radiance field (default) or visual hull (fast)")
+    g.add_argument("--extraction", choices=["density", "tsdf"], default="density",
+                   help="field backend: surface by marching cubes on the density (default) or TSDF fusion")
+    g.add_argument("--steps", type=positive_int, default=None, help="field: fine-grid training steps")
+    g.add_argument("--voxels", type=positive_int, default=None,
+                   help="voxels along the object's longest side (field: fine grid; hull: carving grid, default 192)")
+    g.add_argument("--texture-px", type=positive_int, default=1024, help="texture image size, px (default 1024)")
+    g.add_argument("--max-faces", type=positive_int, default=None, help="simplify the mesh to this many faces "
+                   "(default 40000)")
+    add_asset_arguments(p)
+    for action in p._actions:  # argparse has no public way to hide an inherited flag
+        if action.dest in _FORCED_ASSET_FLAGS:
+            action.help = argparse.SUPPRESS
+    e = p.add_argument_group("evaluation (with --evaluate; results in ASSETDIR/results)")
+    e.add_argument("--evaluate", action="store_true", help="run the Drake evaluation of every representation")
+    e.add_argument("--tasks", default="push,ramp", metavar="LIST", help="comma-separated tasks (default push,ramp)")
+    e.add_argument("--contact", default="point,hydroelastic", metavar="LIST",
+                   help="comma-separated contact models (default point,hydroelastic)")
+    e.add_argument("--runs", type=int, default=10, metavar="N", help="runs per task (default 10)")
+    e.add_argument("--jobs", type=int, default=None, metavar="N", help="simulations in parallel (default CPU count)")
+    e.add_argument("--duration-scale", type=float, default=1.0, metavar="K",
+                   help="multiply the tasks' durations by K (default 1)")
+    p.set_defaults(func=run)
+
+
+def config_from_args(args: argparse.Namespace):
+    """RunConfig from parsed flags; UserInputError for bad values (before anything is written)."""
+    from dataclasses import replace
+
+    from real2sim.cli.asset import config_from_args as asset_config
+    from real2sim.formats.errors import UserInputError
+    from real2sim.pipeline.run import RunConfig
+    from real2sim.reconstruct.stage import ReconstructConfig, resolve_device
+    from real2sim.reconstruct.train import FieldConfig
+
+    if args.seed < 0 or args.seed >= 2**63:
+        raise UserInputError(f"--seed must be in 0..2^63-1 (got {args.seed})")
+    args.flat_bottom, args.support_height = True, 0.0
+    asset = asset_config(args)
+    resolve_device(args.device)
+    field = FieldConfig()
+    if args.steps is not None:
+        field = replace(field, fine_steps=args.steps, coarse_steps=max(args.steps // 2, 1))
+    recon = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
+                              texture_px=args.texture_px)
+    if args.voxels is not None:
+        if args.backend == "field":
+            recon = replace(recon, field=replace(field, fine_voxels=args.voxels, coarse_voxels=max(args.voxels // 2, 4)))
+        else:
+            recon = replace(recon, hull_voxels=args.voxels)
+    if args.max_faces is not None:
+        recon = replace(recon, max_faces=args.max_faces)
+    recon.validate()
+    refine = None
+    if args.refine_poses:
+        from real2sim.capture.pose_refinement import RefineConfig
+
+        refine = RefineConfig(seed=args.seed)
+    evaluation = None
+    if args.evaluate:
+        from real2sim.cli.evaluate import config_from_args as evaluation_config
+
+        args.executor, args.ray_address, args.simulation_error = "local", None, False
+        evaluation = evaluation_config(args)
+    return RunConfig(asset=asset, reconstruct=recon, refine=refine, evaluation=evaluation, device=args.device,
+                     seed=args.seed)
+
+
+class _Display:
+    """One rich display for the whole run: the stage (k of n) and the work inside it."""
+
+    def __init__(self, bar, console):
+        self.bar, self.console = bar, console
+        self.task = bar.add_task("starting", total=None)
+        self.label = ""
+
+    def stage(self, name: str, index: int, count: int, status: str) -> None:
+        label = self.label = f"[{index}/{count}] {name}"
+        if status == "running":
+            self.bar.update(self.task, description=label, completed=0, total=None)
+        else:
+            self.console.log(f"{label}: {'unchanged, skipped' if status == 'skipped' else 'done'}")
+
+    def update(self, name: str, message: str, done: float, total: float) -> None:
+        self.bar.update(self.task, description=f"{self.label} - {message}", completed=done, total=total or None)
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    from real2sim.pipeline.run import StageFailed, run_pipeline
+
+    config = config_from_args(args)
+    console = Console(stderr=True)
+    columns = (SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
+    try:
+        with Progress(*columns, console=console, transient=True) as bar:
+            result = run_pipeline(args.dataset, args.out, config, overwrite=args.overwrite,
+                                  progress=_Display(bar, console))
+    except StageFailed as exc:
+        print(f"real2sim run: error: {exc}; finished stages are kept in {Path(args.out) / '.run'}: "
+              "fix the cause and run the same command again to resume", file=sys.stderr)
+        return 1
+    ran = [s for s, status in result.statuses.items() if status == "ran"]
+    print(f"asset: {result.asset_dir} (stages run: {', '.join(ran) or 'none, all unchanged'})")
+    for urdf in result.urdf_paths:
+        print(f"  {urdf.parent.name:28s} {urdf}")
+    if result.truth:
+        phys, rec = result.truth["physical_properties"], result.truth.get("reconstruction") or {}
+        print(f"vs truth: Chamfer {rec.get('chamfer_mm', float('nan')):.2f} mm, IoU {rec.get('iou', float('nan')):.3f}; "
+              f"CoM {phys['com_error_mm']:.2f} mm, inertia eigenvalues {100 * phys['inertia_eigenvalue_max_rel_error']:.1f} %"
+              f" ({result.asset_dir / 'truth.json'})")
+    return 0

@@ -1,0 +1,182 @@
+"""``ASSETDIR/.run/run.json``: what each stage of `real2sim run` read, with which settings, and what it wrote.
+
+A stage is skipped when its recorded *key* equals the key it would run with now
+and every output it recorded is still present. The key is the SHA-256 of
+
+* the **content** hashes (SHA-256 of the bytes) of its input files: the dataset's
+  transforms.json, every image and mask the frames name, and ground_truth/mesh.obj,
+  object_pose.json and transforms.json when present; for later stages the files
+  the previous stage wrote (mesh.obj, canonical_transform.json, ...). Bytes, not
+  size + mtime: a copied or touched dataset is the same dataset, an edited mask is
+  not. (A 200-view 640x480 capture is ~100 MB: well under a second to hash.)
+* the stage's **settings** (the dataclass fields, as JSON);
+* the **upstream** stage's key, so that a stage that runs again makes every
+  stage after it run again, even when its outputs come out byte-identical.
+
+A stage is recorded only after its outputs are in place (each is written to a
+temporary name and renamed), and run.json itself is replaced atomically, so a
+Ctrl-C or a killed process leaves the finished stages recorded and nothing else.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import resource
+import sys
+import tempfile
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+MANIFEST_VERSION = 1
+RUN_DIRNAME = ".run"
+MANIFEST_NAME = "run.json"
+
+
+def _jsonable(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    if hasattr(value, "tolist"):  # numpy scalars and arrays
+        return value.tolist()
+    return str(value)
+
+
+def settings_record(settings: Any) -> Any:
+    """The JSON form of a stage's settings (dataclasses field by field, paths as strings)."""
+    return _jsonable(settings)
+
+
+def file_sha256(path: Path, chunk: int = 1 << 20) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def files_digest(root: Path, relpaths: Iterable[str]) -> dict:
+    """``{"files": n, "bytes": total, "sha256": digest}`` over (relative path, content hash) of each file."""
+    root = Path(root)
+    digest = hashlib.sha256()
+    count = size = 0
+    for rel in sorted(set(relpaths)):
+        path = root / rel
+        digest.update(rel.encode())
+        digest.update(file_sha256(path).encode() if path.is_file() else b"<missing>")
+        count += 1
+        size += path.stat().st_size if path.is_file() else 0
+    return {"files": count, "bytes": size, "sha256": digest.hexdigest()}
+
+
+def tree_files(root: Path) -> list[str]:
+    """Every regular file below ``root`` (relative paths), hidden temporary names excluded."""
+    root = Path(root)
+    return [p.relative_to(root).as_posix() for p in sorted(root.rglob("*"))
+            if p.is_file() and ".tmp-" not in p.as_posix()]
+
+
+def stage_key(inputs: dict, settings: Any, upstream: str | None) -> str:
+    blob = json.dumps({"inputs": inputs, "settings": settings_record(settings), "upstream": upstream},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(data, fh, indent=2, default=str)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def peak_memory_mb() -> float:
+    """Peak resident memory of this process so far (ru_maxrss), MiB."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return round(peak / (1024 * 1024 if sys.platform == "darwin" else 1024), 1)
+
+
+class Manifest:
+    """run.json of one asset folder: the dataset it belongs to and the finished stages."""
+
+    def __init__(self, asset_dir: Path, dataset: Path, data: dict | None = None):
+        self.asset_dir = Path(asset_dir)
+        self.path = self.asset_dir / RUN_DIRNAME / MANIFEST_NAME
+        self.data = data or {"version": MANIFEST_VERSION, "dataset": str(Path(dataset).resolve()), "stages": {}}
+
+    @classmethod
+    def load(cls, asset_dir: Path) -> "Manifest | None":
+        """The manifest of ``asset_dir``, or None when it has none (or an unreadable one)."""
+        path = Path(asset_dir) / RUN_DIRNAME / MANIFEST_NAME
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            return None
+        if not isinstance(data, dict) or data.get("version") != MANIFEST_VERSION or "dataset" not in data:
+            return None
+        data.setdefault("stages", {})
+        return cls(asset_dir, Path(data["dataset"]), data)
+
+    @property
+    def dataset(self) -> Path:
+        return Path(self.data["dataset"])
+
+    def save(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(self.path, self.data)
+
+    def entry(self, stage: str) -> dict | None:
+        return self.data["stages"].get(stage)
+
+    def is_current(self, stage: str, key: str) -> bool:
+        """True when ``stage`` finished with ``key`` and all of its outputs are still there."""
+        entry = self.entry(stage)
+        if not entry or entry.get("key") != key:
+            return False
+        return all((self.asset_dir / rel).exists() for rel in entry.get("outputs", []))
+
+    def record(self, stage: str, *, key: str, inputs: dict, settings: Any, outputs: list[str],
+               wall_seconds: float, extra: dict | None = None) -> None:
+        self.data["stages"][stage] = {
+            "key": key,
+            "inputs": inputs,
+            "settings": settings_record(settings),
+            "outputs": outputs,
+            "wall_seconds": round(wall_seconds, 3),
+            "peak_memory_mb": peak_memory_mb(),
+            "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            **(extra or {}),
+        }
+        self.save()
+
+    def forget(self, stage: str) -> None:
+        if self.data["stages"].pop(stage, None) is not None:
+            self.save()
+
+
+@contextmanager
+def timed() -> Iterator[list[float]]:
+    """``with timed() as t: ...`` then ``t[0]`` holds the wall seconds."""
+    box = [0.0]
+    start = time.perf_counter()
+    try:
+        yield box
+    finally:
+        box[0] = time.perf_counter() - start

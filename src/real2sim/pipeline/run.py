@@ -1,0 +1,336 @@
+"""`real2sim run`: a posed, masked dataset -> a simulation asset folder, stage by stage, resumable.
+
+Stages, in order (each one the existing stage function, called as it is):
+
+1. ``refine_poses`` (optional): :func:`real2sim.capture.refine_poses` on a copy of
+   the dataset in ``ASSETDIR/.run/dataset/`` (the user's dataset is never written);
+2. ``reconstruct``: :func:`real2sim.reconstruct.stage.reconstruct` +
+   ``write_reconstruction`` -> ``ASSETDIR/.run/reconstruct/`` (mesh.obj, report.json);
+3. ``asset``: :func:`real2sim.asset.build_asset` on that mesh (flat bottom at the
+   table plane z = 0 of the dataset's world frame) -> the usual ASSETDIR layout;
+4. ``truth`` (when the dataset has ``ground_truth/``): ``ASSETDIR/truth.json``;
+5. ``evaluate`` (optional): :func:`real2sim.evaluate.sweep.evaluate` -> ``ASSETDIR/results/``.
+
+Caching, resuming and the manifest: :mod:`real2sim.pipeline.manifest`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, Protocol
+
+from real2sim.formats.dataset import read_dataset
+from real2sim.formats.errors import UserInputError
+from real2sim.formats.outputs import publish_dir
+from real2sim.pipeline import manifest as mf
+from real2sim.pipeline.truth import build_truth, has_ground_truth
+
+if TYPE_CHECKING:
+    from real2sim.asset.build import AssetConfig
+    from real2sim.capture.pose_refinement import RefineConfig
+    from real2sim.evaluate.sweep import EvaluationConfig
+    from real2sim.reconstruct.stage import ReconstructConfig
+
+RESERVED = (mf.RUN_DIRNAME, "truth.json", "results")  # entries of ASSETDIR that the asset stage does not own
+RESULTS_DIRNAME = "results"
+# Evaluation settings that change how fast, not what: not part of the evaluate stage's key.
+_EVAL_SCHEDULING = ("jobs", "executor", "ray_address")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything `run` needs besides the dataset and ASSETDIR.
+
+    asset: the asset stage's settings (mass, SPECs, ...); ``flat_bottom`` is forced on
+    at support height 0 (the reconstruction's table plane). reconstruct: None -> the
+    stage's defaults. refine: None -> no pose refinement. evaluation: None -> no evaluation.
+    """
+
+    asset: "AssetConfig"
+    reconstruct: "ReconstructConfig | None" = None
+    refine: "RefineConfig | None" = None
+    evaluation: "EvaluationConfig | None" = None
+    device: str = "cpu"
+    seed: int = 0
+
+
+class RunProgress(Protocol):
+    def stage(self, name: str, index: int, count: int, status: str) -> None:
+        """``status``: "running", "skipped" (unchanged), "done"."""
+
+    def update(self, name: str, message: str, done: float, total: float) -> None:
+        """Work inside a stage; ``total`` 0 when unknown."""
+
+
+class _Quiet:
+    def stage(self, name, index, count, status):
+        pass
+
+    def update(self, name, message, done, total):
+        pass
+
+
+class StageFailed(RuntimeError):
+    """A stage raised; the finished stages stay recorded in run.json for a resume."""
+
+    def __init__(self, stage: str, cause: BaseException):
+        self.stage, self.cause = stage, cause
+        text = str(cause).splitlines()[0] if str(cause) else type(cause).__name__
+        super().__init__(f"stage {stage} failed: {type(cause).__name__}: {text}")
+
+
+@dataclass
+class RunResult:
+    asset_dir: Path
+    statuses: dict[str, str]  # stage -> "ran" | "skipped"
+    manifest_path: Path
+    truth: dict | None = None
+    urdf_paths: list[Path] = field(default_factory=list)
+
+
+def _dataset_files(root: Path) -> list[str]:
+    """What the stages read from a dataset: transforms.json, the frames' images and masks, ground_truth/."""
+    ds = read_dataset(root, check_files=False)
+    files = ["transforms.json"]
+    for frame in ds.frames:
+        files.append(frame.file_path)
+        if frame.mask_path:
+            files.append(frame.mask_path)
+    gt = root / "ground_truth"
+    if gt.is_dir():
+        files += [f"ground_truth/{rel}" for rel in mf.tree_files(gt)]
+    return files
+
+
+def check_dataset(dataset: Path) -> Path:
+    """The resolved dataset folder; UserInputError when it cannot be used as it is (one line)."""
+    dataset = Path(dataset).resolve()
+    ds = read_dataset(dataset)
+    if ds.extra.get("source") == "colmap":
+        raise UserInputError(f"{dataset} has no transforms.json: run needs poses in the robot frame, table at z = 0 "
+                             "(COLMAP-only captures are not supported by run yet)")
+    missing = [f.file_path for f in ds.frames if not f.mask_path]
+    if missing:
+        raise UserInputError(f"{len(missing)} of {len(ds.frames)} frames of {dataset} have no mask; make them first "
+                             f"with `real2sim mask {dataset} --method provided|maskrcnn|background`")
+    return dataset
+
+
+def _prepare_asset_dir(asset_dir: Path, dataset: Path, overwrite: bool) -> tuple[mf.Manifest, bool]:
+    """The manifest to resume from (or a fresh one) and whether ASSETDIR is new. Writes nothing yet."""
+    if asset_dir.exists() and not asset_dir.is_dir():
+        raise UserInputError(f"output path {asset_dir} exists and is not a folder")
+    if not asset_dir.exists():
+        return mf.Manifest(asset_dir, dataset), True
+    if overwrite:
+        return mf.Manifest(asset_dir, dataset), False
+    previous = mf.Manifest.load(asset_dir)
+    if previous is None:
+        raise UserInputError(f"output folder {asset_dir} exists and holds no run to resume; "
+                             "pass --overwrite to replace it")
+    if previous.dataset != dataset:
+        raise UserInputError(f"output folder {asset_dir} holds a run of another dataset ({previous.dataset}); "
+                             "pass --overwrite to replace it")
+    return previous, False
+
+
+def _remove_stale_temporaries(asset_dir: Path) -> None:
+    """Temporary folders and files a killed run left behind (names from mkdtemp: '.NAME.tmp-XXXX')."""
+    for folder in (asset_dir, asset_dir / mf.RUN_DIRNAME):
+        for path in folder.glob(".*"):
+            if ".tmp-" in path.name or ".old-" in path.name:
+                shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
+
+
+def _discard(asset_dir: Path) -> None:
+    old = asset_dir.with_name(f".{asset_dir.name}.old-{os.getpid()}")
+    asset_dir.rename(old)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+class _Runner:
+    """Runs the stages in order, skipping the current ones; records each finished stage."""
+
+    def __init__(self, manifest: mf.Manifest, progress: RunProgress, count: int):
+        self.manifest, self.progress, self.count = manifest, progress, count
+        self.index = 0
+        self.statuses: dict[str, str] = {}
+
+    def stage(self, name: str, inputs: dict, settings: Any, upstream: str | None, outputs: list[str] | None,
+              work: Callable[[], dict | None]) -> str:
+        """Run ``work`` unless the stage is current. ``outputs`` None: ``work`` returns {"outputs": [...]}."""
+        self.index += 1
+        key = mf.stage_key(inputs, settings, upstream)
+        if self.manifest.is_current(name, key):
+            self.statuses[name] = "skipped"
+            self.progress.stage(name, self.index, self.count, "skipped")
+            return key
+        self.progress.stage(name, self.index, self.count, "running")
+        self.manifest.forget(name)
+        with mf.timed() as clock:
+            try:
+                extra = work() or {}
+            except (KeyboardInterrupt, StageFailed):
+                raise
+            except UserInputError as exc:
+                raise UserInputError(f"stage {name}: {exc}") from exc
+            except Exception as exc:  # noqa: BLE001 -- one line naming the stage; the traceback is chained
+                raise StageFailed(name, exc) from exc
+        outputs = outputs if outputs is not None else extra.pop("outputs")
+        self.manifest.record(name, key=key, inputs=inputs, settings=settings, outputs=outputs,
+                             wall_seconds=clock[0], extra=extra)
+        self.statuses[name] = "ran"
+        self.progress.stage(name, self.index, self.count, "done")
+        return key
+
+
+def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, *, overwrite: bool = False,
+                 progress: RunProgress | None = None) -> RunResult:
+    """Run (or resume) every stage for ``dataset`` into ``asset_dir``; see the module docstring.
+
+    Bad input (unreadable dataset, frames without masks, an ASSETDIR that is neither
+    new, nor ``overwrite``, nor a run of this dataset) raises UserInputError before
+    anything is written. A failing stage raises StageFailed (or UserInputError naming
+    the stage); stages finished before it stay recorded for the next call.
+    """
+    from real2sim.reconstruct.stage import ReconstructConfig
+
+    progress = progress or _Quiet()
+    dataset = check_dataset(Path(dataset))
+    asset_dir = Path(asset_dir).resolve()
+    recon_cfg = config.reconstruct or ReconstructConfig()
+    recon_cfg.validate()
+    asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m)
+    manifest, created = _prepare_asset_dir(asset_dir, dataset, overwrite)
+    if overwrite and asset_dir.exists():
+        _discard(asset_dir)
+        created = True
+    asset_dir.mkdir(parents=True, exist_ok=True)
+    _remove_stale_temporaries(asset_dir)
+    manifest.save()
+    truth = has_ground_truth(dataset)
+    count = 2 + bool(config.refine) + truth + bool(config.evaluation)
+    runner = _Runner(manifest, progress, count)
+    try:
+        result = _run_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg, truth)
+    except BaseException:
+        if created and not manifest.data["stages"]:
+            shutil.rmtree(asset_dir, ignore_errors=True)  # nothing finished: leave nothing behind
+        raise
+    return result
+
+
+def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConfig, recon_cfg, asset_cfg,
+                with_truth: bool) -> RunResult:
+    run_dir = asset_dir / mf.RUN_DIRNAME
+    manifest, progress = runner.manifest, runner.progress
+    used, upstream = dataset, None
+    if config.refine is not None:
+        upstream = runner.stage("refine_poses", {"dataset": mf.files_digest(dataset, _dataset_files(dataset))},
+                                config.refine, None, [f"{mf.RUN_DIRNAME}/dataset"],
+                                lambda: _refine(dataset, run_dir, config.refine, progress))
+        used = run_dir / "dataset"
+    elif manifest.entry("refine_poses"):
+        manifest.forget("refine_poses")
+        shutil.rmtree(run_dir / "dataset", ignore_errors=True)
+
+    recon_dir = run_dir / "reconstruct"
+    upstream = runner.stage(
+        "reconstruct", {"dataset": mf.files_digest(used, _dataset_files(used))},
+        {"config": recon_cfg, "device": config.device, "seed": config.seed}, upstream,
+        [f"{mf.RUN_DIRNAME}/reconstruct/mesh.obj", f"{mf.RUN_DIRNAME}/reconstruct/report.json"],
+        lambda: _reconstruct(used, recon_dir, recon_cfg, config.device, config.seed, progress))
+
+    mesh_files = [f for f in mf.tree_files(recon_dir) if f != "report.json"]
+    asset_key = runner.stage("asset", {"mesh": mf.files_digest(recon_dir, mesh_files)}, asset_cfg, upstream, None,
+                             lambda: _asset(recon_dir / "mesh.obj", asset_dir, asset_cfg, manifest, progress))
+    asset_outputs = manifest.entry("asset")["outputs"]
+
+    truth = None
+    if with_truth:
+        gt_files = [f for f in _dataset_files(dataset) if f.startswith("ground_truth/")]
+        inputs = {"ground_truth": mf.files_digest(dataset, gt_files),
+                  "asset": mf.files_digest(asset_dir, ["physical_properties.json", "canonical_transform.json"]),
+                  "reconstruct_report": mf.files_digest(recon_dir, ["report.json"])}
+        runner.stage("truth", inputs, {"seed": asset_cfg.seed, "refined": config.refine is not None}, asset_key,
+                     ["truth.json"], lambda: _truth(dataset, used, asset_dir, recon_dir, config, asset_cfg.seed, manifest))
+        truth = json.loads((asset_dir / "truth.json").read_text())
+
+    if config.evaluation is not None:
+        files = [f"{top}/{rel}" for top in asset_outputs if (asset_dir / top).is_dir()
+                 for rel in mf.tree_files(asset_dir / top)]
+        files += [top for top in asset_outputs if (asset_dir / top).is_file()]
+        settings = {k: v for k, v in mf.settings_record(config.evaluation).items() if k not in _EVAL_SCHEDULING}
+        runner.stage("evaluate", {"asset": mf.files_digest(asset_dir, files)}, settings, asset_key,
+                     [RESULTS_DIRNAME], lambda: _evaluate(asset_dir, config.evaluation, progress))
+
+    urdfs = sorted(asset_dir.glob("*/model.urdf"))
+    return RunResult(asset_dir, runner.statuses, manifest.path, truth, urdfs)
+
+
+def _refine(dataset: Path, run_dir: Path, refine_cfg, progress: RunProgress) -> dict:
+    from real2sim.capture.pose_refinement import refine_poses
+
+    tmp = Path(tempfile.mkdtemp(prefix=".dataset.tmp-", dir=run_dir))
+    try:
+        shutil.copytree(dataset, tmp, dirs_exist_ok=True, ignore=shutil.ignore_patterns("refine_report.json"))
+        result = refine_poses(tmp, refine_cfg, lambda msg, frac: progress.update("refine_poses", msg, frac, 1.0))
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    publish_dir(tmp, run_dir / "dataset")
+    return {"result": result.to_json()}
+
+
+def _reconstruct(dataset: Path, out: Path, cfg, device: str, seed: int, progress: RunProgress) -> dict:
+    from real2sim.reconstruct.stage import reconstruct, write_reconstruction
+
+    result = reconstruct(dataset, cfg, device=device, seed=seed,
+                         progress=lambda msg, done, total: progress.update("reconstruct", msg, done, total))
+    write_reconstruction(result, out, overwrite=True)
+    report = result.report
+    return {"summary": {"faces": report["mesh"]["faces"], "stage_seconds": report["total_seconds"],
+                        "truth": report.get("truth")}}
+
+
+def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: RunProgress) -> dict:
+    """build_asset into ``.run/asset`` (whole or not at all), then move its entries into ASSETDIR."""
+    from real2sim.asset.build import build_asset
+
+    built = asset_dir / mf.RUN_DIRNAME / "asset"
+    build_asset(mesh, built, cfg, overwrite=True, log=lambda msg: progress.update("asset", msg, 0, 0))
+    # Downstream outputs of the previous asset are stale now.
+    for stage, path in (("truth", asset_dir / "truth.json"), ("evaluate", asset_dir / RESULTS_DIRNAME)):
+        manifest.forget(stage)
+        shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
+    shutil.rmtree(asset_dir / f".{RESULTS_DIRNAME}.partial", ignore_errors=True)
+    for entry in asset_dir.iterdir():
+        if entry.name not in RESERVED and not entry.name.startswith("."):
+            shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+    outputs = sorted(entry.name for entry in built.iterdir())
+    for name in outputs:
+        os.replace(built / name, asset_dir / name)
+    built.rmdir()
+    return {"outputs": outputs}
+
+
+def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, config: RunConfig, seed: int,
+           manifest: mf.Manifest) -> None:
+    report = json.loads((recon_dir / "report.json").read_text())
+    refine_entry = manifest.entry("refine_poses") if config.refine is not None else None
+    refinement = refine_entry.get("result", {}) if refine_entry else None
+    record = build_truth(dataset, used, asset_dir, report, refinement=refinement, seed=seed)
+    mf.write_json_atomic(asset_dir / "truth.json", record)
+
+
+def _evaluate(asset_dir: Path, cfg, progress: RunProgress) -> dict:
+    from real2sim.evaluate.sweep import evaluate
+
+    result = evaluate([asset_dir], asset_dir / RESULTS_DIRNAME, cfg, progress=False, overwrite=True,
+                      log=lambda msg: progress.update("evaluate", msg, 0, 0))
+    return {"summary": {"simulated": result.simulated, "failed": result.failed}}

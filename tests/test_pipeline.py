@@ -1,0 +1,252 @@
+"""`real2sim run` (real2sim.pipeline): one real, small capture of the can, chained through the stages.
+
+The capture has 60 views at 120x90 px: with fewer, the visual hull of the can does not
+close (see tests/reconstruct/conftest.py). Reconstruction is the visual hull on a 64-voxel
+grid with 4000 faces; the collision representation is `mesh` (no fitting) or `boxes:4`
+with 20 iterations, so the suite stays in the default run. The ground-truth comparison of
+the reconstruct stage costs ~20 s on 2 loaded cores, so only the first run keeps
+ground_truth/; the other tests use a copy without it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import pytest
+
+from real2sim.cli import main
+
+FAST = ["--backend", "hull", "--voxels", "64", "--max-faces", "4000", "--texture-px", "256"]
+
+
+def _capture(out: Path) -> Path:
+    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.geometry.objects import make_textured_object
+
+    capture(make_textured_object("can"), out,
+            CaptureConfig(views=60, width=120, height=90, pose_noise_mm=0, pose_noise_deg=0))
+    return out
+
+
+@pytest.fixture(scope="module")
+def can_ds(tmp_path_factory) -> Path:
+    return _capture(tmp_path_factory.mktemp("pipeline") / "can_ds")
+
+
+@pytest.fixture(scope="module")
+def can_ds_no_truth(can_ds, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("pipeline_nogt") / "can_ds"
+    shutil.copytree(can_ds, out, ignore=shutil.ignore_patterns("ground_truth"))
+    return out
+
+
+def run_cli(capsys, *args) -> tuple[int, str, str]:
+    try:
+        code = main(["run", *map(str, args)])
+    except SystemExit as exc:  # argparse's own checks (the mass's type) exit from the parser
+        code = exc.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def manifest(asset_dir: Path) -> dict:
+    return json.loads((asset_dir / ".run" / "run.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def first_run(can_ds, tmp_path_factory) -> tuple[Path, str]:
+    out = tmp_path_factory.mktemp("pipeline_run") / "can_asset"
+    code = main(["run", str(can_ds), "--mass", "0.35", "--out", str(out), "--collision", "mesh", *FAST])
+    assert code == 0
+    return out, json.dumps(manifest(out), sort_keys=True)
+
+
+def test_run_writes_a_drake_loadable_asset_manifest_and_truth(first_run, can_ds):
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    out, _ = first_run
+    for name in ("asset_config.json", "physical_properties.json", "canonical_transform.json", "visual/model.obj",
+                 "mesh/model.urdf", "mesh/collision.json", ".run/reconstruct/mesh.obj", ".run/reconstruct/report.json"):
+        assert (out / name).is_file(), name
+    plant = MultibodyPlant(0.0)
+    models = Parser(plant).AddModels(str(out / "mesh" / "model.urdf"))
+    plant.Finalize()
+    assert len(models) == 1 and plant.num_bodies() >= 2
+    body = [plant.get_body(i) for i in plant.GetBodyIndices(models[0])][0]
+    assert body.default_mass() == pytest.approx(0.35)
+
+    record = manifest(out)
+    assert record["dataset"] == str(can_ds.resolve())
+    assert list(record["stages"]) == ["reconstruct", "asset", "truth"]
+    for stage in record["stages"].values():
+        assert stage["wall_seconds"] > 0 and stage["peak_memory_mb"] > 50
+        assert stage["outputs"] and len(stage["key"]) == 64
+    dataset_digest = record["stages"]["reconstruct"]["inputs"]["dataset"]
+    assert dataset_digest["files"] >= 121 and len(dataset_digest["sha256"]) == 64  # transforms + 60 images + 60 masks
+    assert record["stages"]["reconstruct"]["settings"]["config"]["backend"] == "hull"
+    assert record["stages"]["asset"]["settings"]["flat_bottom"] is True
+    assert "mesh" in record["stages"]["asset"]["outputs"]
+
+    truth = json.loads((out / "truth.json").read_text())
+    rec, phys = truth["reconstruction"], truth["physical_properties"]
+    assert rec["chamfer_mm"] < 2.0 and rec["iou"] > 0.9 and rec["fscore_1mm"] > 0.8
+    assert truth["camera_poses"]["before_refinement"]["rot_max_deg"] < 1e-3  # a noise-free capture
+    assert truth["camera_poses"]["after_refinement"] is None
+    assert truth["masks_iou"]["mean"] == pytest.approx(1.0)
+    assert abs(truth["frames"]["true_mesh_lowest_z_world_m"]) < 1e-6  # the can stands on the table
+    assert 0 <= phys["com_error_mm"] < 3.0
+    assert phys["inertia_eigenvalue_max_rel_error"] < 0.1
+    assert phys["inertia_tensor_rel_frobenius_error"] < 0.1  # same axes: the frames agree
+    assert math.isclose(phys["mass_kg"], 0.35)
+
+
+def test_second_identical_run_skips_every_stage(first_run, can_ds, capsys):
+    out, before = first_run
+    code, stdout, _ = run_cli(capsys, can_ds, "--mass", "0.35", "--out", out, "--collision", "mesh", *FAST)
+    assert code == 0 and "none, all unchanged" in stdout
+    assert json.dumps(manifest(out), sort_keys=True) == before  # nothing recorded again
+
+
+def test_changing_collision_refits_without_reconstructing(first_run, can_ds, tmp_path):
+    from real2sim.cli import build_parser
+    from real2sim.cli.run import config_from_args
+    from real2sim.pipeline.run import run_pipeline
+
+    out = tmp_path / "can_asset"
+    shutil.copytree(first_run[0], out)
+    mesh_before = (out / ".run" / "reconstruct" / "mesh.obj").read_bytes()
+    recon_before = manifest(out)["stages"]["reconstruct"]
+    args = build_parser().parse_args(["run", str(can_ds), "--mass", "0.35", "--out", str(out), *FAST,
+                                      "--collision", "boxes:4", "--iterations", "20"])
+    result = run_pipeline(can_ds, out, config_from_args(args))
+    assert result.statuses == {"reconstruct": "skipped", "asset": "ran", "truth": "ran"}
+    assert manifest(out)["stages"]["reconstruct"] == recon_before
+    assert (out / ".run" / "reconstruct" / "mesh.obj").read_bytes() == mesh_before
+    assert (out / "boxes_4" / "model.urdf").is_file() and not (out / "mesh").exists()
+    assert manifest(out)["stages"]["asset"]["settings"]["specs"][0]["text"] == "boxes:4"
+
+
+def _config(**asset_kw):
+    from real2sim.asset.build import AssetConfig
+    from real2sim.formats.spec import parse_spec
+    from real2sim.pipeline.run import RunConfig
+    from real2sim.reconstruct.stage import ReconstructConfig
+
+    specs = tuple(parse_spec(s) for s in asset_kw.pop("specs", ("mesh",)))
+    return RunConfig(asset=AssetConfig(mass_kg=0.35, specs=specs, **asset_kw),
+                     reconstruct=ReconstructConfig(backend="hull", hull_voxels=64, max_faces=4000, texture_px=256))
+
+
+def test_interrupted_run_resumes_without_redoing_finished_stages(can_ds_no_truth, tmp_path, monkeypatch):
+    import real2sim.asset.build as asset_build
+    from real2sim.pipeline.run import run_pipeline
+
+    real_build = asset_build.build_asset
+    calls = []
+
+    def interrupted_once(*args, **kwargs):  # fault injection: Ctrl-C inside the asset stage, once
+        calls.append(1)
+        if len(calls) == 1:
+            real_build(*args, **kwargs)  # even after the asset is built, before it is recorded
+            raise KeyboardInterrupt
+        return real_build(*args, **kwargs)
+
+    monkeypatch.setattr(asset_build, "build_asset", interrupted_once)
+    out = tmp_path / "can_asset"
+    with pytest.raises(KeyboardInterrupt):
+        run_pipeline(can_ds_no_truth, out, _config())
+    record = manifest(out)
+    assert list(record["stages"]) == ["reconstruct"]
+    assert not (out / "mesh").exists() and not (out / "physical_properties.json").exists()
+    (out / ".run" / ".asset.tmp-killed").mkdir()  # what a killed process leaves behind
+
+    result = run_pipeline(can_ds_no_truth, out, _config())
+    assert result.statuses == {"reconstruct": "skipped", "asset": "ran"}
+    assert manifest(out)["stages"]["reconstruct"] == record["stages"]["reconstruct"]
+    assert (out / "mesh" / "model.urdf").is_file() and not (out / ".run" / ".asset.tmp-killed").exists()
+    assert len(calls) == 2
+
+
+def test_failed_stage_is_named_and_finished_stages_kept(can_ds_no_truth, tmp_path, monkeypatch, capsys):
+    import real2sim.asset.build as asset_build
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("fitting exploded")
+
+    monkeypatch.setattr(asset_build, "build_asset", broken)
+    out = tmp_path / "can_asset"
+    code, _, err = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, "--collision", "mesh", *FAST)
+    assert code == 1
+    assert "stage asset failed" in err and "fitting exploded" in err
+    assert list(manifest(out)["stages"]) == ["reconstruct"]
+    monkeypatch.undo()
+    code, stdout, _ = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, "--collision", "mesh", *FAST)
+    assert code == 0 and "stages run: asset" in stdout
+
+
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(can_ds_no_truth, tmp_path, capsys):
+    no_masks = tmp_path / "no_masks"
+    shutil.copytree(can_ds_no_truth, no_masks)
+    data = json.loads((no_masks / "transforms.json").read_text())
+    for frame in data["frames"]:
+        frame.pop("mask_path", None)
+    (no_masks / "transforms.json").write_text(json.dumps(data))
+    other = tmp_path / "other_folder"
+    other.mkdir()
+    (other / "keep.txt").write_text("mine")
+    ds = can_ds_no_truth
+    cases = {
+        "missing dataset": [tmp_path / "nope", "--mass", "0.3"],
+        "not a dataset": [other, "--mass", "0.3"],
+        "zero mass": [ds, "--mass", "0"],
+        "negative mass": [ds, "--mass", "-1"],
+        "nan mass": [ds, "--mass", "nan"],
+        "inf mass": [ds, "--mass", "inf"],
+        "unknown spec": [ds, "--mass", "0.3", "--collision", "pyramids:3"],
+        "no masks": [no_masks, "--mass", "0.3"],
+    }
+    for label, args in cases.items():
+        out = tmp_path / f"out_{label.replace(' ', '_')}"
+        code, _, err = run_cli(capsys, *args, "--out", out, *FAST)
+        assert code == 2, label
+        assert len(err.strip().splitlines()) == 1, (label, err)
+        assert not out.exists(), label
+    code, _, err = run_cli(capsys, no_masks, "--mass", "0.3", "--out", tmp_path / "x", *FAST)
+    assert "real2sim mask" in err
+    code, _, err = run_cli(capsys, ds, "--mass", "0.3", "--out", other, *FAST)
+    assert code == 2 and "--overwrite" in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in other.iterdir()) == ["keep.txt"]
+
+
+def test_refine_poses_works_on_a_copy_and_leaves_the_dataset_alone(can_ds_no_truth, tmp_path, capsys):
+    before = {p.relative_to(can_ds_no_truth): p.read_bytes() for p in can_ds_no_truth.rglob("*") if p.is_file()}
+    out = tmp_path / "can_asset"
+    code, stdout, _ = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, "--collision", "mesh",
+                              "--refine-poses", *FAST)
+    assert code == 0 and "stages run: refine_poses, reconstruct, asset" in stdout
+    after = {p.relative_to(can_ds_no_truth): p.read_bytes() for p in can_ds_no_truth.rglob("*") if p.is_file()}
+    assert after == before  # not one byte of the user's dataset written
+    copy = out / ".run" / "dataset"
+    assert (copy / "transforms.json").is_file() and (copy / "refine_report.json").is_file()
+    record = manifest(out)["stages"]
+    assert record["refine_poses"]["result"]["num_frames"] == 60
+    assert record["reconstruct"]["inputs"]["dataset"]["files"] >= 121
+
+
+def test_evaluate_after_the_asset_runs_only_the_evaluation(first_run, can_ds, tmp_path, capsys):
+    from real2sim.formats.results import read_summary_csv
+
+    out = tmp_path / "can_asset"
+    shutil.copytree(first_run[0], out)
+    code, stdout, _ = run_cli(capsys, can_ds, "--mass", "0.35", "--out", out, "--collision", "mesh", *FAST,
+                              "--evaluate", "--tasks", "push", "--contact", "point", "--runs", "1", "--jobs", "1",
+                              "--duration-scale", "0.2")
+    assert code == 0 and "stages run: evaluate" in stdout
+    rows = read_summary_csv(out / "results" / "summary.csv")
+    assert [r["representation"] for r in rows] == ["mesh_point"] or rows
+    assert manifest(out)["stages"]["evaluate"]["outputs"] == ["results"]
+    assert "jobs" not in manifest(out)["stages"]["evaluate"]["settings"]
