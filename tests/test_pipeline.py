@@ -250,3 +250,32 @@ def test_evaluate_after_the_asset_runs_only_the_evaluation(first_run, can_ds, tm
     assert [r["representation"] for r in rows] == ["mesh_point"] or rows
     assert manifest(out)["stages"]["evaluate"]["outputs"] == ["results"]
     assert "jobs" not in manifest(out)["stages"]["evaluate"]["settings"]
+
+
+def test_assetdir_of_another_dataset_is_refused(can_ds_no_truth, tmp_path, capsys):
+    out = tmp_path / "can_asset"
+    (out / ".run").mkdir(parents=True)
+    foreign = {"version": 1, "dataset": str(tmp_path / "another_dataset"), "stages": {}}
+    (out / ".run" / "run.json").write_text(json.dumps(foreign))
+    code, _, err = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, *FAST)
+    assert code == 2 and "another dataset" in err and len(err.strip().splitlines()) == 1
+    assert json.loads((out / ".run" / "run.json").read_text()) == foreign
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == [".run", ".run/run.json"]
+
+
+@pytest.mark.slow
+def test_tiny_field_run(can_ds_no_truth, tmp_path):
+    """The radiance-field backend through run (a tiny field: ~2 min on 2 loaded cores, hence slow)."""
+    from dataclasses import replace
+
+    from real2sim.pipeline.run import run_pipeline
+    from real2sim.reconstruct.train import FieldConfig
+
+    config = _config()
+    field = FieldConfig(coarse_voxels=24, fine_voxels=48, coarse_steps=40, fine_steps=80, rays_per_step=1024)
+    config = replace(config, reconstruct=replace(config.reconstruct, backend="field", field=field))
+    result = run_pipeline(can_ds_no_truth, tmp_path / "can_asset", config)
+    assert result.statuses == {"reconstruct": "ran", "asset": "ran"}
+    report = json.loads((tmp_path / "can_asset" / ".run" / "reconstruct" / "report.json").read_text())
+    assert report["backend"] == "field" and report["field_grid"] == [36, 36, 48]
+    assert (tmp_path / "can_asset" / "mesh" / "model.urdf").is_file()

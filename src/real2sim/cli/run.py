@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     from real2sim.pipeline.run import StageFailed, run_pipeline
 
     config = config_from_args(args)
-    console = Console(stderr=True)
+    console = Console(stderr=True, log_path=False)
     columns = (SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
     try:
         with Progress(*columns, console=console, transient=True) as bar:
@@ -140,6 +140,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"real2sim run: error: {exc}; finished stages are kept in {Path(args.out) / '.run'}: "
               "fix the cause and run the same command again to resume", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print(f"real2sim run: interrupted; finished stages are kept in {Path(args.out) / '.run'}: "
+              "run the same command again to resume", file=sys.stderr)
+        return 130
     ran = [s for s, status in result.statuses.items() if status == "ran"]
     print(f"asset: {result.asset_dir} (stages run: {', '.join(ran) or 'none, all unchanged'})")
     for urdf in result.urdf_paths:

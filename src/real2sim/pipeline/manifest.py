@@ -13,6 +13,13 @@ and every output it recorded is still present. The key is the SHA-256 of
 * the **upstream** stage's key, so that a stage that runs again makes every
   stage after it run again, even when its outputs come out byte-identical.
 
+Memory: each stage's ``peak_memory_mb`` is its own peak resident memory. On Linux the
+kernel's high-water mark is reset when a stage starts (``/proc/self/clear_refs``) and read
+(VmHWM) when it ends; note that this also resets what ``getrusage(RUSAGE_SELF).ru_maxrss``
+reports to the rest of the process. Elsewhere it is the process's peak so far
+(ru_maxrss); ``peak_memory_scope`` says which. Worker processes (the evaluation's pool)
+are in ``children_peak_memory_mb``.
+
 A stage is recorded only after its outputs are in place (each is written to a
 temporary name and renamed), and run.json itself is replaced atomically, so a
 Ctrl-C or a killed process leaves the finished stages recorded and nothing else.
@@ -107,10 +114,32 @@ def write_json_atomic(path: Path, data: Any) -> None:
         raise
 
 
-def peak_memory_mb() -> float:
-    """Peak resident memory of this process so far (ru_maxrss), MiB."""
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+def peak_memory_mb(who: int = resource.RUSAGE_SELF) -> float:
+    """Peak resident memory so far (ru_maxrss) of this process (or its finished children), MiB."""
+    peak = resource.getrusage(who).ru_maxrss
     return round(peak / (1024 * 1024 if sys.platform == "darwin" else 1024), 1)
+
+
+def reset_stage_peak() -> bool:
+    """Reset the kernel's resident high-water mark (Linux: ``5`` into /proc/self/clear_refs), so that
+    :func:`stage_peak_mb` measures one stage; False where that is not possible."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def stage_peak_mb() -> float | None:
+    """VmHWM of /proc/self/status (MiB): the peak resident memory since :func:`reset_stage_peak`."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return round(int(line.split()[1]) / 1024, 1)
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
 
 
 class Manifest:
@@ -153,14 +182,19 @@ class Manifest:
         return all((self.asset_dir / rel).exists() for rel in entry.get("outputs", []))
 
     def record(self, stage: str, *, key: str, inputs: dict, settings: Any, outputs: list[str],
-               wall_seconds: float, extra: dict | None = None) -> None:
+               wall_seconds: float, stage_peak: float | None = None, extra: dict | None = None) -> None:
+        """``stage_peak``: this stage's own peak resident memory (MiB) when it could be measured;
+        ``peak_memory_mb`` falls back to the process's peak so far (ru_maxrss)."""
         self.data["stages"][stage] = {
             "key": key,
             "inputs": inputs,
             "settings": settings_record(settings),
             "outputs": outputs,
             "wall_seconds": round(wall_seconds, 3),
-            "peak_memory_mb": peak_memory_mb(),
+            "peak_memory_mb": stage_peak if stage_peak is not None else peak_memory_mb(),
+            "peak_memory_scope": "stage (VmHWM reset at its start)" if stage_peak is not None
+            else "process so far (ru_maxrss)",
+            "children_peak_memory_mb": peak_memory_mb(resource.RUSAGE_CHILDREN),
             "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             **(extra or {}),
         }

@@ -110,6 +110,8 @@ def _dataset_files(root: Path) -> list[str]:
 def check_dataset(dataset: Path) -> Path:
     """The resolved dataset folder; UserInputError when it cannot be used as it is (one line)."""
     dataset = Path(dataset).resolve()
+    if dataset.is_file() and dataset.name == "transforms.json":
+        dataset = dataset.parent
     ds = read_dataset(dataset)
     if ds.extra.get("source") == "colmap":
         raise UserInputError(f"{dataset} has no transforms.json: run needs poses in the robot frame, table at z = 0 "
@@ -172,6 +174,7 @@ class _Runner:
             return key
         self.progress.stage(name, self.index, self.count, "running")
         self.manifest.forget(name)
+        measured = mf.reset_stage_peak()
         with mf.timed() as clock:
             try:
                 extra = work() or {}
@@ -183,7 +186,8 @@ class _Runner:
                 raise StageFailed(name, exc) from exc
         outputs = outputs if outputs is not None else extra.pop("outputs")
         self.manifest.record(name, key=key, inputs=inputs, settings=settings, outputs=outputs,
-                             wall_seconds=clock[0], extra=extra)
+                             wall_seconds=clock[0], stage_peak=mf.stage_peak_mb() if measured else None,
+                             extra=extra)
         self.statuses[name] = "ran"
         self.progress.stage(name, self.index, self.count, "done")
         return key
