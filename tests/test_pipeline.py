@@ -208,7 +208,12 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(can_ds_no_truth, tmp
         "inf mass": [ds, "--mass", "inf"],
         "unknown spec": [ds, "--mass", "0.3", "--collision", "pyramids:3"],
         "no masks": [no_masks, "--mass", "0.3"],
+        "cuda without a GPU": [ds, "--mass", "0.3", "--device", "cuda"],
     }
+    import torch
+
+    if torch.cuda.is_available():
+        del cases["cuda without a GPU"]
     for label, args in cases.items():
         out = tmp_path / f"out_{label.replace(' ', '_')}"
         code, _, err = run_cli(capsys, *args, "--out", out, *FAST)
@@ -217,6 +222,8 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(can_ds_no_truth, tmp
         assert not out.exists(), label
     code, _, err = run_cli(capsys, no_masks, "--mass", "0.3", "--out", tmp_path / "x", *FAST)
     assert "real2sim mask" in err
+    code, _, err = run_cli(capsys, ds, "--mass", "0.3", "--out", ds / "asset_inside", *FAST)
+    assert code == 2 and not (ds / "asset_inside").exists()
     code, _, err = run_cli(capsys, ds, "--mass", "0.3", "--out", other, *FAST)
     assert code == 2 and "--overwrite" in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in other.iterdir()) == ["keep.txt"]

@@ -210,6 +210,8 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     recon_cfg = config.reconstruct or ReconstructConfig()
     recon_cfg.validate()
     asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m)
+    if asset_dir.is_relative_to(dataset) or dataset.is_relative_to(asset_dir):
+        raise UserInputError(f"ASSETDIR {asset_dir} and the dataset {dataset} must not contain each other")
     manifest, created = _prepare_asset_dir(asset_dir, dataset, overwrite)
     if overwrite and asset_dir.exists():
         _discard(asset_dir)
@@ -264,6 +266,9 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
         runner.stage("truth", inputs, {"seed": asset_cfg.seed, "refined": config.refine is not None}, asset_key,
                      ["truth.json"], lambda: _truth(dataset, used, asset_dir, recon_dir, config, asset_cfg.seed, manifest))
         truth = json.loads((asset_dir / "truth.json").read_text())
+    elif manifest.entry("truth"):  # the dataset lost its ground_truth/: a stale truth.json would mislead
+        manifest.forget("truth")
+        (asset_dir / "truth.json").unlink(missing_ok=True)
 
     if config.evaluation is not None:
         files = [f"{top}/{rel}" for top in asset_outputs if (asset_dir / top).is_dir()
