@@ -9,7 +9,7 @@ true object's concave space left empty (a mug's cavity), held-out PSNR of the fi
 and of the textured mesh, wall and CPU seconds, and peak memory.
 
     python benchmarks/bench_reconstruct.py                  # bottle, can, mug: 100 views, 320x240
-    python benchmarks/bench_reconstruct.py --objects bottle --tsdf
+    python benchmarks/bench_reconstruct.py --objects bottle --tsdf bottle
     python benchmarks/bench_reconstruct.py --quick          # 40 views at 160x120, short training
 
 Writes docs/benchmarks/reconstruct.md via benchmarks/common.py.
@@ -41,7 +41,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--views", type=int, default=100)
     ap.add_argument("--width", type=int, default=320)
     ap.add_argument("--height", type=int, default=240)
-    ap.add_argument("--tsdf", action="store_true", help="also extract the field's surface by TSDF fusion")
+    ap.add_argument("--tsdf", default="", metavar="OBJECTS",
+                    help="comma-separated objects on which the field's surface is also extracted by TSDF fusion")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
@@ -62,10 +63,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.views, args.width, args.height = 40, 160, 120
         field_cfg = replace(field_cfg, coarse_voxels=40, fine_voxels=80, coarse_steps=150, fine_steps=300)
-    variants = [("field", ReconstructConfig(field=field_cfg))]
-    if args.tsdf:
-        variants.append(("field (tsdf)", ReconstructConfig(field=field_cfg, extraction="tsdf")))
-    variants.append(("hull", ReconstructConfig(backend="hull")))
+    variants = [("field", ReconstructConfig(field=field_cfg)),
+                ("field (tsdf)", ReconstructConfig(field=field_cfg, extraction="tsdf")),
+                ("hull", ReconstructConfig(backend="hull"))]
 
     rows, pose_rows = [], []
     with tempfile.TemporaryDirectory(prefix="bench-reconstruct-") as tmp:
@@ -81,6 +81,8 @@ def main(argv: list[str] | None = None) -> int:
                               ref.rot_error_after_deg, ref.trans_error_before_mm, ref.trans_error_after_mm,
                               time.perf_counter() - t0])
             for label, cfg in variants:
+                if cfg.extraction == "tsdf" and name not in args.tsdf.split(","):
+                    continue
                 print(f"{name}: {label}", flush=True)
                 cpu0, wall0 = _cpu_s(), time.perf_counter()
                 result = reconstruct(ds, cfg, device=args.device, seed=args.seed)

@@ -19,6 +19,9 @@ import trimesh
 from real2sim.formats.errors import UserInputError
 
 
+_ON_TABLE_TOLERANCE_M = 1e-6
+
+
 def read_dataparser_transforms(path: Path | str) -> tuple[np.ndarray, float]:
     """(4x4 transform, scale) from nerfstudio's ``dataparser_transforms.json``; UserInputError when malformed."""
     path = Path(path)
@@ -62,7 +65,8 @@ def import_nerfstudio_mesh(mesh_path: Path | str, dataparser_transforms: Path | 
 def clean_mesh(mesh: trimesh.Trimesh, *, table_z_m: float, min_part_volume_fraction: float,
                largest_parts) -> trimesh.Trimesh:
     """Drop faces wholly below the table plane and the small disconnected parts (floaters, the table)."""
-    below = mesh.vertices[:, 2] < table_z_m
+    # a bottom lying on the table comes back a few ulp below it from the inverse transform
+    below = mesh.vertices[:, 2] < table_z_m - _ON_TABLE_TOLERANCE_M
     keep = ~below[mesh.faces].all(axis=1)
     if not keep.any():
         raise UserInputError(f"the mesh lies wholly below the table plane z = {table_z_m} m in the dataset's frame: "

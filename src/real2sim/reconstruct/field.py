@@ -126,10 +126,12 @@ class VoxelRadianceField(torch.nn.Module):
 
     # -- rendering -------------------------------------------------------------------------------
     def render(self, origins: torch.Tensor, directions: torch.Tensor, *, step_voxels: float = 0.5,
-               jitter: torch.Tensor | None = None, max_distance_m: float | None = None,
+               jitter: torch.Tensor | None = None, view_dependent: bool = True, max_distance_m: float | None = None,
                t_range_m: tuple[torch.Tensor, torch.Tensor] | None = None) -> RayBatch:
         """Render rays (R, 3) world origins and unit directions; ``jitter`` (R,) in [0, 1) shifts the samples.
 
+        ``view_dependent=False`` hides the viewing direction from the colour decoder (a
+        Lambertian field, which cannot fake a cavity's look on a lid across it).
         ``max_distance_m`` ends every ray that far from its origin; ``t_range_m`` (R,), (R,)
         limits each ray to where it may meet the object (it is also clipped to the grid's box).
 
@@ -159,7 +161,7 @@ class VoxelRadianceField(torch.nn.Module):
         dense = torch.zeros(rays, width, device=device, dtype=tau.dtype).index_put((ray_of, slot), tau)
         before = (torch.cumsum(dense, dim=1) - dense)[ray_of, slot]
         weights = torch.exp(-before) * (1.0 - torch.exp(-tau))
-        colour = self.colour(values[:, 1:], directions[ray_of])
+        colour = self.colour(values[:, 1:], directions[ray_of] if view_dependent else torch.zeros_like(points))
         zeros = torch.zeros(rays, device=device, dtype=tau.dtype)
         rgb = torch.zeros(rays, 3, device=device, dtype=tau.dtype).index_add(0, ray_of, weights[:, None] * colour)
         return RayBatch(rgb=rgb, opacity=zeros.index_add(0, ray_of, weights),
@@ -217,7 +219,9 @@ class VoxelRadianceField(torch.nn.Module):
         with torch.no_grad():
             centres = torch.from_numpy(grid.centres().astype(np.float32)).to(self.device)
             values = torch.cat([self.interpolate(c) for c in centres.split(262_144)])
-            finer.density_table.copy_(values[:, 0])
+            # density is per voxel length: the same medium has less of it per (smaller) voxel
+            per_voxel = F.softplus(values[:, 0]) * (grid.voxel_m / self.grid.voxel_m)
+            finer.density_table.copy_(torch.log(torch.expm1(per_voxel.clamp_min(1e-6))))
             finer.feature_table.copy_(values[:, 1:])
         finer.decoder.load_state_dict(self.decoder.state_dict())
         return finer

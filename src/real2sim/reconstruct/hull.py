@@ -21,6 +21,9 @@ from real2sim.formats.errors import UserInputError
 from real2sim.reconstruct.views import PosedViews, common_look_at_point, project_torch
 
 
+MIN_VOTES = 3
+
+
 @dataclass(frozen=True)
 class VoxelGrid:
     """An axis-aligned grid: voxel (i, j, k) has its centre at ``origin_m + (i, j, k) * voxel_m``."""
@@ -56,8 +59,12 @@ class VoxelGrid:
 
 
 def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction: float,
-                      chunk: int = 100_000) -> np.ndarray:
-    """(P,) float32 silhouette score of world points: see the module docstring."""
+                      chunk: int = 100_000, min_votes: int = MIN_VOTES) -> np.ndarray:
+    """(P,) float32 silhouette score of world points: see the module docstring.
+
+    A point fewer than ``min_votes`` cameras see scores 0: nothing constrains it, and
+    counting it as inside would let the hull run off where the views are sparse.
+    """
     k = views.intrinsics
     masks = torch.from_numpy(views.mask[:, None])  # (V, 1, H, W)
     w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
@@ -71,7 +78,9 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
             vals = torch.nn.functional.grid_sample(masks, grid[:, None], mode="bilinear", align_corners=False)[:, 0, 0]
             no_vote = (z <= 0) | (grid.abs() > 1).any(dim=-1)
             vals = vals.masked_fill(no_vote, 1.0)
-            out[start:start + chunk] = torch.kthvalue(vals, rank, dim=0).values.numpy()
+            score = torch.kthvalue(vals, rank, dim=0).values
+            seen = (~no_vote).sum(dim=0)
+            out[start:start + chunk] = torch.where(seen >= min_votes, score, torch.zeros_like(score)).numpy()
     return out
 
 

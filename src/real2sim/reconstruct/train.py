@@ -38,15 +38,16 @@ class FieldConfig:
     coarse_steps: int = 400
     fine_steps: int = 800
     rays_per_step: int = 4096
-    lr_density: float = 0.1
+    lr_density: float = 0.02
     lr_features: float = 0.1
     lr_decoder: float = 3e-3
-    init_density: float = 2.0
+    init_density: float = 4.0
     feature_channels: int = 12
     step_voxels: float = 0.5
     hull_outlier_fraction: float = 0.03
     carve_outlier_fraction: float = 0.1
     carve_dilation_voxels: int = 2
+    view_dependent: bool = True
     mask_dilation_px: int = 3
     background_ray_fraction: float = 0.05
 
@@ -185,6 +186,7 @@ def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, ste
         jitter = torch.rand(config.rays_per_step, generator=gen).to(device)
         background = torch.rand(config.rays_per_step, 3, generator=gen).to(device)
         out = field.render(pool.origins[pick], pool.directions[pick], step_voxels=config.step_voxels,
+                           view_dependent=config.view_dependent,
                            jitter=jitter, t_range_m=(t_in[pick], t_out[pick]))
         m = pool.mask[pick][:, None]
         target = m * pool.rgb[pick] + (1 - m) * background
