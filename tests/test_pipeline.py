@@ -286,3 +286,21 @@ def test_tiny_field_run(can_ds_no_truth, tmp_path):
     report = json.loads((tmp_path / "can_asset" / ".run" / "reconstruct" / "report.json").read_text())
     assert report["backend"] == "field" and report["field_grid"] == [36, 36, 48]
     assert (tmp_path / "can_asset" / "mesh" / "model.urdf").is_file()
+
+
+def test_missing_masks_are_made_with_mask_method_on_a_copy(can_ds_no_truth, tmp_path, capsys):
+    no_masks = tmp_path / "no_masks"
+    shutil.copytree(can_ds_no_truth, no_masks)
+    data = json.loads((no_masks / "transforms.json").read_text())
+    for frame in data["frames"]:
+        frame.pop("mask_path", None)
+    (no_masks / "transforms.json").write_text(json.dumps(data))
+    before = (no_masks / "transforms.json").read_bytes()
+    out = tmp_path / "can_asset"
+    code, stdout, _ = run_cli(capsys, no_masks, "--mass", "0.35", "--out", out, "--collision", "mesh", "--mask",
+                              "provided", *FAST)
+    assert code == 0 and "stages run: masks, reconstruct, asset" in stdout
+    assert (no_masks / "transforms.json").read_bytes() == before
+    masked = json.loads((out / ".run" / "masked" / "transforms.json").read_text())
+    assert all(frame.get("mask_path") for frame in masked["frames"])
+    assert manifest(out)["stages"]["masks"]["settings"]["method"] == "provided"

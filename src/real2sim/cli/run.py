@@ -22,7 +22,7 @@ def register(sub) -> None:
         "optional pose refinement (on a copy in ASSETDIR/.run/dataset; the dataset is never modified), "
         "reconstruction (ASSETDIR/.run/reconstruct: mesh.obj, report.json), the asset (flat bottom at the table "
         "plane, canonical pose, inertia, one folder per SPEC with model.urdf), ASSETDIR/truth.json when the "
-        "dataset has ground_truth/, and with --evaluate the Drake evaluation into ASSETDIR/results. "
+        "dataset has ground_truth/ (pose, mask, reconstruction and mass-property errors), and with --evaluate the Drake evaluation into ASSETDIR/results. "
         "ASSETDIR/.run/run.json records each stage's input hashes, settings, outputs, wall seconds and peak "
         "memory; running again skips the unchanged stages and redoes those downstream of a change "
         "(a new --collision refits without reconstructing), and resumes an interrupted run.",
@@ -34,6 +34,14 @@ def register(sub) -> None:
                    help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
     p.add_argument("--overwrite", action="store_true", help="discard ASSETDIR (and its cached stages) first")
     p.add_argument("--refine-poses", action="store_true", help="refine the camera poses with COLMAP first")
+    p.add_argument("--mask", choices=["provided", "maskrcnn", "background"], default=None, metavar="METHOD",
+                   help="make the masks first (on a copy in ASSETDIR/.run/masked): provided (masks/<image stem>.png), "
+                   "maskrcnn (needs --mask-weights), background (background/<image name>); default: use the "
+                   "masks the frames name, all frames must have one")
+    p.add_argument("--mask-weights", type=Path, default=None, metavar="PATH",
+                   help="local Mask R-CNN weights file for --mask maskrcnn")
+    p.add_argument("--mask-threshold", type=float, default=12.0,
+                   help="--mask background: difference threshold, 0-255 (default 12)")
     g = p.add_argument_group("reconstruction")
     g.add_argument("--backend", choices=["field", "hull"], default="field",
                    help="radiance field (default) or visual hull (fast)")
@@ -89,6 +97,15 @@ def config_from_args(args: argparse.Namespace):
     if args.max_faces is not None:
         recon = replace(recon, max_faces=args.max_faces)
     recon.validate()
+    mask = None
+    if args.mask is not None:
+        from real2sim.capture.masking import MaskConfig
+
+        if args.mask == "maskrcnn" and (args.mask_weights is None or not args.mask_weights.is_file()):
+            raise UserInputError("--mask maskrcnn needs --mask-weights PATH, a local weights file")
+        if not 0 <= args.mask_threshold <= 255:
+            raise UserInputError(f"--mask-threshold must be in 0..255 (got {args.mask_threshold})")
+        mask = MaskConfig(threshold=args.mask_threshold, weights=args.mask_weights, device=args.device)
     refine = None
     if args.refine_poses:
         from real2sim.capture.pose_refinement import RefineConfig
@@ -100,8 +117,8 @@ def config_from_args(args: argparse.Namespace):
 
         args.executor, args.ray_address, args.simulation_error = "local", None, False
         evaluation = evaluation_config(args)
-    return RunConfig(asset=asset, reconstruct=recon, refine=refine, evaluation=evaluation, device=args.device,
-                     seed=args.seed)
+    return RunConfig(asset=asset, reconstruct=recon, mask_method=args.mask, mask=mask, refine=refine,
+                     evaluation=evaluation, device=args.device, seed=args.seed)
 
 
 class _Display:

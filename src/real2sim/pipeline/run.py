@@ -32,6 +32,7 @@ from real2sim.pipeline.truth import build_truth, has_ground_truth
 
 if TYPE_CHECKING:
     from real2sim.asset.build import AssetConfig
+    from real2sim.capture.masking import MaskConfig
     from real2sim.capture.pose_refinement import RefineConfig
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.reconstruct.stage import ReconstructConfig
@@ -48,11 +49,16 @@ class RunConfig:
 
     asset: the asset stage's settings (mass, SPECs, ...); ``flat_bottom`` is forced on
     at support height 0 (the reconstruction's table plane). reconstruct: None -> the
-    stage's defaults. refine: None -> no pose refinement. evaluation: None -> no evaluation.
+    stage's defaults. mask_method: None -> the dataset's own masks (every frame must
+    have one); else masks are made with :func:`real2sim.capture.compute_masks` (``mask``
+    its settings, None -> defaults) on a copy. refine: None -> no pose refinement.
+    evaluation: None -> no evaluation.
     """
 
     asset: "AssetConfig"
     reconstruct: "ReconstructConfig | None" = None
+    mask_method: str | None = None
+    mask: "MaskConfig | None" = None
     refine: "RefineConfig | None" = None
     evaluation: "EvaluationConfig | None" = None
     device: str = "cpu"
@@ -101,13 +107,13 @@ def _dataset_files(root: Path) -> list[str]:
         files.append(frame.file_path)
         if frame.mask_path:
             files.append(frame.mask_path)
-    gt = root / "ground_truth"
-    if gt.is_dir():
-        files += [f"ground_truth/{rel}" for rel in mf.tree_files(gt)]
+    for folder in ("ground_truth", "background"):  # background/: the empty scene, for background masks
+        if (root / folder).is_dir():
+            files += [f"{folder}/{rel}" for rel in mf.tree_files(root / folder)]
     return files
 
 
-def check_dataset(dataset: Path) -> Path:
+def check_dataset(dataset: Path, masks_needed: bool = True) -> Path:
     """The resolved dataset folder; UserInputError when it cannot be used as it is (one line)."""
     dataset = Path(dataset).resolve()
     if dataset.is_file() and dataset.name == "transforms.json":
@@ -117,9 +123,9 @@ def check_dataset(dataset: Path) -> Path:
         raise UserInputError(f"{dataset} has no transforms.json: run needs poses in the robot frame, table at z = 0 "
                              "(COLMAP-only captures are not supported by run yet)")
     missing = [f.file_path for f in ds.frames if not f.mask_path]
-    if missing:
-        raise UserInputError(f"{len(missing)} of {len(ds.frames)} frames of {dataset} have no mask; make them first "
-                             f"with `real2sim mask {dataset} --method provided|maskrcnn|background`")
+    if missing and masks_needed:
+        raise UserInputError(f"{len(missing)} of {len(ds.frames)} frames of {dataset} have no mask; pass "
+                             f"--mask provided|maskrcnn|background, or make them first with `real2sim mask`")
     return dataset
 
 
@@ -205,7 +211,7 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     from real2sim.reconstruct.stage import ReconstructConfig
 
     progress = progress or _Quiet()
-    dataset = check_dataset(Path(dataset))
+    dataset = check_dataset(Path(dataset), masks_needed=config.mask_method is None)
     asset_dir = Path(asset_dir).resolve()
     recon_cfg = config.reconstruct or ReconstructConfig()
     recon_cfg.validate()
@@ -220,7 +226,7 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     _remove_stale_temporaries(asset_dir)
     manifest.save()
     truth = has_ground_truth(dataset)
-    count = 2 + bool(config.refine) + truth + bool(config.evaluation)
+    count = 2 + bool(config.mask_method) + bool(config.refine) + truth + bool(config.evaluation)
     runner = _Runner(manifest, progress, count)
     try:
         result = _run_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg, truth)
@@ -236,10 +242,23 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
     run_dir = asset_dir / mf.RUN_DIRNAME
     manifest, progress = runner.manifest, runner.progress
     used, upstream = dataset, None
+    if config.mask_method is not None:
+        from real2sim.capture.masking import MaskConfig
+
+        mask_cfg = config.mask or MaskConfig()
+        upstream = runner.stage("masks", {"dataset": mf.files_digest(dataset, _dataset_files(dataset))},
+                                {"method": config.mask_method, "config": mask_cfg}, None,
+                                [f"{mf.RUN_DIRNAME}/masked"],
+                                lambda: _masks(dataset, run_dir, config.mask_method, mask_cfg, progress))
+        used = run_dir / "masked"
+    elif manifest.entry("masks"):
+        manifest.forget("masks")
+        shutil.rmtree(run_dir / "masked", ignore_errors=True)
     if config.refine is not None:
-        upstream = runner.stage("refine_poses", {"dataset": mf.files_digest(dataset, _dataset_files(dataset))},
-                                config.refine, None, [f"{mf.RUN_DIRNAME}/dataset"],
-                                lambda: _refine(dataset, run_dir, config.refine, progress))
+        source = used
+        upstream = runner.stage("refine_poses", {"dataset": mf.files_digest(source, _dataset_files(source))},
+                                config.refine, upstream, [f"{mf.RUN_DIRNAME}/dataset"],
+                                lambda: _refine(source, run_dir, config.refine, progress))
         used = run_dir / "dataset"
     elif manifest.entry("refine_poses"):
         manifest.forget("refine_poses")
@@ -282,18 +301,39 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
     return RunResult(asset_dir, runner.statuses, manifest.path, truth, urdfs)
 
 
-def _refine(dataset: Path, run_dir: Path, refine_cfg, progress: RunProgress) -> dict:
-    from real2sim.capture.pose_refinement import refine_poses
-
-    tmp = Path(tempfile.mkdtemp(prefix=".dataset.tmp-", dir=run_dir))
+def _edited_copy(dataset: Path, target: Path, edit: Callable[[Path], dict]) -> dict:
+    """Copy ``dataset`` beside ``target``, let ``edit`` change the copy, then rename it to ``target``."""
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
     try:
         shutil.copytree(dataset, tmp, dirs_exist_ok=True, ignore=shutil.ignore_patterns("refine_report.json"))
-        result = refine_poses(tmp, refine_cfg, lambda msg, frac: progress.update("refine_poses", msg, frac, 1.0))
+        extra = edit(tmp)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    publish_dir(tmp, run_dir / "dataset")
-    return {"result": result.to_json()}
+    publish_dir(tmp, target)
+    return extra
+
+
+def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: RunProgress) -> dict:
+    from real2sim.capture.masking import compute_masks
+
+    def edit(copy: Path) -> dict:
+        result = compute_masks(copy, method, mask_cfg,
+                               progress=lambda done, total: progress.update("masks", method, done, total))
+        return {"result": {"num_frames": result.num_frames, "mean_object_fraction": result.mean_object_fraction,
+                           "mean_iou": result.mean_iou, "min_iou": result.min_iou}}
+
+    return _edited_copy(dataset, run_dir / "masked", edit)
+
+
+def _refine(dataset: Path, run_dir: Path, refine_cfg, progress: RunProgress) -> dict:
+    from real2sim.capture.pose_refinement import refine_poses
+
+    def edit(copy: Path) -> dict:
+        result = refine_poses(copy, refine_cfg, lambda msg, frac: progress.update("refine_poses", msg, frac, 1.0))
+        return {"result": result.to_json()}
+
+    return _edited_copy(dataset, run_dir / "dataset", edit)
 
 
 def _reconstruct(dataset: Path, out: Path, cfg, device: str, seed: int, progress: RunProgress) -> dict:
