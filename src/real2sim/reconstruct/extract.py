@@ -16,8 +16,6 @@ World frame, metres; the table top is z = 0.
 
 from __future__ import annotations
 
-from typing import Callable
-
 import numpy as np
 import torch
 import trimesh
@@ -25,10 +23,10 @@ from scipy.ndimage import binary_fill_holes
 
 from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.hull import VoxelGrid, largest_parts, surface_from_grid
+from real2sim.reconstruct.train import ProgressFn
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
 SURFACE_DENSITY_PER_VOXEL = float(np.log(2.0))
-ProgressFn = Callable[[str, int, int], None]
 
 
 def density_mesh(field: VoxelRadianceField, *, upsample: int = 1, table_z_m: float = 0.0) -> trimesh.Trimesh:
