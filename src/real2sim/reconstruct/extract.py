@@ -23,7 +23,7 @@ from scipy.ndimage import binary_fill_holes
 
 from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.hull import VoxelGrid, largest_parts, surface_from_grid
-from real2sim.reconstruct.train import ProgressFn
+from real2sim.reconstruct.train import ProgressFn, occupancy_ranges
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
 SURFACE_DENSITY_PER_VOXEL = float(np.log(2.0))
@@ -75,7 +75,9 @@ def render_view(field: VoxelRadianceField, views: PosedViews, c2w_cv: np.ndarray
     v_px, u_px = np.mgrid[0:h, 0:w]
     o, d = pixel_rays(k, c2w_cv, (u_px.ravel() + 0.5) / scale, (v_px.ravel() + 0.5) / scale)
     to = lambda a: torch.from_numpy(a.astype(np.float32)).to(field.device)
-    out = field.render_chunked(to(o), to(d))
+    origins, directions = to(o), to(d)
+    # march each ray only where it crosses the carved region: most pixels miss the object
+    out = field.render_chunked(origins, directions, t_range_m=occupancy_ranges(field, origins, directions))
     forward = c2w_cv[:3, 2]
     z_depth = out.depth_m.cpu().numpy() / np.maximum(out.opacity.cpu().numpy(), 1e-6) * (d @ forward)
     return (out.rgb.cpu().numpy().reshape(h, w, 3), out.opacity.cpu().numpy().reshape(h, w),

@@ -75,6 +75,19 @@ class VoxelRadianceField(torch.nn.Module):
     def device(self) -> torch.device:
         return self.density_table.device
 
+    def occupancy_surface(self):
+        """The surface (trimesh, metres) of the occupied voxels' cells grown by one voxel, so that no
+        occupied sample lies outside it; made once per field (ray casts use it to skip empty space)."""
+        if getattr(self, "_occupancy_surface", None) is None:
+            from scipy.ndimage import binary_dilation
+
+            from real2sim.reconstruct.hull import surface_from_grid
+
+            grown = binary_dilation(self.occupancy.cpu().numpy()).astype(np.float32)
+            self._occupancy_surface = surface_from_grid(grown, self.grid, 0.5,
+                                                        table_z_m=float(self.grid.bounds_m[0, 2]))
+        return self._occupancy_surface
+
     def grid_parameters(self) -> list[torch.nn.Parameter]:
         return [self.density_table, self.feature_table]
 
@@ -202,13 +215,15 @@ class VoxelRadianceField(torch.nn.Module):
         return (ray_of, position) if order is None else (ray_of[order], position[order])
 
     def render_chunked(self, origins: torch.Tensor, directions: torch.Tensor, chunk: int = 8192,
-                       step_voxels: float = 0.5, max_distance_m: float | None = None) -> RayBatch:
+                       step_voxels: float = 0.5, max_distance_m: float | None = None,
+                       t_range_m: tuple[torch.Tensor, torch.Tensor] | None = None) -> RayBatch:
         """:meth:`render` without gradients, in chunks of rays (bounded memory)."""
         parts = []
         with torch.no_grad():
             for s in range(0, len(origins), chunk):
+                t_range = None if t_range_m is None else (t_range_m[0][s:s + chunk], t_range_m[1][s:s + chunk])
                 parts.append(self.render(origins[s:s + chunk], directions[s:s + chunk], step_voxels=step_voxels,
-                                         max_distance_m=max_distance_m))
+                                         max_distance_m=max_distance_m, t_range_m=t_range))
         return RayBatch(*(torch.cat([getattr(p, f) for p in parts]) for f in ("rgb", "opacity", "depth_m")))
 
     # -- resolution ------------------------------------------------------------------------------

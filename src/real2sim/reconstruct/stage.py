@@ -60,10 +60,12 @@ class ReconstructConfig:
 
 @dataclass(frozen=True)
 class Reconstruction:
-    """A textured mesh (world frame, metres) and the stage's report (JSON-ready)."""
+    """A textured mesh (world frame, metres), the stage's report (JSON-ready), and the trained
+    field (``field`` backend; None otherwise) for callers that render or extract more."""
 
     mesh: trimesh.Trimesh
     report: dict
+    field: object | None = None
 
 
 def resolve_device(device: str) -> str:
@@ -164,7 +166,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     report["stages"] = clock.stages
     report["total_seconds"] = round(sum(s["seconds"] for s in clock.stages.values()), 3)
     report["config"] = asdict(config)
-    return Reconstruction(mesh=textured, report=report)
+    return Reconstruction(mesh=textured, report=report, field=None if config.backend == "hull" else trained.field)
 
 
 def _psnr_region(views: PosedViews, i: int, covered: np.ndarray) -> np.ndarray:

@@ -120,20 +120,16 @@ def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> np.
     return config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
 
 
-def occupancy_ranges(field: VoxelRadianceField, pool: RayPool) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per pool ray, the distances (R,) where it first enters and last leaves the field's occupancy.
+def occupancy_ranges(field: VoxelRadianceField, origins: torch.Tensor,
+                     directions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per ray, the distances (R,) where it first enters and last leaves the field's occupancy.
 
-    Ray-cast (embree) against the occupancy's surface, so training marches only that
+    Ray-cast (embree) against the occupancy's surface, so rendering marches only that
     stretch of each ray; a ray that misses gets an empty range.
     """
-    from real2sim.reconstruct.hull import surface_from_grid
-
-    occ = field.occupancy.cpu().numpy().astype(np.float32)
-    # the surface of the occupied voxels' cells, grown by one voxel so no occupied sample is outside
-    surface = surface_from_grid(binary_dilation(occ > 0.5).astype(np.float32), field.grid, 0.5,
-                                table_z_m=float(field.grid.bounds_m[0, 2]))
-    origins = pool.origins.cpu().numpy().astype(np.float64)
-    dirs = pool.directions.cpu().numpy().astype(np.float64)
+    surface = field.occupancy_surface()
+    origins = origins.cpu().numpy().astype(np.float64)
+    dirs = directions.cpu().numpy().astype(np.float64)
     far = 4.0 * float(np.linalg.norm(field.grid.bounds_m[1] - field.grid.bounds_m[0])) + \
         float(np.abs(origins - field.grid.bounds_m.mean(axis=0)).max())
     t_in = np.zeros(len(origins))
@@ -145,10 +141,10 @@ def occupancy_ranges(field: VoxelRadianceField, pool: RayPool) -> tuple[torch.Te
     t_out[rays_back] = far - np.einsum("nd,nd->n", hits_back - back_origin[rays_back], -dirs[rays_back])
     entered = np.zeros(len(origins), dtype=bool)
     entered[rays] = True
-    t_out = np.where(entered, np.maximum(t_out, t_in), 0.0)
+    t_out = np.where(entered, np.maximum(t_out, t_in) + field.grid.voxel_m, 0.0)
     t_in = np.where(entered, np.maximum(t_in - field.grid.voxel_m, 0.0), 0.0)
     to = lambda a: torch.from_numpy(a.astype(np.float32)).to(field.device)
-    return to(t_in), to(t_out + field.grid.voxel_m)
+    return to(t_in), to(t_out)
 
 
 def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], config: FieldConfig = FieldConfig(), *,
@@ -182,7 +178,7 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
 def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
               gen: torch.Generator, progress: ProgressFn | None, curve: list) -> int:
     """``steps`` Adam steps on ``field``; appends (step, mean loss) to ``curve``; returns the steps done so far."""
-    t_in, t_out = occupancy_ranges(field, pool)
+    t_in, t_out = occupancy_ranges(field, pool.origins, pool.directions)
     grid_opt = torch.optim.Adam([{"params": [field.density_table], "lr": config.lr_density, "base": config.lr_density},
                                  {"params": [field.feature_table], "lr": config.lr_features, "base": config.lr_features}])
     dec_opt = torch.optim.Adam(field.decoder.parameters(), lr=config.lr_decoder)
