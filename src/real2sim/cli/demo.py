@@ -1,8 +1,18 @@
-"""`real2sim demo`: the whole job on the bundled bottle, end to end, in minutes on a laptop CPU.
+"""`real2sim demo`: the paper's whole system on the bundled bottle, from images, in minutes on a laptop CPU.
 
-bundled bottle -> asset with several collision representations + CoACD ->
-Drake evaluation against the bottle's own mesh (short protocol) -> Pareto plots
-and report.html.
+simulated wrist-camera capture of the bundled bottle (calibration noise on the robot's
+poses; rendered masks) -> COLMAP pose refinement -> reconstruction -> asset with several
+collision representations + CoACD -> ``truth.json`` (each stage against the true
+bottle) -> Drake evaluation against the reconstruction (the paper's protocol) ->
+Pareto plots and report.html. The chain from the dataset on is
+:func:`real2sim.pipeline.run.run_pipeline`, as ``real2sim run`` calls it.
+
+Layout of ``--out`` (written into a temporary folder beside it and renamed at the end,
+so it appears whole or not at all; an interrupted demo starts again from the capture)::
+
+    OUT/capture/        the dataset (transforms.json, images/, masks/, ground_truth/)
+    OUT/bottle_asset/   the run's ASSETDIR: <representation>/model.urdf, truth.json, .run/
+    OUT/results/        summary.csv, runs.csv, pareto_*.png, report.html
 """
 
 from __future__ import annotations
@@ -14,78 +24,197 @@ from pathlib import Path
 
 @dataclass(frozen=True)
 class DemoPlan:
-    """What the demo builds and how hard it evaluates."""
+    """What the demo captures, how it reconstructs, what it builds and how hard it evaluates.
+
+    ``pose_noise``: the capture's default robot-pose noise (5 mm, 1 deg RMS) or none;
+    ``max_faces`` / ``texture_px`` None: the reconstruct stage's defaults.
+    """
 
     specs: tuple[str, ...]
     tasks: tuple[str, ...]
     contact_models: tuple[str, ...]
     runs: int
+    views: int
+    width: int
+    height: int
+    pose_noise: bool
+    refine_poses: bool
+    backend: str
+    texture_px: int | None = None
+    max_faces: int | None = None
 
 
-# Full: minutes on 2 cores (measured by benchmarks/bench_demo.py, docs/benchmarks.md); quick:
-# about 1 (CI runs it).
+# Measured by benchmarks/bench_demo.py (docs/benchmarks/demo.md): full at most 15 min on 2 cores,
+# quick at most 3 (CI runs it). The visual hull needs ~60 views to close.
 FULL = DemoPlan(
     specs=("cylinders:10", "boxes:50", "spheres:64", "ellipsoids:32", "rotated_boxes:20", "superquadrics:5", "coacd"),
-    tasks=("push", "ramp"),
-    contact_models=("point", "hydroelastic"),
-    runs=3,
+    tasks=("push", "ramp"), contact_models=("point", "hydroelastic"), runs=3,
+    views=100, width=320, height=240, pose_noise=True, refine_poses=True, backend="field",
 )
-QUICK = DemoPlan(specs=("cylinders:4", "spheres:16", "coacd"), tasks=("push", "ramp"), contact_models=("point", "hydroelastic"), runs=1)
+QUICK = DemoPlan(
+    specs=("cylinders:4", "spheres:16", "coacd"), tasks=("push", "ramp"), contact_models=("point", "hydroelastic"),
+    runs=1, views=60, width=160, height=120, pose_noise=False, refine_poses=False, backend="hull",
+    texture_px=256, max_faces=5000,
+)
 
 
 def register(sub) -> None:
     p = sub.add_parser(
         "demo",
-        help="build and evaluate assets of the bundled bottle (the whole job, minutes on a CPU)",
-        description="Exports the bundled mustard-like bottle, builds an asset with several collision "
-        "representations plus CoACD, evaluates each in Drake (planar pushing, actuated ramp; point and "
-        "hydroelastic contact) against the bottle's full mesh, and writes Pareto plots and report.html. "
-        "About 5 minutes on 2 CPU cores; --quick about 1.",
+        help="the whole system on the bundled bottle: capture -> poses -> reconstruction -> assets -> "
+        "evaluation -> report (minutes on a CPU)",
+        description="The paper's system on the bundled mustard-like bottle, judged against the true object: "
+        "a simulated robot wrist-camera capture (100 views, 320x240 px, robot poses with 5 mm / 1 deg "
+        "calibration noise, rendered masks) -> COLMAP pose refinement -> radiance-field reconstruction -> "
+        "an asset with several collision representations plus CoACD -> OUT/bottle_asset/truth.json (pose, "
+        "reconstruction and mass-property errors against the true bottle) -> Drake evaluation of each "
+        "representation against the reconstruction (planar pushing, actuated ramp; point and hydroelastic "
+        "contact) -> Pareto plots and report.html in OUT/results. About 12 minutes on 2 CPU cores. --quick: "
+        "60 noise-free views at 160x120 px, no pose refinement, visual-hull reconstruction, three "
+        "representations, one run per task: about 1.5 minutes.",
     )
-    p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default demo_out)")
-    p.add_argument("--quick", action="store_true", help="fewer, smaller representations and one run per task")
+    p.add_argument("--out", type=Path, default=Path("demo_out"),
+                   help="output folder (default demo_out): capture/ (the dataset), bottle_asset/ (URDFs, truth.json, "
+                   ".run/), results/; it appears whole at the end (an interrupted demo starts over)")
+    p.add_argument("--quick", action="store_true",
+                   help="small noise-free capture, visual hull, fewer and smaller representations, one run per task")
     p.add_argument("--overwrite", action="store_true", help="replace the output folder if it exists")
     p.add_argument("--jobs", type=int, default=None, help="parallel simulations (default: CPU cores)")
     p.set_defaults(func=run)
 
 
+def run_config(plan: DemoPlan):
+    """The RunConfig of the demo's `run` (no evaluation: the demo evaluates into OUT/results)."""
+    from dataclasses import replace
+
+    from real2sim.asset.build import AssetConfig
+    from real2sim.formats.spec import parse_spec
+    from real2sim.geometry.objects import OBJECTS
+    from real2sim.pipeline.run import RunConfig
+    from real2sim.reconstruct.stage import ReconstructConfig
+
+    recon = ReconstructConfig(backend=plan.backend)
+    if plan.texture_px is not None:
+        recon = replace(recon, texture_px=plan.texture_px)
+    if plan.max_faces is not None:
+        recon = replace(recon, max_faces=plan.max_faces)
+    refine = None
+    if plan.refine_poses:
+        from real2sim.capture.pose_refinement import RefineConfig
+
+        refine = RefineConfig()
+    asset = AssetConfig(mass_kg=OBJECTS["bottle"].mass_kg, specs=tuple(parse_spec(s) for s in plan.specs))
+    return RunConfig(asset=asset, reconstruct=recon, refine=refine)
+
+
+def capture_config(plan: DemoPlan):
+    from real2sim.capture.wrist_camera import CaptureConfig
+
+    noise = {} if plan.pose_noise else {"pose_noise_mm": 0.0, "pose_noise_deg": 0.0}
+    return CaptureConfig(views=plan.views, width=plan.width, height=plan.height, **noise)
+
+
+def _capture_line(plan: DemoPlan, cfg) -> str:
+    noise = (f"robot poses with {cfg.pose_noise_mm:g} mm / {cfg.pose_noise_deg:g} deg RMS calibration noise"
+             if plan.pose_noise else "noise-free capture (exact poses)")
+    refine = "COLMAP pose refinement" if plan.refine_poses else "no pose refinement"
+    return f"{plan.views} views at {plan.width}x{plan.height} px, {noise}; {refine}; {plan.backend} reconstruction"
+
+
 def run(args: argparse.Namespace) -> int:
+    import os
+    import sys
     import time
 
-    from rich.console import Console
+    if "torch" not in sys.modules:  # this process is the demo's own; the evaluation workers inherit it
+        # Torch's default OpenMP spin-wait stalls on 2 busy cores (DESIGN.md): measured on 2 shared cores,
+        # the quick demo took 5 min with it and under 2 min with PASSIVE (as the test suite sets it).
+        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-    from real2sim.asset.build import AssetConfig, build_asset
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    from real2sim.capture.wrist_camera import capture
+    from real2sim.cli.run import _Display
     from real2sim.evaluate.sweep import EvaluationConfig, evaluate
-    from real2sim.geometry.objects import OBJECTS, export_object
-    from real2sim.formats.outputs import atomic_output_dir
-    from real2sim.formats.spec import parse_spec
+    from real2sim.formats.outputs import atomic_output_dir, check_output_dir
+    from real2sim.geometry.objects import make_textured_object
+    from real2sim.pipeline.run import StageFailed, run_pipeline
 
     plan = QUICK if args.quick else FULL
-    console = Console(stderr=True)
-    start = time.perf_counter()
+    check_output_dir(args.out, args.overwrite)  # bad --out: one line before any work
+    cap_cfg, config = capture_config(plan), run_config(plan)
+    eval_config = EvaluationConfig(tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs,
+                                   **({"jobs": args.jobs} if args.jobs else {}))
+    console = Console(stderr=True, log_path=False)
+    columns = (SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
+    start, cpu_start = time.perf_counter(), _cpu_seconds()
     out: Path = args.out
-    with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
-        mesh_path = export_object("bottle", tmp / "bottle" / "model.obj")
-        console.log(f"exported the bundled bottle to {out / 'bottle' / 'model.obj'}")
-        config = AssetConfig(mass_kg=OBJECTS["bottle"].mass_kg, specs=tuple(parse_spec(s) for s in plan.specs))
-        with console.status("building the asset") as status:
-            def log(msg: str) -> None:
-                status.update(msg)
-                console.log(msg)
+    console.log(f"capture: {_capture_line(plan, cap_cfg)}")
+    try:
+        with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
+            with Progress(*columns, console=console, transient=True) as bar:
+                task = bar.add_task("capture: rendering the bundled bottle", total=plan.views)
+                capture(make_textured_object("bottle"), tmp / "capture", cap_cfg,
+                        progress=lambda done, total: bar.update(task, completed=done, total=total))
+                bar.remove_task(task)
+                console.log(f"capture: done ({plan.views} views)")
+                result = run_pipeline(tmp / "capture", tmp / "bottle_asset", config, progress=_Display(bar, console))
+            evaluate([tmp / "bottle_asset"], tmp / "results", eval_config, progress=True)
+    except StageFailed as exc:
+        print(f"real2sim demo: error: {exc}; nothing was written to {out}", file=sys.stderr)
+        return 1
+    minutes, cpu_minutes = (time.perf_counter() - start) / 60, (_cpu_seconds() - cpu_start) / 60
+    _print_summary(out, plan, cap_cfg, result.truth, minutes, cpu_minutes)
+    return 0
 
-            build_asset(mesh_path, tmp / "bottle_asset", config, log=log)
-        eval_config = EvaluationConfig(
-            tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs,
-            **({"jobs": args.jobs} if args.jobs else {}),
-        )
-        result = evaluate([tmp / "bottle_asset"], tmp / "results", eval_config, progress=True)
-    minutes = (time.perf_counter() - start) / 60
-    print(f"\ndemo finished in {minutes:.1f} min")
+
+def _cpu_seconds() -> float:
+    """CPU seconds of this process and its finished children (simulation workers included)."""
+    import os
+
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
+def _print_summary(out: Path, plan: DemoPlan, cap_cfg, truth: dict | None, minutes: float,
+                   cpu_minutes: float) -> None:
+    print(f"\ndemo finished in {minutes:.1f} min ({cpu_minutes:.1f} CPU min)"
+          f"{' [--quick]' if plan is QUICK else ''}")
+    print(f"  capture: {out / 'capture'}  ({_capture_line(plan, cap_cfg)})")
     print(f"  URDFs:   {out / 'bottle_asset'}/<representation>/model.urdf")
     for urdf in sorted((out / "bottle_asset").glob("*/model.urdf")):
         print(f"           {urdf}")
     print(f"  table:   {out / 'results' / 'summary.csv'}")
     print(f"  plots:   {out / 'results'}/pareto_*.png")
     print(f"  report:  {out / 'results' / 'report.html'}")
-    del result
-    return 0
+    for line in truth_lines(truth):
+        print(line)
+    print(f"           ({out / 'bottle_asset' / 'truth.json'})")
+
+
+def truth_lines(truth: dict | None) -> list[str]:
+    """The key numbers of truth.json, for people."""
+    if not truth:
+        return ["  vs the true bottle: no truth.json"]
+    nan = float("nan")
+    rec = truth.get("reconstruction") or {}
+    phys = truth["physical_properties"]
+    poses = truth["camera_poses"]
+    lines = [
+        "  vs the true bottle:",
+        f"    reconstruction: Chamfer {rec.get('chamfer_mm', nan):.2f} mm, IoU {rec.get('iou', nan):.3f}",
+        f"    mass properties: CoM error {phys['com_error_mm']:.2f} mm, inertia eigenvalues "
+        f"{100 * phys['inertia_eigenvalue_max_rel_error']:.1f} % (largest relative error)",
+    ]
+    before, after = poses.get("before_refinement"), poses.get("after_refinement")
+    if before:
+        text = f"{before['trans_mean_mm']:.2f} mm / {before['rot_mean_deg']:.2f} deg"
+        if after:
+            text += f" -> {after['trans_mean_mm']:.2f} mm / {after['rot_mean_deg']:.2f} deg after refinement"
+        elif poses.get("refinement_asked"):
+            text += f" (refinement not kept: {poses.get('refinement_outcome')})"
+        else:
+            text += " (no refinement)"
+        lines.append(f"    camera poses (mean error): {text}")
+    return lines
