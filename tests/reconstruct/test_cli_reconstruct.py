@@ -16,20 +16,11 @@ import trimesh
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
-from real2sim.cli import main
 from real2sim.cli.reconstruct import summary_line
 
+from tests.cli.test_asset import run_cli
+
 from .conftest import copy_dataset, edit_transforms
-
-
-def run_cli(capsys, *argv) -> tuple[int, str, str]:
-    """Run the CLI in-process; argparse usage errors exit through SystemExit."""
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def assert_refused(code: int, err: str, out: Path) -> None:
