@@ -53,6 +53,31 @@ def _tsdf_row(name: str, ds: Path, field, cfg, seed: int) -> list:
             "-" if concave is None else f"{concave:.3f}", "-", "-", len(mesh.faces), wall, cpu, "-"]
 
 
+def _write(args, argv, rows: list, pose_rows: list) -> None:
+    """Write (or rewrite) the section with the rows so far: a stopped run keeps what it measured."""
+    load = os.getloadavg()[0]
+    body = (
+        f"{args.views} views at {args.width}x{args.height} per object, 5 mm / 1 deg RMS pose noise refined by "
+        f"refine-poses; every 10th view held out (never used to build anything). Device: {args.device}. "
+        f"Load average when written: {load:.1f} (wall times on a shared machine are inflated; CPU s counts this "
+        "process's threads).\n\n"
+        "Targets (issue #11): field on bottle and can: Chamfer <= 1.0 mm, IoU >= 0.95, <= 5 min wall; mug: "
+        "Chamfer <= 2.0 mm with the cavity present (`concave` = share of the true mesh's concave space, inside "
+        "its convex hull but outside it, that the reconstruction leaves empty); peak memory <= 4 GB.\n\n"
+        "### Pose refinement\n\n"
+        + markdown_table(["object", "refined", "rot before deg", "rot after deg", "pos before mm", "pos after mm",
+                          "wall s"], pose_rows)
+        + "\n\n### Reconstruction against the true object\n\n"
+        + markdown_table(["object", "method", "Chamfer mm", "IoU", "F@1mm", "concave", "field PSNR dB",
+                          "mesh PSNR dB", "faces", "wall s", "CPU s", "peak MB"], rows)
+        + "\n\nPSNR is over the pixels that the true mask or the prediction covers, both composited on black; the "
+        "mesh is rendered unlit (its texture as baked), the capture is lit, so mesh PSNR is a lower bound on how "
+        "the texture looks.\n"
+    )
+    command = "python benchmarks/bench_reconstruct.py " + " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
+    print(write_section("reconstruct", "Reconstruction from images (benchmarks/bench_reconstruct.py)", body, command.strip()))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", default="bottle,can,mug")
@@ -110,31 +135,13 @@ def main(argv: list[str] | None = None) -> int:
                              r.get("psnr_field_held_out_db", "-"), r.get("psnr_mesh_held_out_db", "-"),
                              r["mesh"]["faces"], wall, cpu, peak])
                 print(rows[-1], flush=True)
+                _write(args, argv, rows, pose_rows)
                 if result.field is not None and name in args.tsdf.split(","):
                     rows.append(_tsdf_row(name, ds, result.field, cfg, args.seed))
                     print(rows[-1], flush=True)
+                    _write(args, argv, rows, pose_rows)
 
-    load = os.getloadavg()[0]
-    body = (
-        f"{args.views} views at {args.width}x{args.height} per object, 5 mm / 1 deg RMS pose noise refined by "
-        f"refine-poses; every 10th view held out (never used to build anything). Device: {args.device}. "
-        f"Load average at the end: {load:.1f} (wall times on a shared machine are inflated; CPU s counts this "
-        "process's threads).\n\n"
-        "Targets (issue #11): field on bottle and can: Chamfer <= 1.0 mm, IoU >= 0.95, <= 5 min wall; mug: "
-        "Chamfer <= 2.0 mm with the cavity present (`concave` = share of the true mesh's concave space, inside "
-        "its convex hull but outside it, that the reconstruction leaves empty); peak memory <= 4 GB.\n\n"
-        "### Pose refinement\n\n"
-        + markdown_table(["object", "refined", "rot before deg", "rot after deg", "pos before mm", "pos after mm",
-                          "wall s"], pose_rows)
-        + "\n\n### Reconstruction against the true object\n\n"
-        + markdown_table(["object", "method", "Chamfer mm", "IoU", "F@1mm", "concave", "field PSNR dB",
-                          "mesh PSNR dB", "faces", "wall s", "CPU s", "peak MB"], rows)
-        + "\n\nPSNR is over the pixels that the true mask or the prediction covers, both composited on black; the "
-        "mesh is rendered unlit (its texture as baked), the capture is lit, so mesh PSNR is a lower bound on how "
-        "the texture looks.\n"
-    )
-    command = "python benchmarks/bench_reconstruct.py " + " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
-    print(write_section("reconstruct", "Reconstruction from images (benchmarks/bench_reconstruct.py)", body, command.strip()))
+    _write(args, argv, rows, pose_rows)
     return 0
 
 
