@@ -69,9 +69,9 @@ def register(sub) -> None:
         "an asset with several collision representations plus CoACD -> OUT/bottle_asset/truth.json (pose, "
         "reconstruction and mass-property errors against the true bottle) -> Drake evaluation of each "
         "representation against the reconstruction (planar pushing, actuated ramp; point and hydroelastic "
-        "contact) -> Pareto plots and report.html in OUT/results. About 12 minutes on 2 CPU cores. --quick: "
-        "60 noise-free views at 160x120 px, no pose refinement, visual-hull reconstruction, three "
-        "representations, one run per task: about 1.5 minutes.",
+        "contact) -> Pareto plots and report.html in OUT/results. About 12 minutes on 2 idle CPU cores "
+        "(21.5 measured on 2 shared ones). --quick: 60 noise-free views at 160x120 px, no pose refinement, "
+        "visual-hull reconstruction, three representations, one run per task: under 2 minutes.",
     )
     p.add_argument("--out", type=Path, default=Path("demo_out"),
                    help="output folder (default demo_out): capture/ (the dataset), bottle_asset/ (URDFs, truth.json, "
