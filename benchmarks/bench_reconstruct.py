@@ -26,6 +26,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+# as the real2sim program does: torch's OpenMP spin-wait stalls small ops on 2 busy cores
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from common import markdown_table, write_section  # noqa: E402
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from real2sim import __version__
@@ -47,6 +48,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    if "torch" not in sys.modules:
+        # Torch's default OpenMP spin-wait stalls small ops on 2 busy cores (DESIGN.md): the quick demo
+        # took 5 min with it and under 2 with PASSIVE. Set here, by the program, before torch loads;
+        # worker processes inherit it. A value the user set wins.
+        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

@@ -122,14 +122,8 @@ def _capture_line(plan: DemoPlan, cfg) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    import os
     import sys
     import time
-
-    if "torch" not in sys.modules:  # this process is the demo's own; the evaluation workers inherit it
-        # Torch's default OpenMP spin-wait stalls on 2 busy cores (DESIGN.md): measured on 2 shared cores,
-        # the quick demo took 5 min with it and under 2 min with PASSIVE (as the test suite sets it).
-        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
     from rich.console import Console
     from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
