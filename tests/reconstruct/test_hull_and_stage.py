@@ -239,3 +239,20 @@ def test_object_region_closes_with_24_views(tmp_path_factory):
     lo, hi = object_region(load_views(root))
     # the can is 6.7 cm wide and 10 cm tall; the region holds it with a voxel or two to spare
     assert np.all(hi - lo < [0.09, 0.09, 0.12])
+
+
+def test_largest_parts_keeps_an_open_surface_over_a_closed_speck():
+    """A TSDF surface is open: a tiny closed speck beside it must not win on 'volume' (bench regression)."""
+    import trimesh
+
+    from real2sim.reconstruct.hull import largest_parts
+
+    sheet = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    sheet.update_faces(sheet.vertices[sheet.faces][:, :, 2].min(axis=1) > -0.03)  # open at the bottom
+    sheet.remove_unreferenced_vertices()
+    speck = trimesh.creation.box(extents=(0.002,) * 3)
+    speck.apply_translation([0.2, 0.0, 0.0])
+    kept = largest_parts(trimesh.util.concatenate([sheet, speck]))
+    assert len(kept.faces) == len(sheet.faces)
+    closed = trimesh.util.concatenate([trimesh.creation.icosphere(radius=0.05), speck])
+    assert len(largest_parts(closed).faces) == len(trimesh.creation.icosphere(radius=0.05).faces)

@@ -154,12 +154,16 @@ def surface_from_grid(values: np.ndarray, grid: VoxelGrid, level: float, table_z
 
 
 def largest_parts(mesh: trimesh.Trimesh, min_volume_fraction: float = 0.05) -> trimesh.Trimesh:
-    """The connected components holding at least ``min_volume_fraction`` of the largest one's volume (floaters go)."""
+    """The connected components holding at least ``min_volume_fraction`` of the largest one's volume (floaters go).
+
+    When any component is open, areas stand in for volumes.
+    """
     parts = mesh.split(only_watertight=False)
     if len(parts) <= 1:
         return mesh
-    size = np.array([abs(p.volume) if p.is_watertight else 0.0 for p in parts])
-    if not size.any():  # open pieces (a TSDF surface): compare areas instead
+    if all(p.is_watertight for p in parts):
+        size = np.array([abs(p.volume) for p in parts])
+    else:  # an open surface (a TSDF mesh) has no volume: compare areas, or a closed speck would win
         size = np.array([p.area for p in parts])
     keep = [p for p, s in zip(parts, size) if s >= min_volume_fraction * size.max()]
     return trimesh.util.concatenate(keep) if len(keep) > 1 else keep[0]
