@@ -77,7 +77,9 @@ def _write(args, argv, rows: list, pose_rows: list) -> None:
         "the texture looks.\n"
     )
     command = "python benchmarks/bench_reconstruct.py " + " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
-    print(write_section("reconstruct", "Reconstruction from images (benchmarks/bench_reconstruct.py)", body, command.strip()))
+    name = "reconstruct" + (f"_{args.tag}" if args.tag else "")
+    title = "Reconstruction from images (benchmarks/bench_reconstruct.py" + (f", {args.tag})" if args.tag else ")")
+    print(write_section(name, title, body, command.strip()))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -92,6 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--tag", default="", help="write docs/benchmarks/reconstruct_TAG.md instead (a partial run)")
     args = ap.parse_args(argv)
 
     from dataclasses import replace
