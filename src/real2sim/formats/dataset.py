@@ -166,13 +166,18 @@ def dataset_to_json(ds: Dataset) -> dict:
     return out
 
 
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON to a temporary file beside ``path`` and rename it into place."""
+def write_json_atomic(path: Path, data: Any, default: Any = None) -> None:
+    """Write JSON to a temporary file beside ``path``, flushed to disk, and rename it into place.
+
+    ``default`` is ``json.dump``'s hook for values JSON has no type for.
+    """
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
     try:
         with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=2)
+            json.dump(data, fh, indent=2, default=default)
+            fh.flush()
+            os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -35,7 +35,8 @@ _BATCH = 100_000
 _MAX_IOU_SAMPLES = 5_000_000  # a union filling < 0.8 % of its bounding box stops here, with a wider interval
 
 
-def _surface_distance_m(points_m: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
+def surface_distance_m(points_m: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
+    """Exact distance (N,) from each point to the nearest triangle of ``mesh`` (libigl), same units."""
     import igl
 
     d2, _, _ = igl.point_mesh_squared_distance(
@@ -61,8 +62,8 @@ def _sample_surface(mesh: trimesh.Trimesh, count: int, rng: np.random.Generator)
 def chamfer_distance_mm(mesh_a: trimesh.Trimesh, mesh_b: trimesh.Trimesh, *, num_samples: int = 20_000, seed: int = 0) -> float:
     """Symmetric Chamfer distance (mm) between two surfaces in metres: mean of the two mean point-to-surface distances."""
     rng = np.random.default_rng(seed)
-    a_to_b = _surface_distance_m(_sample_surface(mesh_a, num_samples, rng), mesh_b).mean()
-    b_to_a = _surface_distance_m(_sample_surface(mesh_b, num_samples, rng), mesh_a).mean()
+    a_to_b = surface_distance_m(_sample_surface(mesh_a, num_samples, rng), mesh_b).mean()
+    b_to_a = surface_distance_m(_sample_surface(mesh_b, num_samples, rng), mesh_a).mean()
     return float(500.0 * (a_to_b + b_to_a))
 
 

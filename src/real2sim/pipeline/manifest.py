@@ -30,14 +30,14 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 import resource
 import sys
-import tempfile
 import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable, Iterator
+
+from real2sim.formats.dataset import write_json_atomic as _write_json_atomic
 
 MANIFEST_VERSION = 1
 RUN_DIRNAME = ".run"
@@ -101,17 +101,8 @@ def stage_key(inputs: dict, settings: Any, upstream: str | None) -> str:
 
 
 def write_json_atomic(path: Path, data: Any) -> None:
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=2, default=str)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """:func:`real2sim.formats.dataset.write_json_atomic`, any non-JSON value written as its text."""
+    _write_json_atomic(path, data, default=str)
 
 
 def peak_memory_mb(who: int = resource.RUSAGE_SELF) -> float:

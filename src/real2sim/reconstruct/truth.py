@@ -3,7 +3,7 @@
 ``DATASET/ground_truth/mesh.obj`` placed by ``ground_truth/object_pose.json``
 (``world_from_mesh``) is the truth, in the dataset's world frame, metres.
 
-* Chamfer (mm): :func:`real2sim.fidelity.chamfer_distance_mm`, the mean of the two
+* Chamfer (mm): as :func:`real2sim.geometry.fidelity.chamfer_distance_mm`, the mean of the two
   directions' mean point-to-surface distances.
 * F-score at ``tau`` (default 1 mm): precision = share of points on the
   reconstruction within ``tau`` of the true surface, recall = the converse,
@@ -45,25 +45,17 @@ def load_truth(dataset_root: Path | str) -> trimesh.Trimesh | None:
     return mesh
 
 
-def _surface_distance_m(points_m: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
-    import igl
-
-    d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(points_m, dtype=np.float64),
-                                               np.ascontiguousarray(mesh.vertices, dtype=np.float64),
-                                               np.ascontiguousarray(mesh.faces, dtype=np.int64))
-    return np.sqrt(np.maximum(d2, 0.0))
-
-
 def compare_to_truth(mesh: trimesh.Trimesh, truth: trimesh.Trimesh, *, tau_m: float = 0.001,
                      surface_samples: int = 30_000, volume_samples: int = 400_000, seed: int = 0) -> dict:
     """Chamfer (mm), F-score at ``tau_m``, IoU and concavity recovery of ``mesh`` against ``truth``."""
+    from real2sim.geometry.fidelity import surface_distance_m
     from real2sim.geometry.inside import compact_triangles, inside_mask
 
     rng = np.random.default_rng(seed)
     rec_pts, _ = trimesh.sample.sample_surface(mesh, surface_samples, seed=int(rng.integers(2**31)))
     gt_pts, _ = trimesh.sample.sample_surface(truth, surface_samples, seed=int(rng.integers(2**31)))
-    rec_to_gt = _surface_distance_m(rec_pts, truth)
-    gt_to_rec = _surface_distance_m(gt_pts, mesh)
+    rec_to_gt = surface_distance_m(rec_pts, truth)
+    gt_to_rec = surface_distance_m(gt_pts, mesh)
     precision = float(np.mean(rec_to_gt <= tau_m))
     recall = float(np.mean(gt_to_rec <= tau_m))
     fscore = 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
