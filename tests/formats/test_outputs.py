@@ -24,12 +24,12 @@ def test_failure_leaves_nothing(tmp_path):
 
 def test_existing_folder_needs_overwrite(tmp_path):
     target = tmp_path / "out"
-    target.mkdir()
-    (target / "old.txt").write_text("old")
+    with atomic_output_dir(target) as tmp:
+        (tmp / "old.txt").write_text("old")
     with pytest.raises(UserInputError):
         with atomic_output_dir(target):
             pass
     with atomic_output_dir(target, overwrite=True) as tmp:
         (tmp / "new.txt").write_text("new")
-    assert sorted(p.name for p in target.iterdir()) == ["new.txt"]
+    assert sorted(p.name for p in target.iterdir()) == [".real2sim", "new.txt"]
     assert [p.name for p in tmp_path.iterdir()] == ["out"]

@@ -26,8 +26,6 @@ latter on the fly (its poses are then in COLMAP's arbitrary frame and scale).
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -35,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from real2sim.formats.errors import UserInputError
+from real2sim.formats.outputs import write_json_atomic as _write_json_atomic
 
 # OpenCV camera (x right, y down, z forward) <-> OpenGL camera (x right, y up, z backward):
 # both are a flip of the camera's y and z axes, applied on the right of camera-to-world.
@@ -167,21 +166,8 @@ def dataset_to_json(ds: Dataset) -> dict:
 
 
 def write_json_atomic(path: Path, data: Any, default: Any = None) -> None:
-    """Write JSON to a temporary file beside ``path``, flushed to disk, and rename it into place.
-
-    ``default`` is ``json.dump``'s hook for values JSON has no type for.
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=2, default=default)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """:func:`real2sim.formats.outputs.write_json_atomic` (kept here for the stages that import it)."""
+    _write_json_atomic(path, data, default=default)
 
 
 def write_transforms(path: Path, ds: Dataset) -> None:
