@@ -80,7 +80,8 @@ def test_run_writes_a_drake_loadable_asset_manifest_and_truth(first_run, can_ds)
     assert body.default_mass() == pytest.approx(0.35)
 
     record = manifest(out)
-    assert record["dataset"] == str(can_ds.resolve())
+    assert not Path(record["dataset"]).is_absolute()  # written files hold no absolute paths
+    assert (out / record["dataset"]).resolve() == can_ds.resolve()
     assert list(record["stages"]) == ["reconstruct", "asset", "truth"]
     for stage in record["stages"].values():
         assert stage["wall_seconds"] > 0 and stage["peak_memory_mb"] > 50
@@ -264,10 +265,11 @@ def test_assetdir_of_another_dataset_is_refused(can_ds_no_truth, tmp_path, capsy
     (out / ".run").mkdir(parents=True)
     foreign = {"version": 1, "dataset": str(tmp_path / "another_dataset"), "stages": {}}
     (out / ".run" / "run.json").write_text(json.dumps(foreign))
+    (out / ".real2sim").write_text("{}")  # made by real2sim
     code, _, err = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, *FAST)
     assert code == 2 and "another dataset" in err and len(err.strip().splitlines()) == 1
     assert json.loads((out / ".run" / "run.json").read_text()) == foreign
-    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == [".run", ".run/run.json"]
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == [".real2sim", ".run", ".run/run.json"]
 
 
 def test_tiny_field_run(can_ds_no_truth, tmp_path):

@@ -199,7 +199,7 @@ def build_asset(
     from real2sim.geometry.fidelity import measure_fidelity
     from real2sim.asset.inertia import estimate_physical_properties
 
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite, inputs=[mesh_path], made_by="real2sim asset") as tmp:
         write_asset_config(config_record(config), tmp / ASSET_CONFIG_NAME)
         if config.flat_bottom:
             from real2sim.asset.bottom import close_flat_bottom

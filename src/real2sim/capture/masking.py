@@ -31,6 +31,7 @@ import numpy as np
 
 from real2sim.formats.dataset import Dataset, Frame, load_image_rgb, load_mask, read_dataset, write_transforms
 from real2sim.formats.errors import UserInputError
+from real2sim.formats.outputs import current_umask
 
 METHODS = ("provided", "maskrcnn", "background")
 ProgressFn = Callable[[int, int], None]
@@ -307,6 +308,7 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
         if target.exists():
             old = root / f".{out_name}.old-{tmp.name[-8:]}"
             target.rename(old)
+        os.chmod(tmp, 0o777 & ~current_umask())  # mkdtemp's 0700 would hide the masks from colleagues
         tmp.rename(target)
         try:
             write_transforms(root / "transforms.json", replace(ds, frames=tuple(new_frames)))

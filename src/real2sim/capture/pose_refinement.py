@@ -30,9 +30,10 @@ import shutil
 import tempfile
 import time
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -368,6 +369,26 @@ def _c2w_gl_from_cfw(cfw: np.ndarray) -> np.ndarray:
     return np.linalg.inv(m) @ CV_FROM_GL
 
 
+@contextmanager
+def colmap_logging(quiet: bool) -> Iterator[None]:
+    """COLMAP's (glog's) logging for the block: to stderr only, never to a file.
+
+    glog otherwise leaves a log file in /tmp at the first warning of every run. COLMAP's INFO
+    log is hundreds of lines, and its warnings (gauge fixing) are about its internals: ``quiet``
+    keeps errors only. The previous settings are restored.
+    """
+    import pycolmap
+
+    log = pycolmap.logging
+    saved = log.minloglevel, log.logtostderr
+    log.minloglevel = max(saved[0], 2) if quiet else saved[0]
+    log.logtostderr = True
+    try:
+        yield
+    finally:
+        log.minloglevel, log.logtostderr = saved
+
+
 def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progress: ProgressFn | None = None
                          ) -> tuple[np.ndarray, RefineResult]:
     """Refined (N, 4, 4) camera-to-world poses (OpenGL axes, the dataset's frame) and a report.
@@ -394,23 +415,20 @@ def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progre
     if n < 3:
         return fallback(f"only {n} frames (need at least 3)")
     try:
-        import pycolmap
+        import pycolmap  # noqa: F401  (checked here for the message; the stages import it themselves)
     except ImportError:
         raise UserInputError("refine-poses needs pycolmap (pip install pycolmap)") from None
 
     work = Path(tempfile.mkdtemp(prefix="real2sim-colmap-"))
-    log_level = pycolmap.logging.minloglevel
-    # COLMAP's INFO log is hundreds of lines per run; keep its warnings and errors.
-    pycolmap.logging.minloglevel = max(log_level, 1) if cfg.quiet else log_level
     try:
-        try:
-            refined_cfw, counts, num_pairs, num_pts, reproj, timings = _run_colmap(ds, cfg, work, progress)
-        except _ColmapFailure as exc:
-            return fallback(str(exc))
-        except Exception as exc:  # COLMAP raises plain RuntimeErrors/ValueErrors on degenerate input
-            return fallback(f"COLMAP failed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
+        with colmap_logging(quiet=cfg.quiet):
+            try:
+                refined_cfw, counts, num_pairs, num_pts, reproj, timings = _run_colmap(ds, cfg, work, progress)
+            except _ColmapFailure as exc:
+                return fallback(str(exc))
+            except Exception as exc:  # COLMAP raises plain RuntimeErrors/ValueErrors on degenerate input
+                return fallback(f"COLMAP failed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
     finally:
-        pycolmap.logging.minloglevel = log_level
         shutil.rmtree(work, ignore_errors=True)
 
     names = [f.file_path for f in ds.frames]

@@ -9,8 +9,10 @@ becomes one line on stderr and exit status 2.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
+import signal
 import sys
 
 from real2sim import __version__
@@ -35,6 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
         "(URDF/SDFormat for Drake), and measure its accuracy and speed. Units are SI.",
     )
     parser.add_argument("--version", action="version", version=f"real2sim {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="on an internal error, print the whole traceback (default: one line)")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     for name in _VERB_MODULES:
         try:
@@ -58,14 +62,51 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    previous_sigterm = signal.signal(signal.SIGTERM, _terminate) if _in_main_thread() else None
     try:
         return int(args.func(args) or 0)
     except UserInputError as exc:
         print(f"real2sim {args.verb}: error: {exc}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("real2sim: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print("real2sim: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:
+        if args.debug:
+            raise
+        if isinstance(exc, OSError) and exc.errno in _DISK_FULL:
+            # Not a bug: the outputs are written whole or not at all, so say so and stop.
+            print(f"real2sim {args.verb}: error: {os.strerror(exc.errno).lower()} while writing "
+                  f"{exc.filename or 'the output'}; no partial output was published", file=sys.stderr)
+            return 1
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        print(f"real2sim {args.verb}: internal error: {type(exc).__name__}: {first[:300]} "
+              "(run `real2sim --debug ...` for the traceback, and please report it)", file=sys.stderr)
+        return 1
+    finally:
+        if previous_sigterm is not None:
+            signal.signal(signal.SIGTERM, previous_sigterm)
+
+
+_DISK_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that the same clean-up as Ctrl-C runs
+    (temporary folders removed, worker pools stopped, finished results kept)."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated()
+
+
+def _in_main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
 
 
 def positive_float(text: str) -> float:

@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     from real2sim.formats.outputs import check_output_dir
 
     config = config_from_args(args)
-    check_output_dir(args.out, args.overwrite)  # fail before any heavy work
+    check_output_dir(args.out, args.overwrite, inputs=[args.mesh])  # fail before any heavy work
     console = Console(stderr=True)
     with console.status("building asset") as status:
         def log(msg: str) -> None:

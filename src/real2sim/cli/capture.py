@@ -115,7 +115,7 @@ def run_capture(args: argparse.Namespace) -> int:
     cfg = CaptureConfig(views=args.views, width=args.width, height=args.height, pose_noise_mm=args.pose_noise_mm,
                         pose_noise_deg=args.pose_noise_deg, seed=args.seed, with_background=args.with_background)
     cfg.validate()
-    check_output_dir(args.out, args.overwrite)
+    check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
     mesh = _resolve_mesh(args.mesh)
     with Progress(transient=True) as bar:
         task = bar.add_task("rendering", total=None)
@@ -132,6 +132,7 @@ def run_refine(args: argparse.Namespace) -> int:
 
     from real2sim.formats.errors import UserInputError
     from real2sim.capture.pose_refinement import RefineConfig, refine_poses
+    from real2sim.formats.outputs import output_lock
 
     if args.neighbors < 1:
         raise UserInputError(f"--neighbors must be at least 1 (got {args.neighbors})")
@@ -141,7 +142,9 @@ def run_refine(args: argparse.Namespace) -> int:
                        align=args.align, prior_noise_mm=args.pose_noise_mm, prior_noise_deg=args.pose_noise_deg,
                        seed=args.seed)
     console = Console(stderr=True)
-    with warnings.catch_warnings(record=True) as caught, console.status("refining poses") as status:
+    # refine-poses edits the dataset in place: one writer at a time.
+    with output_lock(args.dataset, inside=True), warnings.catch_warnings(record=True) as caught, \
+            console.status("refining poses") as status:
         warnings.simplefilter("always", RuntimeWarning)
         result = refine_poses(args.dataset, cfg, progress=lambda msg, frac: status.update(f"refine-poses: {msg}"))
     for w in caught:
@@ -158,11 +161,12 @@ def run_mask(args: argparse.Namespace) -> int:
     from rich.progress import Progress
 
     from real2sim.capture.masking import MaskConfig, compute_masks
+    from real2sim.formats.outputs import output_lock
 
     cfg = MaskConfig(threshold=args.threshold, weights=args.weights, device=args.device,
                      maskrcnn_min_size_px=args.maskrcnn_min_size, maskrcnn_max_size_px=args.maskrcnn_max_size,
                      maskrcnn_max_instances=args.maskrcnn_max_instances)
-    with Progress(transient=True) as bar:
+    with output_lock(args.dataset, inside=True), Progress(transient=True) as bar:  # masks are written into the dataset
         task = bar.add_task(f"masks ({args.method})", total=None)
         result = compute_masks(args.dataset, args.method, cfg,
                                progress=lambda done, total: bar.update(task, completed=done, total=total))

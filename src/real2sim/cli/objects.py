@@ -23,7 +23,7 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from real2sim.formats.errors import UserInputError
-    from real2sim.geometry.objects import OBJECTS, export_object
+    from real2sim.geometry.objects import OBJECTS
 
     if args.action == "list":
         for obj in OBJECTS.values():
@@ -33,11 +33,25 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("usage: real2sim objects export NAME PATH.obj")
     if args.name not in OBJECTS:
         raise UserInputError(f"unknown bundled object {args.name!r}; known: {', '.join(OBJECTS)}")
-    path: Path = args.path
+    from real2sim.formats.mesh_io import textured_mesh_files
+    from real2sim.formats.outputs import check_output_path, write_bytes_atomic
+    from real2sim.geometry.objects import make_textured_object
+
+    path = check_output_path(args.path, what="export")
     if path.suffix.lower() != ".obj":
         raise UserInputError(f"export path must end in .obj, got {path}")
-    if path.exists() and not args.overwrite:
-        raise UserInputError(f"{path} exists; pass --overwrite to replace it")
-    export_object(args.name, path)
-    print(f"wrote {path} ({OBJECTS[args.name].mass_kg} kg suggested: real2sim asset {path} --mass {OBJECTS[args.name].mass_kg} ...)")
+    files = textured_mesh_files(make_textured_object(args.name), path)
+    targets = [path.parent / name for name in files]
+    for target in targets:
+        if target.is_dir():
+            raise UserInputError(f"{target} is a folder; the export needs a file there")
+    existing = [t.name for t in targets if t.exists()]
+    if existing and not args.overwrite:
+        raise UserInputError(f"{', '.join(existing)} already exist in {path.parent}; pass --overwrite to replace them")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for target in targets[1:] + targets[:1]:  # the OBJ last: it is complete only when its files are
+        write_bytes_atomic(target, files[target.name])
+    mass = OBJECTS[args.name].mass_kg
+    print(f"wrote {path} and {', '.join(t.name for t in targets[1:])} "
+          f"({mass} kg suggested: real2sim asset {path} --mass {mass} ...)")
     return 0

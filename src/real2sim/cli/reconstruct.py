@@ -43,16 +43,24 @@ def register(sub) -> None:
 
 
 def run_reconstruct(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
     from real2sim.formats.errors import UserInputError
-    from real2sim.formats.outputs import check_output_dir
-    from real2sim.reconstruct.stage import ReconstructConfig, import_external, reconstruct, write_reconstruction
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.formats.outputs import check_output_dir, output_lock
 
     if args.seed < 0 or args.seed >= 2**63:
         raise UserInputError(f"--seed must be in 0..2^63-1 (got {args.seed})")
-    check_output_dir(args.out, args.overwrite)
+    inputs = [p for p in (args.dataset, args.from_mesh, args.dataparser_transforms) if p is not None]
+    out = check_output_dir(args.out, args.overwrite, inputs=inputs)
+    with output_lock(out):  # held from the start: a second writer learns now, not after training
+        return _reconstruct(args, out)
+
+
+def _reconstruct(args: argparse.Namespace, out: Path) -> int:
+    from dataclasses import replace
+
+    from real2sim.formats.errors import UserInputError
+    from real2sim.reconstruct.stage import ReconstructConfig, import_external, reconstruct, write_reconstruction
+    from real2sim.reconstruct.train import FieldConfig
+
     if (args.from_mesh is None) != (args.dataparser_transforms is None):
         raise UserInputError("--from-mesh and --dataparser-transforms go together")
     if args.from_mesh is not None:
@@ -68,7 +76,8 @@ def run_reconstruct(args: argparse.Namespace) -> int:
         config.validate()
         result = _with_progress(lambda progress: reconstruct(args.dataset, config, device=args.device,
                                                              seed=args.seed, progress=progress))
-    out = write_reconstruction(result, args.out, overwrite=args.overwrite)
+    out = write_reconstruction(result, out, overwrite=args.overwrite,
+                               inputs=tuple(p for p in (args.dataset, args.from_mesh) if p is not None))
     print(summary_line(out, result.report))
     return 0
 

@@ -62,7 +62,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -449,11 +448,11 @@ def _load_cache(path: Path) -> SdfSamples | None:
 
 
 def _save_cache(path: Path, samples: SdfSamples) -> None:
+    from real2sim.formats.outputs import atomic_file
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        # Write beside the target and rename, so a reader never sees half a file.
-        fd, tmp = tempfile.mkstemp(prefix=path.stem, suffix=".tmp.npz", dir=path.parent)
-        with os.fdopen(fd, "wb") as fh:
+        with atomic_file(path) as tmp, open(tmp, "wb") as fh:  # a reader never sees half a file
             np.savez(
                 fh,
                 points=samples.points,
@@ -462,13 +461,8 @@ def _save_cache(path: Path, samples: SdfSamples) -> None:
                 scale_m=np.float64(samples.scale_m),
                 num_surface=np.int64(samples.num_surface),
             )
-        os.replace(tmp, path)
     except OSError:
-        # The cache is an optimisation: an unwritable folder must not fail the stage.
-        try:
-            os.unlink(tmp)  # type: ignore[possibly-undefined]
-        except (OSError, UnboundLocalError):
-            pass
+        pass  # the cache is an optimisation: an unwritable folder must not fail the stage
 
 
 class _Steps:

@@ -53,18 +53,45 @@ def validate_mesh(mesh: trimesh.Trimesh, label: str = "mesh") -> None:
         raise UserInputError(f"{label} is degenerate (flat or zero area; extents {extents.round(6).tolist()} m)")
 
 
+def textured_mesh_files(mesh: trimesh.Trimesh, obj_path: Path | str) -> dict[str, bytes]:
+    """The files of ``mesh`` as an OBJ at ``obj_path``: ``{file name: bytes}``, OBJ first.
+
+    The MTL is ``STEM.mtl`` and every texture image ``STEM_<name>.png``: trimesh names textures
+    ``material_0.png`` whatever the OBJ is called, so two meshes exported into one folder
+    would otherwise overwrite each other's texture.
+    """
+    stem = Path(obj_path).stem
+    mtl_name = f"{stem}.mtl"
+    text, files = trimesh.exchange.obj.export_obj(
+        mesh, include_normals=True, include_texture=True, return_texture=True, mtl_name=mtl_name
+    )
+    renamed = {name: name if name == mtl_name or name.startswith(f"{stem}_") else f"{stem}_{name}"
+               for name in files}
+    out = {Path(obj_path).name: text.encode("utf-8")}
+    for name, data in files.items():
+        if name == mtl_name:
+            lines = data.decode("utf-8").splitlines()
+            for i, line in enumerate(lines):
+                key, _, value = line.partition(" ")
+                if key.startswith("map_") and value.strip() in renamed:
+                    lines[i] = f"{key} {renamed[value.strip()]}"
+            data = ("\n".join(lines) + "\n").encode("utf-8")
+        out[renamed[name]] = data
+    return out
+
+
 def export_textured_mesh(mesh: trimesh.Trimesh, obj_path: Path) -> Path:
     """Write a mesh as OBJ with normals (+ MTL and PNG when textured); return the OBJ path.
 
-    Drake needs normals in a visual OBJ; file names inside are relative.
+    Drake needs normals in a visual OBJ; file names inside are relative. Each file is
+    written whole or not at all (temporary file, fsync, rename), the OBJ last, so a
+    full disk never leaves a truncated mesh at ``obj_path``.
     """
+    from real2sim.formats.outputs import write_bytes_atomic
+
     obj_path = Path(obj_path)
     obj_path.parent.mkdir(parents=True, exist_ok=True)
-    stem = obj_path.stem
-    text, files = trimesh.exchange.obj.export_obj(
-        mesh, include_normals=True, include_texture=True, return_texture=True, mtl_name=f"{stem}.mtl"
-    )
-    obj_path.write_text(text)
-    for fname, data in files.items():
-        (obj_path.parent / fname).write_bytes(data)
+    files = textured_mesh_files(mesh, obj_path)
+    for name in list(files)[1:] + [obj_path.name]:
+        write_bytes_atomic(obj_path.parent / name, files[name])
     return obj_path

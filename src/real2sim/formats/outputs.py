@@ -144,19 +144,20 @@ _held_locks: dict[Path, list] = {}
 _held_guard = threading.Lock()
 
 
-def _lock_path(target: Path) -> Path:
-    return target.with_name(f".{target.name}.lock")
+def _lock_path(target: Path, inside: bool) -> Path:
+    return target / ".real2sim.lock" if inside else target.with_name(f".{target.name}.lock")
 
 
 @contextmanager
-def output_lock(target: Path | str) -> Iterator[None]:
-    """Hold the lock of output ``target`` (a ``.NAME.lock`` file beside it) for the block.
+def output_lock(target: Path | str, *, inside: bool = False) -> Iterator[None]:
+    """Hold the lock of output ``target`` for the block: a ``.NAME.lock`` file beside it, or
+    with ``inside`` (a folder edited in place, such as a dataset) a file in it.
 
     Re-entrant within a process. A second process gets ``UserInputError`` at once rather
     than waiting: two writers of one output are a mistake to report, not to queue.
     """
     target = Path(os.path.abspath(target))
-    path = _lock_path(target)
+    path = _lock_path(target, inside)
     with _held_guard:
         held = _held_locks.get(path)
         if held is not None:
@@ -168,9 +169,17 @@ def output_lock(target: Path | str) -> Iterator[None]:
             with _held_guard:
                 held[1] -= 1
         return
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if inside and not target.is_dir():
+        raise UserInputError(f"{target} is not a folder" if target.exists() else f"folder not found: {target}")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise UserInputError(f"cannot write {target}: {path.parent} is not a folder") from None
     while True:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        except PermissionError:
+            raise UserInputError(f"cannot write {target}: {path.parent} is read-only for you") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
 import resource
 import sys
 import time
@@ -139,7 +140,10 @@ class Manifest:
     def __init__(self, asset_dir: Path, dataset: Path, data: dict | None = None):
         self.asset_dir = Path(asset_dir)
         self.path = self.asset_dir / RUN_DIRNAME / MANIFEST_NAME
-        self.data = data or {"version": MANIFEST_VERSION, "dataset": str(Path(dataset).resolve()), "stages": {}}
+        # Relative to ASSETDIR: written files hold no absolute paths (they name people's home folders),
+        # and a project folder holding both can be moved.
+        self.data = data or {"version": MANIFEST_VERSION, "stages": {},
+                             "dataset": os.path.relpath(Path(dataset).resolve(), self.asset_dir.resolve())}
 
     @classmethod
     def load(cls, asset_dir: Path) -> "Manifest | None":
@@ -156,7 +160,8 @@ class Manifest:
 
     @property
     def dataset(self) -> Path:
-        return Path(self.data["dataset"])
+        """The dataset's absolute path (stored relative to ASSETDIR)."""
+        return (self.asset_dir.resolve() / self.data["dataset"]).resolve()
 
     def save(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from real2sim.formats.dataset import read_dataset
 from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import publish_dir
+from real2sim.formats.outputs import MARKER_NAME, check_output_dir, make_output_dir, output_lock, publish_dir
 from real2sim.pipeline import manifest as mf
 from real2sim.pipeline.truth import build_truth, has_ground_truth
 
@@ -212,19 +212,25 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
 
     progress = progress or _Quiet()
     dataset = check_dataset(Path(dataset), masks_needed=config.mask_method is None)
-    asset_dir = Path(asset_dir).resolve()
     recon_cfg = config.reconstruct or ReconstructConfig()
     recon_cfg.validate()
     asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m)
-    if asset_dir.is_relative_to(dataset) or dataset.is_relative_to(asset_dir):
-        raise UserInputError(f"ASSETDIR {asset_dir} and the dataset {dataset} must not contain each other")
-    manifest, created = _prepare_asset_dir(asset_dir, dataset, overwrite)
-    if overwrite and asset_dir.exists():
-        _discard(asset_dir)
-        created = True
-    asset_dir.mkdir(parents=True, exist_ok=True)
-    _remove_stale_temporaries(asset_dir)
-    manifest.save()
+    # A run resumes in place, so an existing ASSETDIR passes the "exists" rule; every other rule of
+    # the output helper (inputs, working folder, foreign folders) holds even for a resume.
+    asset_dir = check_output_dir(asset_dir, overwrite=True, inputs=[dataset], what="ASSETDIR")
+    with output_lock(asset_dir):
+        manifest, created = _prepare_asset_dir(asset_dir, dataset, overwrite)
+        if overwrite and asset_dir.exists():
+            _discard(asset_dir)
+            created = True
+        make_output_dir(asset_dir, made_by="real2sim run")
+        _remove_stale_temporaries(asset_dir)
+        manifest.save()
+        return _run_locked(manifest, created, dataset, asset_dir, config, recon_cfg, asset_cfg, progress)
+
+
+def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: Path, config: RunConfig,
+                recon_cfg, asset_cfg, progress: RunProgress) -> RunResult:
     truth = has_ground_truth(dataset)
     count = 2 + bool(config.mask_method) + bool(config.refine) + truth + bool(config.evaluation)
     runner = _Runner(manifest, progress, count)
@@ -361,6 +367,7 @@ def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: Ru
     for entry in asset_dir.iterdir():
         if entry.name not in RESERVED and not entry.name.startswith("."):
             shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+    (built / MARKER_NAME).unlink(missing_ok=True)  # ASSETDIR has its own
     outputs = sorted(entry.name for entry in built.iterdir())
     for name in outputs:
         os.replace(built / name, asset_dir / name)

@@ -21,6 +21,7 @@ Frames, checked here and recorded in the file:
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -113,7 +114,7 @@ def build_truth(dataset: Path, used_dataset: Path, asset_dir: Path, reconstruct_
              "refinement_asked": refinement is not None, "refined": refined,
              "refinement_outcome": None if refinement is None else refinement.get("reason")}
     return {
-        "dataset": str(Path(dataset).resolve()),
+        "dataset": os.path.relpath(Path(dataset).resolve(), asset_dir.resolve()),
         "camera_poses": poses,
         "masks_iou": mask_iou(used_dataset),
         "reconstruction": reconstruct_report.get("truth"),

@@ -196,7 +196,8 @@ def _mesh_psnr(mesh: trimesh.Trimesh, held: PosedViews) -> float:
     return float(np.mean(values))
 
 
-def write_reconstruction(result: Reconstruction, out_dir: Path | str, *, overwrite: bool = False) -> Path:
+def write_reconstruction(result: Reconstruction, out_dir: Path | str, *, overwrite: bool = False,
+                         inputs: tuple = ()) -> Path:
     """Write ``mesh.obj`` (+ .mtl, .png) and ``report.json`` into ``out_dir``, whole or not at all."""
     import json
 
@@ -204,7 +205,7 @@ def write_reconstruction(result: Reconstruction, out_dir: Path | str, *, overwri
     from real2sim.formats.outputs import atomic_output_dir
 
     out_dir = Path(out_dir)
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite, inputs=inputs, made_by="real2sim reconstruct") as tmp:
         export_textured_mesh(result.mesh, tmp / "mesh.obj")
         (tmp / "report.json").write_text(json.dumps(result.report, indent=2, default=_json_default))
     return out_dir.resolve()
