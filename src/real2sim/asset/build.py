@@ -9,7 +9,7 @@ is the contract of DESIGN.md ("Files on disk"):
       physical_properties.json   mass_kg, com_m, inertia_kg_m2 (about the CoM, asset axes)
       canonical_transform.json   4x4 from the input mesh frame to the asset frame
       visual/model.obj           textured visual mesh with normals (asset frame)
-      <representation>/          model.urdf, [model.sdf], collision.json, fit_report.json
+      <representation>/          model.urdf, [model.sdf], [model.xml for MuJoCo], collision.json, fit_report.json
 """
 
 from __future__ import annotations
@@ -74,9 +74,11 @@ class AssetConfig:
         names = [s.name for s in self.specs]
         if len(set(names)) != len(names):
             raise UserInputError(f"a collision SPEC is given twice: {names}")
-        bad = set(self.formats) - {"urdf", "sdf"}
+        from real2sim.asset.writers import ASSET_FORMATS
+
+        bad = set(self.formats) - set(ASSET_FORMATS)
         if bad:
-            raise UserInputError(f"unknown --format {sorted(bad)}; known: urdf, sdf")
+            raise UserInputError(f"unknown --format {sorted(bad)}; known: {', '.join(ASSET_FORMATS)}")
 
 
 @dataclass(frozen=True)
@@ -250,6 +252,14 @@ def build_asset(
                 **fidelity,
                 **report,
             }
+            if "mjcf" in config.formats:
+                from real2sim.asset.mjcf import mjcf_notes
+
+                notes = mjcf_notes(geometry)
+                if notes:
+                    report["mjcf_notes"] = notes
+                for note in notes:
+                    say(f"warning: {note}")
             (rep_dir / "fit_report.json").write_text(json.dumps(report, indent=1, default=float))
             say(
                 f"collision {spec.text}: {len(geometry.shapes)} pieces, IoU {report.get('iou', float('nan')):.3f}, "

@@ -78,6 +78,10 @@ VISUAL_MESH_RELPATH = "../visual/model.obj"
 
 SDF_VERSION = "1.9"
 
+
+#: Model files an asset can hold per representation: model.urdf (always), model.sdf, model.xml (MuJoCo).
+ASSET_FORMATS = ("urdf", "sdf", "mjcf")
+
 ET.register_namespace("drake", DRAKE_NS)
 
 
@@ -311,7 +315,8 @@ def write_representation(
     model_name: str = "object",
     link_name: str = LINK_NAME,
 ) -> None:
-    """Write ``rep_dir/model.urdf`` (always) and ``rep_dir/model.sdf`` (if "sdf" in formats).
+    """Write ``rep_dir/model.urdf`` (always), ``rep_dir/model.sdf`` (if "sdf" in formats) and
+    ``rep_dir/model.xml`` for MuJoCo (if "mjcf" in formats; see :mod:`real2sim.asset.mjcf`).
 
     ``geometry`` is in the asset frame (metres); mesh files of convex/mesh shapes are
     paths relative to ``rep_dir`` and must already exist there (the decomposition
@@ -321,9 +326,9 @@ def write_representation(
     non-physical properties.
     """
     rep_dir = Path(rep_dir)
-    unknown = set(formats) - {"urdf", "sdf"}
+    unknown = set(formats) - set(ASSET_FORMATS)
     if unknown:
-        raise ValueError(f"unknown asset format(s) {sorted(unknown)}; use 'urdf' and/or 'sdf'")
+        raise ValueError(f"unknown asset format(s) {sorted(unknown)}; use {', '.join(ASSET_FORMATS)}")
     for shape in geometry.shapes:
         if shape.mesh_file is not None and not (rep_dir / shape.mesh_file).is_file():
             raise ValueError(f"collision mesh {shape.mesh_file!r} not found in {rep_dir}")
@@ -332,3 +337,8 @@ def write_representation(
     (rep_dir / "model.urdf").write_text(write_model_urdf_string(*args))
     if "sdf" in formats:
         (rep_dir / "model.sdf").write_text(write_model_sdf_string(*args))
+    if "mjcf" in formats:
+        from real2sim.asset.mjcf import MJCF_NAME, write_model_mjcf_string
+
+        (rep_dir / MJCF_NAME).write_text(write_model_mjcf_string(
+            geometry, props, contact, rep_dir, visual_mesh_relpath, model_name))

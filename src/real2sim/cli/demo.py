@@ -103,7 +103,8 @@ def run_config(plan: DemoPlan):
         from real2sim.capture.pose_refinement import RefineConfig
 
         refine = RefineConfig()
-    asset = AssetConfig(mass_kg=OBJECTS["bottle"].mass_kg, specs=tuple(parse_spec(s) for s in plan.specs))
+    asset = AssetConfig(mass_kg=OBJECTS["bottle"].mass_kg, specs=tuple(parse_spec(s) for s in plan.specs),
+                        formats=("urdf", "mjcf"))
     return RunConfig(asset=asset, reconstruct=recon, refine=refine)
 
 
