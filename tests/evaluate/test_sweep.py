@@ -25,7 +25,7 @@ from real2sim.formats.errors import UserInputError
 from real2sim.evaluate.discovery import discover_representations, place_reference_mesh
 from real2sim.evaluate.scoring import score
 from real2sim.evaluate.sweep import EvaluationConfig, evaluate
-from real2sim.formats.results import RUN_COLUMNS, read_runs_csv
+from real2sim.formats.results import CHECK_COLUMN, RUN_COLUMNS, read_runs_csv
 from real2sim.formats.trajectory import load_trajectory, save_trajectory
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
 from real2sim.evaluate.scene_config import SceneConfig
@@ -185,7 +185,7 @@ def test_sweep_writes_rows_summary_plots_report(sweep):
     assert result.out_dir == out.resolve()
     assert not out.with_name(f".{out.name}.partial").exists()  # published whole
     with open(out / "runs.csv", newline="") as fh:
-        assert tuple(next(csv.reader(fh))) == RUN_COLUMNS
+        assert tuple(next(csv.reader(fh))) == RUN_COLUMNS + (CHECK_COLUMN,)
     rows = read_runs_csv(out / "runs.csv")
     assert len(rows) == 4 * 2  # 4 representations x 2 contact models x 1 task x 1 run
     assert result.simulated == 8 and result.skipped == 0
@@ -236,7 +236,9 @@ def test_resume_skips_done_rows_and_retries_failures(sweep):
     mtime = cache[0].stat().st_mtime_ns
     before = _by_key(read_runs_csv(out / "runs.csv"))
     # Resume with the same settings: only the two failed rows are simulated again.
-    asset_dir = Path(json.loads((out / "config.json").read_text())["assets"]["box"])
+    recorded = json.loads((out / "config.json").read_text())["assets"]["box"]
+    assert not Path(recorded).is_absolute()  # config.json does not tell where the user's files live
+    asset_dir = out / recorded
     result = evaluate([asset_dir], out, config, progress=False)
     assert result.skipped == 6 and result.simulated == 2
     assert cache[0].stat().st_mtime_ns == mtime  # the reference came from the cache
@@ -255,7 +257,7 @@ def test_resume_skips_done_rows_and_retries_failures(sweep):
 def test_output_that_is_not_a_results_folder_is_refused(asset, tmp_path):
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "something.txt").write_text("mine")
-    with pytest.raises(UserInputError, match="not a results folder"):
+    with pytest.raises(UserInputError, match="real2sim did not make"):
         evaluate([asset], tmp_path / "out", EvaluationConfig(tasks=("push",), runs=1, jobs=1, scene=SHORT_SCENE))
     assert (tmp_path / "out" / "something.txt").read_text() == "mine"
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import sys
 from pathlib import Path
 
 # Light modules (numpy at most): the vocabulary of --tasks and --contact, defined once.
@@ -54,7 +56,14 @@ def register(sub) -> None:
                    help="multiply the push duration and the ramp's total duration by K (default 1; < 1 for quick looks)")
     p.add_argument("--recommend", choices=["accuracy", "speed", "smoothness"], default=None,
                    help="print the recommended representation for this preference (all three are in report.html)")
-    p.add_argument("--overwrite", action="store_true", help="discard existing results in RESULTS and start afresh")
+    p.add_argument("--sim-timeout-s", type=float, default=600.0, metavar="S",
+                   help="wall-clock limit of one simulation in seconds (default 600); past it the row is recorded as "
+                   "failed with the reason 'timeout' and the sweep goes on")
+    p.add_argument("--ray-timeout-s", type=float, default=30.0, metavar="S",
+                   help="how long to wait for the Ray cluster to answer, in seconds (default 30)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="discard existing results in RESULTS and start afresh (only a folder real2sim made is "
+                   "replaced; never an input)")
     p.set_defaults(func=run)
 
     r = sub.add_parser(
@@ -92,6 +101,8 @@ def config_from_args(args: argparse.Namespace):
         tasks=_csv_list(args.tasks), contact_models=_csv_list(args.contact), runs=args.runs, seed=args.seed,
         jobs=args.jobs or _default_jobs(), executor=args.executor, ray_address=args.ray_address,
         simulation_error=args.simulation_error, scene=scene,
+        # `real2sim run --evaluate` shares this function but not these flags: the defaults then.
+        sim_timeout_s=getattr(args, "sim_timeout_s", 600.0), ray_timeout_s=getattr(args, "ray_timeout_s", 30.0),
     )
 
 
@@ -115,6 +126,29 @@ def _print_summary(summary, recommend_pref: str | None) -> None:
         console.print(f"recommended for {pref}: [bold]{name}[/bold]  ({RECOMMENDATION_RULES[pref]})")
 
 
+@contextlib.contextmanager
+def _sigterm_interrupts():
+    """SIGTERM raises KeyboardInterrupt for the block, so that the sweep ends its workers and
+    keeps its finished rows as on Ctrl-C. A handler someone else installed (the main command
+    line may install one for every verb) is left alone."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
+        yield
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def run(args: argparse.Namespace) -> int:
     from real2sim.formats.errors import UserInputError
     from real2sim.evaluate.sweep import evaluate
@@ -122,8 +156,9 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     if args.reference is not None and not args.reference.is_file():
         raise UserInputError(f"reference mesh not found: {args.reference}")
-    result = evaluate(args.assets, args.out, config, reference_mesh=args.reference, progress=True,
-                      overwrite=args.overwrite, log=lambda m: print(m, flush=True))
+    with _sigterm_interrupts():
+        result = evaluate(args.assets, args.out, config, reference_mesh=args.reference, progress=True,
+                          overwrite=args.overwrite, log=lambda m: print(m, flush=True))
     _print_summary(result.summary, args.recommend)
     print(f"{result.simulated} simulations run, {result.skipped} reused, {result.failed} failed; "
           f"results in {result.out_dir} (report: {result.report_path})")
@@ -134,7 +169,7 @@ def run_report(args: argparse.Namespace) -> int:
     from real2sim.formats.results import read_summary_csv
     from real2sim.report.html import write_report
 
-    path = write_report(args.results)
+    path = write_report(args.results, log=lambda m: print(f"real2sim report: {m}", file=sys.stderr, flush=True))
     _print_summary(read_summary_csv(Path(args.results) / "summary.csv"), None)
     print(f"report: {path}")
     return 0

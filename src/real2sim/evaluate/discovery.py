@@ -83,9 +83,12 @@ def read_canonical_transform(asset_dir: Path) -> np.ndarray:
     path = Path(asset_dir) / "canonical_transform.json"
     if not path.is_file():
         raise UserInputError(f"{asset_dir} has no canonical_transform.json, needed to place --reference")
-    data = json.loads(path.read_text())
-    matrix = data.get("T_asset_from_input", data.get("matrix", data)) if isinstance(data, dict) else data
-    t = np.asarray(matrix, dtype=float)
+    try:
+        data = json.loads(path.read_text())
+        matrix = data.get("T_asset_from_input", data.get("matrix", data)) if isinstance(data, dict) else data
+        t = np.asarray(matrix, dtype=float)
+    except (OSError, ValueError, TypeError):  # not JSON, not text, ragged or non-numeric entries
+        t = np.zeros(0)
     if t.shape != (4, 4) or not np.all(np.isfinite(t)):
         raise UserInputError(f"{path} does not hold a 4x4 transform")
     return t

@@ -1,12 +1,24 @@
 """Where the sweep's jobs run: this process, a local process pool, or Ray.
 
 Each executor offers submit(fn, arg) -> handle, wait(handles) -> finished handles,
-result(handle), shutdown(); the rows are the same on every executor.
+result(handle), shutdown(abort=False); the rows are the same on every executor.
+
+Nothing is left running: ``shutdown(abort=True)`` (the sweep calls it when it ends by an
+exception, KeyboardInterrupt included -- the command line turns SIGTERM into one) cancels
+what is queued and terminates the workers instead of waiting for their simulations. If the
+sweep's process is killed outright (SIGKILL), each pool worker notices: on Linux the kernel
+kills it with its parent (``PR_SET_PDEATHSIG``), elsewhere a watcher thread sees the parent
+change within a second. Once the workers are gone, multiprocessing's resource tracker (which
+holds the same pipe and stderr) sees its pipe close and exits too.
 """
 
 from __future__ import annotations
 
 import os
+import signal
+import sys
+import threading
+import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -46,8 +58,61 @@ class _SerialExecutor:
     def result(self, handle: int) -> Any:
         return self._results.pop(handle)
 
-    def shutdown(self) -> None:
+    def shutdown(self, abort: bool = False) -> None:
         pass
+
+
+def _set_parent_death_signal() -> bool:
+    """Ask Linux to SIGKILL this process when its parent dies; False where that is unavailable."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        PR_SET_PDEATHSIG = 1
+        return libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def _watch_parent(parent_pid: int, period_s: float = 1.0) -> None:
+    while True:
+        time.sleep(period_s)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+
+
+def _init_worker(parent_pid: int) -> None:
+    """Pool worker initializer: die with the sweep's process, and leave Ctrl-C to it.
+
+    A terminal's Ctrl-C reaches the whole process group; the parent then terminates the
+    workers itself (a worker that died of KeyboardInterrupt would only break the pool).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    armed = _set_parent_death_signal()
+    if os.getppid() != parent_pid:  # the parent died before the request above took effect
+        os._exit(1)
+    if not armed:
+        threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True, name="parent-watch").start()
+
+
+def _terminate_pool(pool) -> None:
+    """Cancel what ``pool`` has queued and end its workers now (SIGTERM, then SIGKILL)."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        if p.is_alive():
+            p.terminate()
+    deadline = time.monotonic() + 5.0
+    for p in processes:
+        # join() returns when the worker's sentinel pipe closes, which can be a moment before
+        # the kernel lets its exit status be collected: poll until it is.
+        while p.exitcode is None and time.monotonic() < deadline:
+            p.join(timeout=0.05)
+        if p.exitcode is None:
+            p.kill()
+            p.join(timeout=1.0)
 
 
 class _PoolExecutor:
@@ -71,7 +136,8 @@ class _PoolExecutor:
         main_file = getattr(sys.modules.get("__main__"), "__file__", None)
         method = "spawn" if main_file is None or os.path.exists(main_file) else "fork"
         self._ctx = multiprocessing.get_context(method)
-        self._make = lambda: ProcessPoolExecutor(max_workers=jobs, mp_context=self._ctx)
+        self._make = lambda: ProcessPoolExecutor(max_workers=jobs, mp_context=self._ctx, initializer=_init_worker,
+                                                 initargs=(os.getpid(),))
         self._pool = self._make()
         self._solo = None  # one-worker pool for jobs caught in two pool breaks
         self._futures: dict[int, Any] = {}
@@ -111,7 +177,8 @@ class _PoolExecutor:
         from concurrent.futures.process import BrokenProcessPool
 
         if self._solo is None:
-            self._solo = ProcessPoolExecutor(max_workers=1, mp_context=self._ctx)
+            self._solo = ProcessPoolExecutor(max_workers=1, mp_context=self._ctx, initializer=_init_worker,
+                                             initargs=(os.getpid(),))
         try:
             return self._solo.submit(fn, arg).result()
         except BrokenProcessPool:
@@ -125,16 +192,68 @@ class _PoolExecutor:
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = self._make()
 
-    def shutdown(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
-        if self._solo is not None:
-            self._solo.shutdown(wait=True)
+    def shutdown(self, abort: bool = False) -> None:
+        """Wait for the workers to exit; ``abort``: end them now, dropping what they were doing."""
+        pools = [p for p in (self._pool, self._solo) if p is not None]
+        self._solo = None
+        for pool in pools:
+            if abort:
+                _terminate_pool(pool)
+            else:
+                pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _probe_address(address: str, timeout_s: float) -> None:
+    """Fail fast when a ``host:port`` (or ``ray://host:port``) address does not accept connections."""
+    import socket
+
+    hostport = address.removeprefix("ray://")
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not port.isdigit() or "/" in hostport:
+        return  # "auto", "local" and other forms: left to ray.init, under the timeout
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        raise UserInputError(f"could not reach the Ray cluster at {address} within {timeout_s:g} s "
+                             f"({exc.strerror or type(exc).__name__}); check --ray-address / $RAY_ADDRESS, or "
+                             "raise --ray-timeout-s") from None
+
+
+def _init_ray_bounded(ray, address: str | None, kwargs: dict, timeout_s: float) -> None:
+    """``ray.init`` with a wall-clock bound: it retries an unreachable address for minutes.
+
+    It runs in a daemon thread so that the caller can give up; a call still stuck then is
+    abandoned (the process exits with the error) rather than waited for.
+    """
+    outcome: dict[str, BaseException | None] = {}
+
+    def start() -> None:
+        try:
+            ray.init(address=address, **kwargs)
+            outcome["error"] = None
+        except BaseException as exc:  # handed to the caller
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=start, daemon=True, name="ray-init")
+    thread.start()
+    thread.join(timeout_s)
+    where = address or "a local Ray"
+    if thread.is_alive():
+        raise UserInputError(f"could not start or reach Ray at {where} within {timeout_s:g} s; check --ray-address "
+                             "/ $RAY_ADDRESS, or raise --ray-timeout-s")
+    if outcome.get("error") is not None:
+        raise UserInputError(f"could not start or reach Ray at {where}: {_one_line(outcome['error'])}")
 
 
 class _RayExecutor:
-    """Ray tasks, one CPU each; ``address`` None starts (or joins) a local Ray."""
+    """Ray tasks, one CPU each; ``address`` None starts (or joins) a local Ray.
 
-    def __init__(self, jobs: int, address: str | None) -> None:
+    ``timeout_s`` bounds joining a cluster; starting a local Ray (processes on this
+    machine, slow on a loaded one) gets at least 120 s.
+    """
+
+    def __init__(self, jobs: int, address: str | None, timeout_s: float = 30.0) -> None:
         try:
             import ray
         except ImportError:  # pragma: no cover - ray is a dependency
@@ -142,13 +261,16 @@ class _RayExecutor:
         self._ray = ray
         address = address or os.environ.get("RAY_ADDRESS") or None
         if not ray.is_initialized():
-            kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
+            import logging
+
+            # Ray's own INFO/WARNING lines would break the one-line error contract of the command line.
+            kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
+                                      "logging_level": logging.ERROR}
             if address is None:
                 kwargs["num_cpus"] = jobs
-            try:
-                ray.init(address=address, **kwargs)
-            except Exception as exc:
-                raise UserInputError(f"could not start or reach Ray at {address or 'local'}: {_one_line(exc)}") from None
+            else:
+                _probe_address(address, timeout_s)
+            _init_ray_bounded(ray, address, kwargs, timeout_s if address else max(timeout_s, 120.0))
             self._owns_ray = True
         else:
             self._owns_ray = False
@@ -178,7 +300,14 @@ class _RayExecutor:
         except Exception as exc:  # the worker died (our functions catch their own errors)
             return _failed_result(fn, arg, f"ray task failed: {_one_line(exc)}")
 
-    def shutdown(self) -> None:
+    def shutdown(self, abort: bool = False) -> None:
+        if abort:
+            for ref, _fn, _arg in self._refs.values():
+                try:
+                    self._ray.cancel(ref, force=True)
+                except Exception:  # already finished, or the cluster is gone
+                    pass
+            self._refs.clear()
         if self._owns_ray:
             self._ray.shutdown()
 
@@ -199,7 +328,7 @@ def _failed_result(fn: Callable, arg: Any, message: str) -> Any:
 
 def _make_executor(config):
     if config.executor == "ray":
-        return _RayExecutor(config.jobs, config.ray_address)
+        return _RayExecutor(config.jobs, config.ray_address, getattr(config, "ray_timeout_s", 30.0))
     if config.jobs == 1:
         return _SerialExecutor()
     return _PoolExecutor(config.jobs)

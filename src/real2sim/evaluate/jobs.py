@@ -17,6 +17,7 @@ from real2sim.evaluate.discovery import Asset
 from real2sim.evaluate.scene_config import SceneConfig
 from real2sim.evaluate.tasks import RunSpec
 from real2sim.evaluate.scoring import score
+from real2sim.evaluate.simulate import SimulationTimeout
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.results import FLOAT_COLUMNS, KEY_COLUMNS
 from real2sim.formats.trajectory import load_trajectory, save_trajectory
@@ -33,6 +34,7 @@ class ReferenceJob:
     scene: SceneConfig
     cache_path: Path | None = None
     contact: ContactProperties | None = None  # the asset's own material, so the reference is the same object
+    sim_timeout_s: float | None = None  # wall-clock limit of the simulation (None: none)
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,7 @@ class CandidateJob:
     scene: SceneConfig
     simulation_error: bool
     reference: Any  # Trajectory
+    sim_timeout_s: float | None = None  # wall-clock limit of the simulation (None: none)
 
     @property
     def key(self) -> tuple:
@@ -54,8 +57,9 @@ class CandidateJob:
 
 
 def _one_line(exc: BaseException) -> str:
-    text = f"{type(exc).__name__}: {exc}".strip().replace("\r", " ").replace("\n", " | ")
-    return text[:500]
+    # A timeout's message starts with "timeout:", the reason the row records; others name their type.
+    text = str(exc) if isinstance(exc, SimulationTimeout) else f"{type(exc).__name__}: {exc}"
+    return text.strip().replace("\r", " ").replace("\n", " | ")[:500]
 
 
 def run_reference_job(job: ReferenceJob) -> tuple[str, Any]:
@@ -70,7 +74,8 @@ def run_reference_job(job: ReferenceJob) -> tuple[str, Any]:
         from real2sim.evaluate.simulate import simulate_reference
 
         props = read_physical_properties(job.physical_properties_path)
-        traj = simulate_reference(job.mesh_path, props, job.run_spec, job.scene, object_contact=job.contact)
+        traj = simulate_reference(job.mesh_path, props, job.run_spec, job.scene, object_contact=job.contact,
+                                  timeout_s=job.sim_timeout_s)
         if job.cache_path is not None:
             save_trajectory(traj, job.cache_path)
         return "ok", traj
@@ -96,7 +101,8 @@ def run_candidate_job(job: CandidateJob) -> dict:
 
         # The candidate always starts from the reference's initial state; simulation error is
         # the same call with resets switched off (``job.scene`` has reset_interval_s None then).
-        traj = simulate_candidate(job.urdf_path, job.contact_model, job.run_spec, job.scene, job.reference)
+        traj = simulate_candidate(job.urdf_path, job.contact_model, job.run_spec, job.scene, job.reference,
+                                  timeout_s=job.sim_timeout_s)
         values = score(job.reference, traj)
         return _row(job.key, **values)
     except Exception as exc:

@@ -19,6 +19,26 @@ from real2sim.evaluate.tasks import RunSpec, task_named
 _STABLE_CACHE: dict[bytes, list[tuple[np.ndarray, float]]] = {}
 
 
+def com_inside_hull(vertices_m: np.ndarray, com_m) -> bool:
+    """True when ``com_m`` lies strictly inside the convex hull of ``vertices_m``.
+
+    This is exactly the test that ``trimesh.poses.compute_stable_poses`` repeats in an
+    endless loop until a centre-of-mass sample passes it (with no spread, every sample is
+    the same point): a CoM on or outside the hull -- an open surface such as a bowl or a
+    half shell, or a mesh that is not in the asset's frame -- would spin forever there.
+    """
+    import trimesh
+
+    from trimesh.util import diagonal_dot
+
+    # trimesh tests against the hull of the mesh it is given; it is given this hull.
+    hull = trimesh.convex.convex_hull(np.ascontiguousarray(vertices_m, dtype=float)).convex_hull
+    c = np.asarray(com_m, dtype=float).reshape(3)
+    if not np.all(np.isfinite(c)):
+        return False
+    return bool(np.all(diagonal_dot(c - hull.triangles_center, hull.face_normals) < 0))
+
+
 def stable_rotations(vertices_m: np.ndarray, com_m=None) -> list[tuple[np.ndarray, float]]:
     """Statically stable resting orientations of a rigid object on a plane: (R_WO, probability)
     pairs, most probable first (trimesh's quasi-static analysis of the vertices' convex hull
@@ -31,6 +51,10 @@ def stable_rotations(vertices_m: np.ndarray, com_m=None) -> list[tuple[np.ndarra
     key = v.tobytes() + (b"" if c is None else c.tobytes())
     if key not in _STABLE_CACHE:
         hull = trimesh.convex.convex_hull(v)
+        if c is not None and not com_inside_hull(v, c):
+            raise ValueError(f"the centre of mass {np.round(c, 4).tolist()} m is not inside the convex hull of "
+                             "the mesh's vertices; it has no resting pose (an open surface, or a mesh that "
+                             "is not in the asset's frame)")
         transforms, probs = trimesh.poses.compute_stable_poses(
             hull, center_mass=hull.center_mass if c is None else c, n_samples=1)
         _STABLE_CACHE.clear()  # one object at a time: keep memory flat in long sweeps

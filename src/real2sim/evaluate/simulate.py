@@ -8,12 +8,19 @@ candidate's state (object pose + spatial velocity, and the pusher's / table's jo
 state) is set to the reference's state at that step, then one interval is simulated.
 
 Each simulation runs twice on the same diagram:
-1. the timed run: bare ``Simulator.AdvanceTo`` from reset to reset, with no Python
-   per step; ``sim_time_s`` is its wall time (resets included: they cost microseconds);
+1. the timed run: bare ``Simulator.AdvanceTo`` from reset to reset (in chunks of
+   :data:`CHUNK_STEPS` steps), with no Python per step; ``sim_time_s`` is its wall time
+   (resets included: they cost microseconds);
 2. the instrumented run: one ``AdvanceTo`` per step, reading the state and the plant's
    contact results; its wall time is ``instrumented_time_s``.
 Both runs execute the same discrete updates on the same states; their final states agree
 bit for bit (checked on every run: a RuntimeWarning if not).
+
+Wall-clock limit: with ``timeout_s`` both runs advance in chunks of at most
+:data:`CHUNK_STEPS` steps and check the clock between chunks; past the limit the simulation
+stops with :class:`SimulationTimeout` (the sweep records the row as a "timeout" failure and
+goes on). Chunking does not change the result: the plant is discrete, and the instrumented
+run already advances one step at a time to the same states.
 
 Times: sample n is at n * time_step_s, n = 0..num_steps. At a reset step the logged
 candidate state is the *prediction* (before the reset), so equation error measures one
@@ -40,6 +47,27 @@ from real2sim.evaluate.world import Scene, build_scene, reference_object_adder, 
 class SimulationError(RuntimeError):
     """A simulation failed (solver failure, non-finite or exploded state); the message
     names the task, run, contact model, representation and simulated time."""
+
+
+class SimulationTimeout(SimulationError):
+    """A simulation ran past its wall-clock limit; the message starts with "timeout:"."""
+
+
+#: Steps advanced between two looks at the clock (a box's step is ~0.1 ms, a big mesh's ~10 ms).
+CHUNK_STEPS = 25
+
+
+class _Deadline:
+    """The wall-clock limit of one simulation (both runs together); None: no limit."""
+
+    def __init__(self, timeout_s: float | None) -> None:
+        self.timeout_s = timeout_s
+        self._end = None if timeout_s is None else time.monotonic() + float(timeout_s)
+
+    def check(self, label: str, t_s: float) -> None:
+        if self._end is not None and time.monotonic() > self._end:
+            raise SimulationTimeout(f"timeout: {label} ran past its {self.timeout_s:g} s wall-clock limit "
+                                    f"(sim_timeout_s) at simulated t = {t_s:.3f} s")
 
 
 @dataclass(frozen=True)
@@ -114,7 +142,7 @@ def _intervals(num_steps: int, interval: int | None) -> list[tuple[int, int]]:
 
 
 def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: SceneConfig,
-              label: str, representation: str, run: int) -> Trajectory:
+              label: str, representation: str, run: int, deadline: _Deadline | None = None) -> Trajectory:
     from pydrake.common.eigen_geometry import Quaternion
     from pydrake.math import RotationMatrix
     from pydrake.systems.analysis import Simulator
@@ -131,8 +159,10 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
                              "(same SceneConfig and task)")
     spans = _intervals(n, interval)
     reset_steps = np.array([a for a, _ in spans if a > 0], dtype=int)
+    deadline = deadline or _Deadline(None)
+    deadline.check(label, 0.0)  # building the scene may already have used the time
 
-    # 1. Timed run: bare AdvanceTo between resets.
+    # 1. Timed run: bare AdvanceTo between resets (in chunks, for the wall-clock limit).
     simulator = Simulator(scene.diagram)
     ctx = simulator.get_mutable_context()
     pctx = plant.GetMyMutableContextFromRoot(ctx)
@@ -142,9 +172,13 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     for a, b in spans:
         if a > 0:
             _set_state(scene, pctx, _state_at(reference, a), label, a * dt)
-        t0 = time.perf_counter()
-        _advance(simulator, b, dt, label)
-        sim_time_s += time.perf_counter() - t0
+        step = a
+        while step < b:  # in chunks, looking at the clock in between
+            step = min(step + CHUNK_STEPS, b)
+            t0 = time.perf_counter()
+            _advance(simulator, step, dt, label)
+            sim_time_s += time.perf_counter() - t0
+            deadline.check(label, step * dt)
         _check_finite(scene, pctx, label, b * dt)
     timed_final_q = plant.GetPositions(pctx).copy()
 
@@ -208,6 +242,8 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
         log_contacts()
         if (i + 1) % 100 == 0 or i + 1 == n:
             _check_finite(scene, pctx, label, (i + 1) * dt)
+        if (i + 1) % CHUNK_STEPS == 0:
+            deadline.check(label, (i + 1) * dt)
     instrumented_time_s = time.perf_counter() - t0
     if not np.array_equal(plant.GetPositions(pctx), timed_final_q):
         # Same diagram, same states, same discrete updates: they should agree bit for bit.
@@ -241,12 +277,14 @@ def _mesh_vertices(mesh_path: Path) -> np.ndarray:
 
 
 def simulate_reference(reference_mesh_path: Path, physical_properties, run_spec: RunSpec,
-                       scene_config: SceneConfig, object_contact=None) -> Trajectory:
+                       scene_config: SceneConfig, object_contact=None, timeout_s: float | None = None) -> Trajectory:
     """The ground truth: the mesh at ``reference_mesh_path`` (asset frame, m; usually
     ``ASSETDIR/visual/model.obj``) as a rigid hydroelastic body with ``physical_properties``
     (a real2sim.formats.physical.PhysicalProperties), hydroelastic contact, no resets.
     ``object_contact``: real2sim.formats.contact.ContactProperties for friction/dissipation
-    (defaults when None)."""
+    (defaults when None). ``timeout_s``: wall-clock limit of the whole call
+    (:class:`SimulationTimeout` past it); None: none."""
+    deadline = _Deadline(timeout_s)
     scene = build_scene(run_spec.task, "hydroelastic",
                         reference_object_adder(reference_mesh_path, physical_properties, object_contact),
                         run_spec, scene_config)
@@ -254,7 +292,7 @@ def simulate_reference(reference_mesh_path: Path, physical_properties, run_spec:
                                com_m=physical_properties.com_m)
     label = f"reference {run_spec.task} run {run_spec.run}"
     return _simulate(scene, _initial_state(scene, X_WO), None, scene_config, label, "reference",
-                     run_spec.run)
+                     run_spec.run, deadline)
 
 
 def representation_name(urdf_path: Path) -> str:
@@ -264,7 +302,7 @@ def representation_name(urdf_path: Path) -> str:
 
 def simulate_candidate(representation_urdf_path: Path, contact_model: str, run_spec: RunSpec,
                        scene_config: SceneConfig, reference: Trajectory | None = None,
-                       initial_mesh_path: Path | None = None) -> Trajectory:
+                       initial_mesh_path: Path | None = None, timeout_s: float | None = None) -> Trajectory:
     """Simulate a candidate URDF with ``contact_model`` ("point" | "hydroelastic").
 
     With ``reference``: it starts from the reference's initial state and, when
@@ -274,8 +312,10 @@ def simulate_candidate(representation_urdf_path: Path, contact_model: str, run_s
     error) from the initial pose computed from ``initial_mesh_path`` (default: the asset's
     ``visual/model.obj`` two folders up from the URDF) and the CoM in the asset's
     ``physical_properties.json`` when present, so it matches :func:`simulate_reference`
-    on that mesh.
+    on that mesh. ``timeout_s``: wall-clock limit of the whole call (:class:`SimulationTimeout`
+    past it); None: none.
     """
+    deadline = _Deadline(timeout_s)
     urdf = Path(representation_urdf_path)
     scene = build_scene(run_spec.task, contact_model, urdf_object_adder(urdf), run_spec, scene_config)
     name = representation_name(urdf)
@@ -292,4 +332,4 @@ def simulate_candidate(representation_urdf_path: Path, contact_model: str, run_s
         com_m = read_physical_properties(props_path).com_m if props_path.is_file() else None
         initial = _initial_state(scene, initial_object_pose(_mesh_vertices(mesh), run_spec, scene_config,
                                                             com_m=com_m))
-    return _simulate(scene, initial, reference, scene_config, label, name, run_spec.run)
+    return _simulate(scene, initial, reference, scene_config, label, name, run_spec.run, deadline)

@@ -32,14 +32,24 @@ settings that change what a row means (seed, scene, simulation/equation error,
 reference meshes) must match those stored in ``config.json``, otherwise the sweep
 refuses to mix them (use ``overwrite=True`` / ``--overwrite``). Tasks, contact
 models, runs and assets may change between calls (that is how a sweep is extended);
-summary.csv, the plots and the report always cover every row in runs.csv.
+summary.csv, the plots and the report always cover every row in runs.csv. A row that
+was torn (cut mid-number by a crash or a full disk: its checksum does not match, see
+:mod:`real2sim.formats.results`) counts as not done and is simulated again.
+
+Safety (docs/reliability.md): ``--out`` may not be, contain or lie in what the sweep
+reads, nor hold the working folder, and ``--overwrite`` replaces only folders real2sim
+made (:mod:`real2sim.evaluate.workdir`); the output's lock is held from the first check
+to the publication, so a second sweep into the same ``--out`` is refused at once; every
+asset is checked before anything is written (:mod:`real2sim.evaluate.inputs`); each
+simulation has a wall-clock limit (``sim_timeout_s``: the row records a "timeout" and the
+sweep goes on); an interrupt (Ctrl-C, SIGTERM) ends the workers and keeps every finished
+row for the resume. config.json records paths relative to the results folder only.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import os
+import math
 import shutil
 import time
 from contextlib import contextmanager
@@ -50,17 +60,17 @@ from typing import Any, Callable, Sequence
 from real2sim.evaluate.discovery import (Asset, Representation, discover_assets, discover_representations,
                                          place_reference_mesh, read_canonical_transform)
 from real2sim.evaluate.executors import EXECUTORS, _default_jobs, _make_executor, _Retry
+from real2sim.evaluate.inputs import check_inputs
+from real2sim.evaluate.record import check_resume_settings, config_record
 from real2sim.evaluate.jobs import CandidateJob, ReferenceJob, _reference_cache_name, _row, run_candidate_job, run_reference_job
 from real2sim.evaluate.scene_config import SceneConfig
 from real2sim.evaluate.tasks import TASKS, make_run_specs
+from real2sim.evaluate.workdir import (check_partial, check_results_dir, fresh_partial, partial_dir, protected_inputs,
+                                       resolve_target)
 from real2sim.formats.contact import CONTACT_MODELS
 from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import publish_dir
-from real2sim.formats.results import RUN_COLUMNS, read_runs_csv, row_key, write_csv_atomic
-
-
-# Settings that change the meaning of a row: a resumed sweep must use the same ones.
-_PINNED_SETTINGS = ("seed", "scene", "simulation_error", "reference", "reference_contact")
+from real2sim.formats.outputs import output_lock, publish_dir, write_json_atomic
+from real2sim.formats.results import describe_torn, load_runs_csv, relative_paths_in_text, row_key, write_runs_csv
 
 
 @dataclass(frozen=True)
@@ -74,6 +84,10 @@ class EvaluationConfig:
     ray_address: Ray cluster address (None: ``$RAY_ADDRESS``, else a local Ray);
     simulation_error: free roll-outs instead of equation error (resets every 0.1 s);
     scene: task scene parameters (durations, sizes, time step).
+    sim_timeout_s: wall-clock limit of one simulation (reference or candidate), s; past it
+    the row is recorded as failed with the reason "timeout" and the sweep goes on. The
+    default is far above a paper-sized run (seconds), so it only stops runaways.
+    ray_timeout_s: how long to wait for the Ray cluster at ``ray_address`` to answer, s.
     """
 
     tasks: tuple[str, ...] = TASKS
@@ -85,6 +99,8 @@ class EvaluationConfig:
     ray_address: str | None = None
     simulation_error: bool = False
     scene: SceneConfig = field(default_factory=SceneConfig)
+    sim_timeout_s: float = 600.0
+    ray_timeout_s: float = 30.0
 
     def __post_init__(self) -> None:
         if not self.tasks or any(t not in TASKS for t in self.tasks):
@@ -102,6 +118,10 @@ class EvaluationConfig:
             raise UserInputError(f"--jobs must be a whole number >= 1, got {self.jobs}")
         if self.executor not in EXECUTORS:
             raise UserInputError(f"unknown executor {self.executor!r}; choose local or ray")
+        for name in ("sim_timeout_s", "ray_timeout_s"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise UserInputError(f"--{name.replace('_', '-')} must be a finite number of seconds > 0, got {value}")
 
 
 @dataclass(frozen=True)
@@ -116,106 +136,11 @@ class EvaluationResult:
     failed: int  # rows with an error after this call
 
 
-def _config_record(config: EvaluationConfig, assets: Sequence[Asset], reference_meshes: dict[str, Path],
-                   reference_arg: Path | None) -> dict:
-    import platform
-
-    try:
-        import pydrake
-
-        drake_version = getattr(pydrake, "__version__", "unknown")
-    except Exception:  # pragma: no cover
-        drake_version = "unknown"
-    scene = dataclasses.asdict(config.scene) if dataclasses.is_dataclass(config.scene) else repr(config.scene)
-    return {
-        "seed": config.seed,
-        "scene": json.loads(json.dumps(scene, default=str)),
-        "simulation_error": config.simulation_error,
-        "reference": str(Path(reference_arg).resolve()) if reference_arg else "asset",
-        "tasks": list(config.tasks),
-        "contact_models": list(config.contact_models),
-        "runs": config.runs,
-        "jobs": config.jobs,
-        "executor": config.executor,
-        "assets": {a.name: str(a.asset_dir) for a in assets},
-        "reference_meshes": {k: str(v) for k, v in reference_meshes.items()},
-        "reference_contact": {a.name: dataclasses.asdict(a.contact) if a.contact else "defaults (no asset_config.json)"
-                              for a in assets},
-        "protocol": (
-            "simulation error: free roll-outs from the same initial state"
-            if config.simulation_error or not config.scene.reset_interval_s
-            else f"equation error: candidate state reset to the reference state every "
-            f"{config.scene.reset_interval_s:g} s (paper V-C: 0.1 s)"
-        ),
-        "metrics": {
-            "ate_m": "mean Euclidean distance between reference and candidate object positions (eq. 17)",
-            "ocae_m": "mean ATE of three points at 1 m along the object's x, y, z axes",
-            "cpd_m_per_s": "mean |d/dt| (central differences) of the mean contact-point distance from the "
-            "object origin, inside contiguous contact runs of >= 3 steps, cut at equation-error resets",
-            "cpd_force_weighted_m_per_s": "as cpd_m_per_s, with the mean contact-point distance weighted by "
-            "contact force magnitude (not in the paper)",
-            "sim_time_s": "wall-clock seconds per candidate simulation (measured under the sweep's parallel load)",
-        },
-        "software": {"python": platform.python_version(), "drake": drake_version, "machine": platform.machine(),
-                     "cpus": os.cpu_count()},
-    }
-
-
-def _check_resume_settings(partial: Path, record: dict) -> None:
-    path = partial / "config.json"
-    if not path.is_file():
-        return
-    old = json.loads(path.read_text())
-    for key in _PINNED_SETTINGS:
-        if key in old and old[key] != record[key]:
-            raise UserInputError(
-                f"{partial.name.removeprefix('.').removesuffix('.partial')} holds results made with a different {key}; "
-                "pass --overwrite to start again, or choose another --out"
-            )
-
-
-def _prepare_workdir(out_dir: Path, overwrite: bool) -> tuple[Path, Path, bool]:
-    """(target, working folder, whether this call created the working folder)."""
-    target = Path(out_dir).resolve()
-    partial = target.with_name(f".{target.name}.partial")
-    if target.exists() and not target.is_dir():
-        raise UserInputError(f"output path {target} exists and is not a folder")
-    if overwrite:
-        shutil.rmtree(partial, ignore_errors=True)
-    elif partial.is_dir() and (partial / "runs.csv").is_file():
-        return target, partial, False  # an interrupted sweep: resume it
-    else:
-        shutil.rmtree(partial, ignore_errors=True)
-        if target.is_dir() and any(target.iterdir()):
-            if not (target / "runs.csv").is_file():
-                raise UserInputError(f"{target} exists and is not a results folder (no runs.csv); pass --overwrite")
-            shutil.copytree(target, partial)
-            return target, partial, True
-    partial.mkdir(parents=True)
-    return target, partial, True
-
-
-def _prepare_inputs(assets: Sequence[Asset], config: EvaluationConfig, reference_mesh: Path | str | None,
-                    partial: Path) -> tuple[EvaluationConfig, dict[str, Path]]:
-    """Reference mesh per asset (placed ones written into ``partial``), the effective config,
-    and config.json -- after checking that a resumed folder was made with the same settings."""
-    reference_meshes: dict[str, Path] = {}
-    for a in assets:
-        if reference_mesh is None:
-            if not a.reference_mesh_path.is_file():
-                raise UserInputError(f"{a.asset_dir} has no visual/model.obj to use as the reference")
-            reference_meshes[a.name] = a.reference_mesh_path
-        else:
-            reference_meshes[a.name] = partial / "reference_meshes" / f"{a.name}.obj"
-    if config.simulation_error:
-        config = dataclasses.replace(config, scene=dataclasses.replace(config.scene, reset_interval_s=None))
-    record = _config_record(config, assets, reference_meshes, Path(reference_mesh) if reference_mesh else None)
-    _check_resume_settings(partial, record)
-    if reference_mesh is not None:
-        for a in assets:
-            place_reference_mesh(reference_mesh, a.asset_dir, reference_meshes[a.name])
-    (partial / "config.json").write_text(json.dumps(record, indent=1))
-    return config, reference_meshes
+def _reference_mesh_paths(assets: Sequence[Asset], reference_mesh: Path | str | None, partial: Path) -> dict[str, Path]:
+    """Reference mesh per asset: its own, or where the placed ``--reference`` goes in the working folder."""
+    if reference_mesh is None:
+        return {a.name: a.reference_mesh_path for a in assets}
+    return {a.name: partial / "reference_meshes" / f"{a.name}.obj" for a in assets}
 
 
 def evaluate(
@@ -233,33 +158,51 @@ def evaluate(
     reference_mesh: None -> each asset's own closed mesh (``visual/collision_reference.obj``,
         else ``visual/model.obj``); a mesh file -> that mesh, given in the frame of the mesh
         each asset was built from and moved into the asset frame with its canonical_transform.json.
+    overwrite: start afresh, discarding the results (and working folder) at ``out_dir``; only
+        folders the evaluation made are ever deleted (:mod:`real2sim.evaluate.workdir`).
+
+    UserInputError, with nothing written, for unusable assets or reference, an ``out_dir``
+    that is not ours to write, or another sweep writing ``out_dir`` now.
     """
     say = log or (lambda _m: None)
     reps = discover_representations(asset_dirs)
     assets = discover_assets(asset_dirs)
     if reference_mesh is not None:
-        from real2sim.formats.mesh_io import load_mesh
-
-        load_mesh(reference_mesh)  # UserInputError now for a missing file / not a mesh
         for a in assets:
             read_canonical_transform(a.asset_dir)
-    target, partial, created = _prepare_workdir(Path(out_dir), overwrite)
-    try:
-        config, reference_meshes = _prepare_inputs(assets, config, reference_mesh, partial)
-    except BaseException:
-        if created:  # nothing of ours worth keeping: leave no hidden folder behind
-            shutil.rmtree(partial, ignore_errors=True)
-        raise
+    check_inputs(assets, reps, reference_mesh)
+    target = resolve_target(out_dir)
+    inputs = protected_inputs(assets, target, reference_mesh)
+    target = check_results_dir(target, overwrite, inputs)
+    with output_lock(target):  # one sweep per --out, from here to the publication
+        return _evaluate_locked(reps, assets, target, inputs, config, reference_mesh, progress, overwrite, say)
 
-    # Rows already done (resume); failed rows are retried.
-    runs_path = partial / "runs.csv"
-    rows: dict[tuple, dict] = {}
-    if runs_path.is_file():
-        rows = {row_key(r): r for r in read_runs_csv(runs_path)}
+
+def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfig, reference_mesh, progress: bool,
+                     overwrite: bool, say: Callable[[str], None]) -> EvaluationResult:
+    partial = partial_dir(target)
+    if check_partial(partial, overwrite, inputs):
+        source: Path | None = partial  # an interrupted sweep: resume it
+    elif not overwrite and (target / "runs.csv").is_file():
+        source = target  # a finished sweep: extend it
+    else:
+        source = None
+    # Read what is to be resumed before anything is written: a damaged runs.csv or config.json is refused.
+    table = load_runs_csv(source / "runs.csv") if source is not None else None
+    if config.simulation_error:
+        config = dataclasses.replace(config, scene=dataclasses.replace(config.scene, reset_interval_s=None))
+    reference_meshes = _reference_mesh_paths(assets, reference_mesh, partial)
+    record = config_record(config, assets, reference_meshes, Path(reference_mesh) if reference_mesh else None,
+                            target, partial)
+    if source is not None:
+        check_resume_settings(source, target, record)
+
+    # Rows already done (resume); failed and torn rows are simulated again.
+    rows: dict[tuple, dict] = {row_key(r): r for r in table.rows} if table is not None else {}
+    if table is not None and table.torn_lines:
+        say(f"warning: {describe_torn(table, 'runs.csv')}: simulated again")
     done = {k for k, r in rows.items() if not r["error"]}
-
     specs = {task: make_run_specs(task, config.runs, config.seed) for task in config.tasks}
-    asset_by_name = {a.name: a for a in assets}
     todo: dict[tuple[str, str, int], list[tuple[Representation, str]]] = {}
     skipped = 0
     for rep in reps:
@@ -275,22 +218,41 @@ def evaluate(
     n_candidates = sum(len(v) for v in todo.values())
     say(f"{len(reps)} representations of {len(assets)} assets: {n_candidates} simulations to run, {skipped} already done")
 
-    executor = _make_executor(config) if todo else None
-    simulated = 0
+    created = source is not partial
+    executor = None
     try:
+        executor = _make_executor(config) if todo else None  # a Ray that cannot be reached fails here
+        if created:
+            fresh_partial(partial, copy_of=source)
+        if reference_mesh is not None:
+            for a in assets:
+                place_reference_mesh(reference_mesh, a.asset_dir, reference_meshes[a.name])
+        write_json_atomic(partial / "config.json", record)
+    except BaseException:
         if executor is not None:
+            executor.shutdown(abort=True)
+        if created:  # nothing of ours worth keeping: leave no hidden folder behind
+            shutil.rmtree(partial, ignore_errors=True)
+        raise
+
+    runs_path = partial / "runs.csv"
+    simulated = 0
+    if executor is not None:
+        asset_by_name = {a.name: a for a in assets}
+        try:
             simulated = _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows,
-                                   runs_path, progress)
-    finally:
-        if executor is not None:
-            executor.shutdown()
+                                   runs_path, progress, target)
+        except BaseException:  # KeyboardInterrupt (Ctrl-C, SIGTERM) included: end the workers now
+            executor.shutdown(abort=True)
+            raise
+        executor.shutdown()
 
     all_rows = sorted(rows.values(), key=row_key)
-    write_csv_atomic(runs_path, all_rows, RUN_COLUMNS)
+    write_runs_csv(runs_path, all_rows)
     from real2sim.report.html import build_outputs
 
     summary, plots, report_path = build_outputs(partial, all_rows)
-    publish_dir(partial, target)
+    publish_dir(partial, target, made_by="real2sim evaluate")
     failed = sum(1 for r in all_rows if r["error"])
     return EvaluationResult(
         out_dir=target,
@@ -310,11 +272,23 @@ def _checkpoint_on_exit(runs_path: Path, rows: dict):
     try:
         yield
     finally:
-        write_csv_atomic(runs_path, sorted(rows.values(), key=row_key), RUN_COLUMNS)
+        write_runs_csv(runs_path, sorted(rows.values(), key=row_key))
+
+
+def _private(row: dict, target: Path) -> dict:
+    """``row`` with the absolute paths in its error text made relative to the results folder."""
+    if row.get("error"):
+        row = dict(row, error=relative_paths_in_text(row["error"], target))
+    return row
+
+
+def _reference_failed(payload: str) -> str:
+    # A timeout keeps "timeout" as the reason the row records; its text names the reference.
+    return payload if payload.startswith("timeout:") else f"reference simulation failed: {payload}"
 
 
 def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows, runs_path,
-               progress) -> int:
+               progress, target: Path) -> int:
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -326,7 +300,7 @@ def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config,
         spec = spec_by[(task, run)]
         cache = partial / "reference_cache" / _reference_cache_name(asset, reference_meshes[obj], spec, config.scene)
         job = ReferenceJob(obj, task, run, reference_meshes[obj], asset.physical_properties_path, spec, config.scene,
-                           cache, asset.contact)
+                           cache, asset.contact, config.sim_timeout_s)
         pending[executor.submit(run_reference_job, job)] = ("ref", (obj, task, run), job)
 
     simulated = 0
@@ -352,20 +326,20 @@ def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config,
                     for rep, cm in todo[key]:
                         ckey = (rep.object, rep.name, cm, key[1], key[2])
                         if status != "ok":
-                            rows[ckey] = _row(ckey, error=f"reference simulation failed: {payload}")
+                            rows[ckey] = _private(_row(ckey, error=_reference_failed(payload)), target)
                             bar.advance(bar_cands)
                             simulated += 1
                             continue
                         cjob = CandidateJob(rep.object, rep.name, cm, key[1], key[2], rep.urdf_path, job.run_spec,
-                                            config.scene, config.simulation_error, payload)
+                                            config.scene, config.simulation_error, payload, config.sim_timeout_s)
                         pending[executor.submit(run_candidate_job, cjob)] = ("cand", ckey, cjob)
                 else:
-                    rows[key] = result
+                    rows[key] = _private(result, target)
                     simulated += 1
                     bar.advance(bar_cands)
                 now = time.monotonic()
                 if now - last_write > 1.0 or not pending:
-                    write_csv_atomic(runs_path, sorted(rows.values(), key=row_key), RUN_COLUMNS)
+                    write_runs_csv(runs_path, sorted(rows.values(), key=row_key))
                     last_write = now
     return simulated
 

@@ -2,18 +2,31 @@
 row per ``<representation>_<contactmodel>``, the layout of the paper's Table I).
 
 Written by the evaluation, read by the report; neither imports the other.
+
+Torn rows: every runs.csv row ends with :data:`CHECK_COLUMN`, the CRC-32 of its other
+fields, so a row cut mid-number (a crash or a full disk while an older version appended,
+a copy cut short, a hand edit) is recognised: :func:`load_runs_csv` sets aside rows whose
+checksum is missing or wrong, whose field count is wrong or whose numbers do not parse,
+and reports their line numbers; the sweep simulates them again and the report leaves them
+out. A runs.csv written before the column existed still reads (its rows are unverified,
+but rows with the wrong field count or unparsable numbers are still set aside).
 """
 
 from __future__ import annotations
 
 import csv
 import math
+import os
+import re
+import zlib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import numpy as np
 
 from real2sim.formats.errors import UserInputError
+from real2sim.formats.outputs import write_text_atomic
 
 
 RUN_COLUMNS = (
@@ -24,6 +37,10 @@ RUN_COLUMNS = (
 
 # Added after the first release: a runs.csv without them still reads (as NaN).
 _OPTIONAL_RUN_COLUMNS = ("cpd_force_weighted_m_per_s",)
+
+
+#: Last column of runs.csv: CRC-32 (8 hex digits) of the row's RUN_COLUMNS fields as written.
+CHECK_COLUMN = "row_crc32"
 
 
 KEY_COLUMNS = ("object", "representation", "contact_model", "task", "run")
@@ -46,34 +63,129 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
+def _csv_text(header: Sequence[str], records: Iterable[Sequence[str]]) -> str:
+    import io
+
+    buffer = io.StringIO(newline="")
+    writer = csv.writer(buffer)
+    writer.writerow(header)
+    writer.writerows(records)
+    return buffer.getvalue()
+
+
 def write_csv_atomic(path: Path, rows: Iterable[dict], columns: Sequence[str]) -> None:
-    """Write ``rows`` to ``path`` via a temporary file and a rename (never half-written)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(columns)
+    """Write ``rows`` to ``path`` whole or not at all (temporary file, fsync, rename)."""
+    write_text_atomic(path, _csv_text(columns, ([_fmt(row.get(c, "")) for c in columns] for row in rows)))
+
+
+def row_checksum(fields: Sequence[str]) -> str:
+    """CRC-32 of a runs.csv row's RUN_COLUMNS fields (their text as written), 8 hex digits."""
+    # The unit separator cannot occur in a field, so moving a character across a field
+    # boundary changes the checksum too.
+    return f"{zlib.crc32(chr(31).join(fields).encode('utf-8')) & 0xFFFFFFFF:08x}"
+
+
+def write_runs_csv(path: Path, rows: Iterable[dict]) -> None:
+    """Write runs.csv whole or not at all: RUN_COLUMNS, then each row's checksum (CHECK_COLUMN)."""
+    def records():
         for row in rows:
-            writer.writerow([_fmt(row.get(c, "")) for c in columns])
-    tmp.replace(path)
+            fields = [_fmt(row.get(c, "")) for c in RUN_COLUMNS]
+            yield fields + [row_checksum(fields)]
+
+    write_text_atomic(path, _csv_text(RUN_COLUMNS + (CHECK_COLUMN,), records()))
+
+
+@dataclass(frozen=True)
+class RunsTable:
+    """What :func:`load_runs_csv` found: the complete rows, the line numbers of torn rows
+    (set aside), and whether the file carries checksums (False: written before they existed)."""
+
+    rows: list[dict]
+    torn_lines: tuple[int, ...]
+    verified: bool
+
+
+def _parse_row(raw: dict[str, str]) -> dict[str, Any]:
+    """One row from its text fields; ValueError when a key is empty or a number does not parse."""
+    row: dict[str, Any] = {c: raw.get(c, "") for c in RUN_COLUMNS}
+    if any(not row[c] for c in KEY_COLUMNS):
+        raise ValueError("empty key field")
+    row["run"] = int(raw["run"])
+    for c in FLOAT_COLUMNS:
+        # An empty optional column (older files) is NaN; float() reads "nan", "inf" and numbers.
+        row[c] = float(raw.get(c) or "nan")
+    row["error"] = raw.get("error") or ""
+    return row
+
+
+def load_runs_csv(path: Path) -> RunsTable:
+    """Read runs.csv; torn rows are set aside (see the module docstring), never guessed at.
+
+    UserInputError when the file is not a runs.csv at all: not a readable text file,
+    binary, or without the RUN_COLUMNS header.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise UserInputError(f"{path} is not a file")
+    rows: list[dict] = []
+    torn: list[int] = []
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None)
+            if header is None:
+                raise UserInputError(f"{path} is empty, not a runs.csv")
+            missing = set(RUN_COLUMNS) - set(header) - set(_OPTIONAL_RUN_COLUMNS)
+            if missing:
+                raise UserInputError(f"{path} is not a runs.csv (missing columns {', '.join(sorted(missing))})")
+            verified = CHECK_COLUMN in header
+            for record in reader:
+                if not record:
+                    continue  # a blank line
+                line = reader.line_num
+                if len(record) != len(header):
+                    torn.append(line)
+                    continue
+                raw = dict(zip(header, record))
+                if verified and row_checksum([raw.get(c, "") for c in RUN_COLUMNS]) != raw[CHECK_COLUMN]:
+                    torn.append(line)
+                    continue
+                try:
+                    rows.append(_parse_row(raw))
+                except ValueError:
+                    torn.append(line)
+    except UnicodeDecodeError:
+        raise UserInputError(f"{path} is not a runs.csv (not UTF-8 text)") from None
+    except csv.Error as exc:
+        raise UserInputError(f"{path} is not a runs.csv ({exc})") from None
+    except OSError as exc:
+        raise UserInputError(f"could not read {path}: {exc.strerror or exc}") from None
+    return RunsTable(rows, tuple(torn), verified)
 
 
 def read_runs_csv(path: Path) -> list[dict]:
-    """runs.csv rows with floats parsed and ``run`` as int."""
-    rows = []
-    with open(path, newline="") as fh:
-        reader = csv.DictReader(fh)
-        missing = set(RUN_COLUMNS) - set(reader.fieldnames or ()) - set(_OPTIONAL_RUN_COLUMNS)
-        if missing:
-            raise UserInputError(f"{path} is not a runs.csv (missing columns {', '.join(sorted(missing))})")
-        for raw in reader:
-            row: dict[str, Any] = {c: raw.get(c, "") for c in RUN_COLUMNS}
-            row["run"] = int(raw["run"])
-            for c in FLOAT_COLUMNS:
-                row[c] = float(raw.get(c) or "nan")
-            row["error"] = raw["error"] or ""
-            rows.append(row)
-    return rows
+    """The complete rows of runs.csv (floats parsed, ``run`` an int); torn rows left out."""
+    return load_runs_csv(path).rows
+
+
+def describe_torn(table: RunsTable, path: Path | str) -> str:
+    """One line about the torn rows of ``table`` (empty when there are none)."""
+    if not table.torn_lines:
+        return ""
+    lines = ", ".join(str(n) for n in table.torn_lines[:10]) + (" ..." if len(table.torn_lines) > 10 else "")
+    return f"{len(table.torn_lines)} incomplete or corrupt row(s) in {Path(path).name} (line {lines})"
+
+
+# An absolute path in a message: a '/' not preceded by a word character or a dot, then at
+# least two components ("m/s" and "1/2" are not paths).
+_ABSOLUTE_PATH = re.compile(r"(?<![\w.~])/(?:[^\s/'\"(),;:]+/)+[^\s/'\"(),;:]*")
+
+
+def relative_paths_in_text(text: str, base: Path | str) -> str:
+    """``text`` with every absolute path in it rewritten relative to ``base`` (the results
+    folder), so that results and reports do not record where the user's files live."""
+    base = os.path.abspath(base)
+    return _ABSOLUTE_PATH.sub(lambda m: os.path.relpath(m.group(0), base), text)
 
 
 def row_key(row: dict) -> tuple:

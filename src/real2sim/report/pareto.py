@@ -18,6 +18,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from real2sim.formats.outputs import atomic_file
+
 # (x metric, y metric, file name, paper figure)
 PARETO_PLOTS: tuple[tuple[str, str, str, str], ...] = (
     ("sim_time_s", "ocae_m", "pareto_ocae_vs_time.png", "Fig. 9"),
@@ -164,10 +166,11 @@ def plot_pareto(rows: Sequence[Mapping], x_key: str, y_key: str, path: Path, tit
     ax.grid(True, which="both", alpha=0.25)
     fig.tight_layout()
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp)
-    plt.close(fig)
-    tmp.replace(path)
+    try:
+        with atomic_file(path) as tmp:  # whole or not at all, no temporary file left on failure
+            fig.savefig(tmp, format="png")
+    finally:
+        plt.close(fig)
     return path
 
 
