@@ -253,11 +253,28 @@ def test_evaluate_after_the_asset_runs_only_the_evaluation(first_run, can_ds, tm
     code, stdout, _ = run_cli(capsys, can_ds, "--mass", "0.35", "--out", out, "--collision", "mesh", *FAST,
                               "--evaluate", "--tasks", "push", "--contact", "point", "--runs", "1", "--jobs", "1",
                               "--duration-scale", "0.2")
-    assert code == 0 and "stages run: evaluate" in stdout
+    assert code == 0 and "stages run: evaluate, evaluate_truth, truth" in stdout
     rows = read_summary_csv(out / "results" / "summary.csv")
-    assert [r["representation"] for r in rows] == ["mesh_point"] or rows
+    assert [r["representation"] for r in rows] == ["mesh_point"]
     assert manifest(out)["stages"]["evaluate"]["outputs"] == ["results"]
     assert "jobs" not in manifest(out)["stages"]["evaluate"]["settings"]
+
+    # The same sweep against the true can (true mesh, true mass properties): the reconstruction's
+    # own error against the truth, beside its error against itself (the paper's protocol).
+    assert manifest(out)["stages"]["evaluate_truth"]["outputs"] == ["results_truth"]
+    truth_config = json.loads((out / "results_truth" / "config.json").read_text())
+    assert truth_config["reference"]["file"] == "true_mesh_world.obj"
+    assert truth_config["reference_properties"]["file"] == "true_physical_properties.json"
+    dynamics = json.loads((out / "truth.json").read_text())["dynamics"]
+    (mesh_row,) = dynamics["reconstruction_vs_truth"]
+    assert mesh_row["contact_model"] == "point"
+    assert 0 < mesh_row["ocae_vs_truth_m"] < 0.5 and mesh_row["ocae_vs_reconstruction_m"] >= 0
+    # The true can differs from its reconstruction: the true reference moves differently.
+    assert mesh_row["ocae_vs_truth_m"] != pytest.approx(mesh_row["ocae_vs_reconstruction_m"], rel=1e-6)
+    report = (out / "results" / "report.html").read_text()
+    assert "Against the truth" in report and "OCAE [m] vs truth" in report
+    assert report.count("class='pic'") == 2  # the visual mesh and the one representation
+    assert "http://" not in report.replace("http://www.w3.org", "")  # self-contained
 
 
 def test_assetdir_of_another_dataset_is_refused(can_ds_no_truth, tmp_path, capsys):

@@ -448,8 +448,10 @@ def test_signals_end_the_workers_and_a_second_sweep_is_locked_out(tmp_path):
         while _alive(children) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert not _alive(children), f"{sig.name}: still running: {_alive(children)}"
-        if sig != signal.SIGKILL:
+        if sig == signal.SIGINT:
             assert proc.returncode == 130 and "interrupted" in stderr, (proc.returncode, stderr[-500:])
+        elif sig == signal.SIGTERM:
+            assert proc.returncode == 143 and "terminated" in stderr, (proc.returncode, stderr[-500:])
         assert _row_count(partial / "runs.csv") > before  # the finished rows are kept
         assert not out.exists()
     kept = _row_count(partial / "runs.csv")

@@ -36,6 +36,10 @@ def register(sub) -> None:
                    help="ground-truth mesh (metres) in the frame of the mesh the assets were built from; it is "
                    "moved into each asset's frame with canonical_transform.json (default: each asset's own closed mesh, "
                    "visual/collision_reference.obj, else visual/model.obj)")
+    p.add_argument("--reference-inertia", choices=["asset", "mesh"], default="asset",
+                   help="mass properties of the reference: the asset's (default, the paper's protocol) or those "
+                   "of the --reference mesh itself at the asset's mass (uniform density): a true object "
+                   "simulated as it is")
     tasks, contacts = ",".join(TASKS), ",".join(CONTACT_MODELS)
     p.add_argument("--tasks", default=tasks, metavar="LIST",
                    help=f"comma-separated tasks: {', '.join(TASKS)} (default all)")
@@ -127,26 +131,39 @@ def _print_summary(summary, recommend_pref: str | None) -> None:
 
 
 @contextlib.contextmanager
-def _sigterm_interrupts():
-    """SIGTERM raises KeyboardInterrupt for the block, so that the sweep ends its workers and
-    keeps its finished rows as on Ctrl-C. A handler someone else installed (the main command
-    line may install one for every verb) is left alone."""
-    import signal
-    import threading
-
-    if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
-        yield
+def _reference_properties(args: argparse.Namespace):
+    """None (the asset's mass properties), or with ``--reference-inertia mesh`` a temporary
+    physical_properties.json of the reference mesh itself (asset frame, the asset's mass)."""
+    if args.reference_inertia == "asset":
+        yield None
         return
+    import json
+    import tempfile
 
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt(f"signal {signum}")
+    import numpy as np
 
-    signal.signal(signal.SIGTERM, interrupt)
+    from real2sim.asset.inertia import estimate_physical_properties
+    from real2sim.formats.errors import UserInputError
+    from real2sim.formats.mesh_io import load_mesh
+    from real2sim.formats.physical import read_physical_properties, write_physical_properties
+
+    if args.reference is None:
+        raise UserInputError("--reference-inertia mesh needs --reference MESH (the mesh whose inertia to use)")
+    if len(args.assets) != 1:
+        raise UserInputError("--reference-inertia mesh is for one asset (the reference is one object)")
+    asset = Path(args.assets[0])
     try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        mass_kg = read_physical_properties(asset / "physical_properties.json").mass_kg
+        transform = np.asarray(json.loads((asset / "canonical_transform.json").read_text())["T_asset_from_input"],
+                               dtype=float)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise UserInputError(f"{asset} is not a readable asset folder ({type(exc).__name__})") from None
+    mesh = load_mesh(args.reference)
+    mesh.apply_transform(transform)
+    with tempfile.TemporaryDirectory(prefix="real2sim-reference-") as tmp:
+        path = Path(tmp) / "reference_physical_properties.json"
+        write_physical_properties(estimate_physical_properties(mesh, mass_kg, seed=args.seed), path)
+        yield path
 
 
 def run(args: argparse.Namespace) -> int:
@@ -156,9 +173,11 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     if args.reference is not None and not args.reference.is_file():
         raise UserInputError(f"reference mesh not found: {args.reference}")
-    with _sigterm_interrupts():
+    # SIGTERM unwinds as Ctrl-C does (real2sim.cli.main): the sweep ends its workers, keeps its rows.
+    with _reference_properties(args) as reference_properties:
         result = evaluate(args.assets, args.out, config, reference_mesh=args.reference, progress=True,
-                          overwrite=args.overwrite, log=lambda m: print(m, flush=True))
+                          overwrite=args.overwrite, log=lambda m: print(m, flush=True),
+                          reference_properties=reference_properties)
     _print_summary(result.summary, args.recommend)
     print(f"{result.simulated} simulations run, {result.skipped} reused, {result.failed} failed; "
           f"results in {result.out_dir} (report: {result.report_path})")

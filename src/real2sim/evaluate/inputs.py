@@ -105,14 +105,21 @@ def _check_reference_vertices(vertices: np.ndarray, asset: Asset, props: Physica
 
 
 def check_inputs(assets: Sequence[Asset], reps: Sequence[Representation],
-                 reference_mesh: Path | str | None = None) -> None:
-    """All the checks of the module docstring; UserInputError for the first problem found."""
+                 reference_mesh: Path | str | None = None, reference_properties: Path | str | None = None) -> None:
+    """All the checks of the module docstring; UserInputError for the first problem found.
+
+    ``reference_properties``: the reference's own physical_properties.json (one asset only).
+    """
     from real2sim.formats.mesh_io import load_mesh
 
     check_representations(reps)
     given = load_mesh(reference_mesh) if reference_mesh is not None else None  # UserInputError: not a mesh
+    if reference_properties is not None and len(assets) != 1:
+        raise UserInputError("reference mass properties are those of one object: evaluate one asset with them")
     for asset in assets:
         props = check_physical_properties(asset.physical_properties_path)
+        if reference_properties is not None:
+            props = check_physical_properties(Path(reference_properties))
         if given is not None:
             transform = read_canonical_transform(asset.asset_dir)
             vertices = np.asarray(given.vertices, dtype=float) @ transform[:3, :3].T + transform[:3, 3]

@@ -117,9 +117,11 @@ def _sha1_file(path: Path) -> str:
     return h.hexdigest()
 
 
-def _reference_cache_name(asset: Asset, mesh_path: Path, spec: RunSpec, scene: SceneConfig) -> str:
+def _reference_cache_name(asset: Asset, mesh_path: Path, spec: RunSpec, scene: SceneConfig,
+                          properties_path: Path | None = None) -> str:
     h = hashlib.sha1()
-    for part in (_sha1_file(mesh_path), _sha1_file(asset.physical_properties_path), repr(spec), repr(scene),
+    properties_path = properties_path or asset.physical_properties_path
+    for part in (_sha1_file(mesh_path), _sha1_file(properties_path), repr(spec), repr(scene),
                  repr(asset.contact)):
         h.update(part.encode())
     return f"{asset.name}_{spec.task}_{spec.run}_{h.hexdigest()[:12]}.npz"

@@ -19,7 +19,7 @@ from real2sim.evaluate.discovery import Asset
 from real2sim.formats.errors import UserInputError
 
 # Settings that change the meaning of a row: a resumed sweep must use the same ones.
-PINNED_SETTINGS = ("seed", "scene", "simulation_error", "reference", "reference_contact")
+PINNED_SETTINGS = ("seed", "scene", "simulation_error", "reference", "reference_contact", "reference_properties")
 
 
 def _sha1_file(path: Path) -> str:
@@ -39,7 +39,8 @@ def _recorded_path(path: Path, target: Path, partial: Path) -> str:
 
 
 def config_record(config, assets: Sequence[Asset], reference_meshes: dict[str, Path],
-                   reference_arg: Path | None, target: Path, partial: Path) -> dict:
+                   reference_arg: Path | None, target: Path, partial: Path,
+                   reference_properties: Path | None = None) -> dict:
     import platform
 
     try:
@@ -56,6 +57,10 @@ def config_record(config, assets: Sequence[Asset], reference_meshes: dict[str, P
         # The reference by name and content: where it lives is the user's business (and private).
         "reference": ({"file": Path(reference_arg).name, "sha1": _sha1_file(Path(reference_arg))}
                       if reference_arg else "asset"),
+        # The reference's mass properties: each asset's own, or a given file (by name and content).
+        "reference_properties": ({"file": Path(reference_properties).name,
+                                  "sha1": _sha1_file(Path(reference_properties))}
+                                 if reference_properties else "asset"),
         "tasks": list(config.tasks),
         "contact_models": list(config.contact_models),
         "runs": config.runs,

@@ -151,6 +151,7 @@ def evaluate(
     progress: bool = True,
     overwrite: bool = False,
     log: Callable[[str], None] | None = None,
+    reference_properties: Path | str | None = None,
 ) -> EvaluationResult:
     """Run the sweep and write the results folder (see the module docstring).
 
@@ -160,6 +161,10 @@ def evaluate(
         each asset was built from and moved into the asset frame with its canonical_transform.json.
     overwrite: start afresh, discarding the results (and working folder) at ``out_dir``; only
         folders the evaluation made are ever deleted (:mod:`real2sim.evaluate.workdir`).
+    reference_properties: None -> the reference has the asset's mass, CoM and inertia
+        (physical_properties.json); a physical_properties.json file (asset frame) -> the
+        reference has those instead, e.g. the true object's (one asset only). With
+        ``reference_mesh`` this simulates a different object altogether: the truth.
 
     UserInputError, with nothing written, for unusable assets or reference, an ``out_dir``
     that is not ours to write, or another sweep writing ``out_dir`` now.
@@ -170,16 +175,18 @@ def evaluate(
     if reference_mesh is not None:
         for a in assets:
             read_canonical_transform(a.asset_dir)
-    check_inputs(assets, reps, reference_mesh)
+    check_inputs(assets, reps, reference_mesh, reference_properties)
     target = resolve_target(out_dir)
     inputs = protected_inputs(assets, target, reference_mesh)
     target = check_results_dir(target, overwrite, inputs)
     with output_lock(target):  # one sweep per --out, from here to the publication
-        return _evaluate_locked(reps, assets, target, inputs, config, reference_mesh, progress, overwrite, say)
+        return _evaluate_locked(reps, assets, target, inputs, config, reference_mesh, progress, overwrite, say,
+                                Path(reference_properties).resolve() if reference_properties else None)
 
 
 def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfig, reference_mesh, progress: bool,
-                     overwrite: bool, say: Callable[[str], None]) -> EvaluationResult:
+                     overwrite: bool, say: Callable[[str], None],
+                     reference_properties: Path | None = None) -> EvaluationResult:
     partial = partial_dir(target)
     if check_partial(partial, overwrite, inputs):
         source: Path | None = partial  # an interrupted sweep: resume it
@@ -193,7 +200,7 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
         config = dataclasses.replace(config, scene=dataclasses.replace(config.scene, reset_interval_s=None))
     reference_meshes = _reference_mesh_paths(assets, reference_mesh, partial)
     record = config_record(config, assets, reference_meshes, Path(reference_mesh) if reference_mesh else None,
-                            target, partial)
+                           target, partial, reference_properties)
     if source is not None:
         check_resume_settings(source, target, record)
 
@@ -241,7 +248,7 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
         asset_by_name = {a.name: a for a in assets}
         try:
             simulated = _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows,
-                                   runs_path, progress, target)
+                                   runs_path, progress, target, reference_properties)
         except BaseException:  # KeyboardInterrupt (Ctrl-C, SIGTERM) included: end the workers now
             executor.shutdown(abort=True)
             raise
@@ -288,7 +295,7 @@ def _reference_failed(payload: str) -> str:
 
 
 def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows, runs_path,
-               progress, target: Path) -> int:
+               progress, target: Path, reference_properties: Path | None = None) -> int:
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -298,8 +305,10 @@ def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config,
     for (obj, task, run), _ in sorted(todo.items()):
         asset = asset_by_name[obj]
         spec = spec_by[(task, run)]
-        cache = partial / "reference_cache" / _reference_cache_name(asset, reference_meshes[obj], spec, config.scene)
-        job = ReferenceJob(obj, task, run, reference_meshes[obj], asset.physical_properties_path, spec, config.scene,
+        properties = reference_properties or asset.physical_properties_path
+        cache = partial / "reference_cache" / _reference_cache_name(asset, reference_meshes[obj], spec, config.scene,
+                                                                    properties)
+        job = ReferenceJob(obj, task, run, reference_meshes[obj], properties, spec, config.scene,
                            cache, asset.contact, config.sim_timeout_s)
         pending[executor.submit(run_reference_job, job)] = ("ref", (obj, task, run), job)
 

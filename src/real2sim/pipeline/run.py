@@ -37,10 +37,12 @@ if TYPE_CHECKING:
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.reconstruct.stage import ReconstructConfig
 
-RESERVED = (mf.RUN_DIRNAME, "truth.json", "results")  # entries of ASSETDIR that the asset stage does not own
 RESULTS_DIRNAME = "results"
+TRUTH_RESULTS_DIRNAME = "results_truth"
+# Entries of ASSETDIR that the asset stage does not own.
+RESERVED = (mf.RUN_DIRNAME, "truth.json", RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME)
 # Evaluation settings that change how fast, not what: not part of the evaluate stage's key.
-_EVAL_SCHEDULING = ("jobs", "executor", "ray_address")
+_EVAL_SCHEDULING = ("jobs", "executor", "ray_address", "ray_timeout_s", "sim_timeout_s")
 
 
 @dataclass(frozen=True)
@@ -232,7 +234,13 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
 def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: Path, config: RunConfig,
                 recon_cfg, asset_cfg, progress: RunProgress) -> RunResult:
     truth = has_ground_truth(dataset)
-    count = 2 + bool(config.mask_method) + bool(config.refine) + truth + bool(config.evaluation)
+    if truth and config.evaluation is not None and not any(s.name == "mesh" for s in asset_cfg.specs):
+        from real2sim.formats.spec import parse_spec
+
+        # The reconstruction itself as a representation: its own dynamics against the truth.
+        asset_cfg = replace(asset_cfg, specs=asset_cfg.specs + (parse_spec("mesh"),))
+    count = (2 + bool(config.mask_method) + bool(config.refine) + truth + bool(config.evaluation)
+             + (truth and config.evaluation is not None))
     runner = _Runner(manifest, progress, count)
     try:
         result = _run_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg, truth)
@@ -282,26 +290,34 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
                              lambda: _asset(recon_dir / "mesh.obj", asset_dir, asset_cfg, manifest, progress))
     asset_outputs = manifest.entry("asset")["outputs"]
 
-    truth = None
-    if with_truth:
-        gt_files = [f for f in _dataset_files(dataset) if f.startswith("ground_truth/")]
-        inputs = {"ground_truth": mf.files_digest(dataset, gt_files),
-                  "asset": mf.files_digest(asset_dir, ["physical_properties.json", "canonical_transform.json"]),
-                  "reconstruct_report": mf.files_digest(recon_dir, ["report.json"])}
-        runner.stage("truth", inputs, {"seed": asset_cfg.seed, "refined": config.refine is not None}, asset_key,
-                     ["truth.json"], lambda: _truth(dataset, used, asset_dir, recon_dir, config, asset_cfg.seed, manifest))
-        truth = json.loads((asset_dir / "truth.json").read_text())
-    elif manifest.entry("truth"):  # the dataset lost its ground_truth/: a stale truth.json would mislead
-        manifest.forget("truth")
-        (asset_dir / "truth.json").unlink(missing_ok=True)
-
+    gt_files = [f for f in _dataset_files(dataset) if f.startswith("ground_truth/")] if with_truth else []
+    eval_key = None
     if config.evaluation is not None:
         files = [f"{top}/{rel}" for top in asset_outputs if (asset_dir / top).is_dir()
                  for rel in mf.tree_files(asset_dir / top)]
         files += [top for top in asset_outputs if (asset_dir / top).is_file()]
         settings = {k: v for k, v in mf.settings_record(config.evaluation).items() if k not in _EVAL_SCHEDULING}
-        runner.stage("evaluate", {"asset": mf.files_digest(asset_dir, files)}, settings, asset_key,
-                     [RESULTS_DIRNAME], lambda: _evaluate(asset_dir, config.evaluation, progress))
+        asset_digest = mf.files_digest(asset_dir, files)
+        eval_key = runner.stage("evaluate", {"asset": asset_digest}, settings, asset_key,
+                                [RESULTS_DIRNAME], lambda: _evaluate(asset_dir, config.evaluation, progress))
+        if with_truth:
+            eval_key = runner.stage(
+                "evaluate_truth", {"asset": asset_digest, "ground_truth": mf.files_digest(dataset, gt_files)},
+                {**settings, "seed_properties": asset_cfg.seed}, eval_key, [TRUTH_RESULTS_DIRNAME],
+                lambda: _evaluate_truth(dataset, asset_dir, config.evaluation, asset_cfg.seed, progress))
+
+    truth = None
+    if with_truth:
+        inputs = {"ground_truth": mf.files_digest(dataset, gt_files),
+                  "asset": mf.files_digest(asset_dir, ["physical_properties.json", "canonical_transform.json"]),
+                  "reconstruct_report": mf.files_digest(recon_dir, ["report.json"])}
+        runner.stage("truth", inputs, {"seed": asset_cfg.seed, "refined": config.refine is not None,
+                                       "dynamics": config.evaluation is not None}, eval_key or asset_key,
+                     ["truth.json"], lambda: _truth(dataset, used, asset_dir, recon_dir, config, asset_cfg.seed, manifest))
+        truth = json.loads((asset_dir / "truth.json").read_text())
+    elif manifest.entry("truth"):  # the dataset lost its ground_truth/: a stale truth.json would mislead
+        manifest.forget("truth")
+        (asset_dir / "truth.json").unlink(missing_ok=True)
 
     urdfs = sorted(asset_dir.glob("*/model.urdf"))
     return RunResult(asset_dir, runner.statuses, manifest.path, truth, urdfs)
@@ -360,10 +376,12 @@ def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: Ru
     built = asset_dir / mf.RUN_DIRNAME / "asset"
     build_asset(mesh, built, cfg, overwrite=True, log=lambda msg: progress.update("asset", msg, 0, 0))
     # Downstream outputs of the previous asset are stale now.
-    for stage, path in (("truth", asset_dir / "truth.json"), ("evaluate", asset_dir / RESULTS_DIRNAME)):
+    for stage, path in (("truth", asset_dir / "truth.json"), ("evaluate", asset_dir / RESULTS_DIRNAME),
+                        ("evaluate_truth", asset_dir / TRUTH_RESULTS_DIRNAME)):
         manifest.forget(stage)
         shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
-    shutil.rmtree(asset_dir / f".{RESULTS_DIRNAME}.partial", ignore_errors=True)
+    for name in (RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME):
+        shutil.rmtree(asset_dir / f".{name}.partial", ignore_errors=True)
     for entry in asset_dir.iterdir():
         if entry.name not in RESERVED and not entry.name.startswith("."):
             shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
@@ -381,7 +399,31 @@ def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, config: 
     refine_entry = manifest.entry("refine_poses") if config.refine is not None else None
     refinement = refine_entry.get("result", {}) if refine_entry else None
     record = build_truth(dataset, used, asset_dir, report, refinement=refinement, seed=seed)
+    results, results_truth = asset_dir / RESULTS_DIRNAME, asset_dir / TRUTH_RESULTS_DIRNAME
+    if config.evaluation is not None and (results_truth / "summary.csv").is_file():
+        from real2sim.pipeline.truth_dynamics import dynamics_record
+
+        record["dynamics"] = dynamics_record(results, results_truth)
     mf.write_json_atomic(asset_dir / "truth.json", record)
+    if config.evaluation is not None:
+        from real2sim.report.html import write_report
+
+        for folder in (results, results_truth):  # their reports show the truth now
+            if (folder / "runs.csv").is_file():
+                write_report(folder)
+
+
+def _evaluate_truth(dataset: Path, asset_dir: Path, cfg, seed: int, progress: RunProgress) -> dict:
+    """The sweep again, against the true mesh with the true mass properties (see truth_dynamics)."""
+    from real2sim.evaluate.sweep import evaluate
+    from real2sim.pipeline.truth_dynamics import write_true_reference
+
+    mesh, properties = write_true_reference(dataset, asset_dir, asset_dir / mf.RUN_DIRNAME / "truth", seed)
+    shutil.rmtree(asset_dir / f".{TRUTH_RESULTS_DIRNAME}.partial", ignore_errors=True)
+    result = evaluate([asset_dir], asset_dir / TRUTH_RESULTS_DIRNAME, cfg, reference_mesh=mesh,
+                      reference_properties=properties, progress=False, overwrite=True,
+                      log=lambda msg: progress.update("evaluate_truth", msg, 0, 0))
+    return {"summary": {"simulated": result.simulated, "failed": result.failed}}
 
 
 def _evaluate(asset_dir: Path, cfg, progress: RunProgress) -> dict:

@@ -107,7 +107,7 @@ def build_outputs(results_dir: Path, rows: Sequence[dict], *, config: dict | Non
     summary = summarize(rows)
     write_csv_atomic(out / "summary.csv", summary, SUMMARY_COLUMNS)
     plots = write_pareto_plots(summary, out)
-    page = render_html(summary, rows, config, plots)
+    page = render_html(summary, rows, config, plots, results_dir=results_dir)
     report = out / "report.html"
     write_text_atomic(report, page)
     return summary, plots, report
@@ -327,8 +327,17 @@ def _errors_block(rows: Sequence[Mapping], limit: int = 50) -> str:
     return f"<p>{len(bad)} of {len(rows)} simulations failed; their rows are excluded from the means.</p><ul>{items}</ul>{more}"
 
 
-def render_html(summary: Sequence[Mapping], rows: Sequence[Mapping], config: Mapping, plots: Sequence[Path]) -> str:
-    """The report page as one HTML string (plots inlined as base64 PNG)."""
+def render_html(summary: Sequence[Mapping], rows: Sequence[Mapping], config: Mapping, plots: Sequence[Path],
+                results_dir: Path | None = None) -> str:
+    """The report page as one HTML string (plots and pictures inlined as base64 PNG).
+
+    With ``results_dir``, the asset folders its config.json names add two sections: pictures
+    of every representation, and the truth (for assets with a truth.json).
+    """
+    from real2sim.report.sections import pictures_section, truth_section
+
+    truth = truth_section(results_dir, config) if results_dir is not None else ""
+    pictures = pictures_section(results_dir, config, rows) if results_dir is not None else ""
     try:
         paper = read_paper_table()
     except Exception:  # pragma: no cover - the CSV ships with the package
@@ -348,7 +357,7 @@ def render_html(summary: Sequence[Mapping], rows: Sequence[Mapping], config: Map
         "td,th{border:1px solid #ccc;padding:3px 7px;text-align:right}"
         "td:first-child,th:first-child{text-align:left}"
         ".paper{background:#f4f4f8;color:#446}.err{color:#b00}"
-        "figure{display:inline-block;margin:0.5em}img{max-width:640px}"
+        "figure{display:inline-block;margin:0.5em}img{max-width:640px}img.pic{width:200px}"
         "code{font-size:12px}"
     )
     return f"""<!DOCTYPE html>
@@ -370,11 +379,16 @@ can), scenes and machines, so only orders of magnitude and trends are comparable
 <h2>Recommendations</h2>
 {_recommendations(summary)}
 
+{truth}
+
 <h2>Pareto fronts</h2>
 <p>Every metric is lower-is-better; in the plots better is down and to the left, and Pareto-optimal
 points are outlined and labelled (the paper's Fig. 9 flips both axes).</p>
 {_pareto_lists(summary)}
 {''.join(imgs)}
+
+<h2>Representations</h2>
+{pictures}
 
 <h2>Per object and task</h2>
 {_breakdown_table(rows)}

@@ -27,28 +27,23 @@ def _png_bytes(image: np.ndarray) -> bytes:
     return buffer.getvalue()
 
 
-def asset_pictures(asset_dir: Path, out_dir: Path, width_px: int = 320, height_px: int = 240) -> dict[str, Path]:
-    """Write ``out_dir/<asset>__visual.png`` and ``out_dir/<asset>__<representation>.png``; return
-    {"visual" or representation name: path}. Representations whose files cannot be read are
-    left out (the report says "no picture")."""
+def asset_picture_pngs(asset_dir: Path, width_px: int = 320, height_px: int = 240) -> dict[str, bytes]:
+    """PNG bytes of the visual mesh ("visual") and of every representation's collision geometry, one
+    camera for all. Representations whose files cannot be read are left out (the report says so);
+    an asset without a readable visual mesh has no pictures at all."""
     import trimesh
 
     from real2sim.formats.collision import read_collision_json
     from real2sim.geometry.collision_mesh import shape_mesh
     from real2sim.geometry.picture import SHAPE_COLOURS, look_at_camera, render_picture
 
-    asset_dir, out_dir = Path(asset_dir), Path(out_dir)
-    visual_path = asset_dir / "visual" / "model.obj"
+    asset_dir = Path(asset_dir)
     try:
-        visual = trimesh.load(visual_path, process=False, force="mesh")
+        visual = trimesh.load(asset_dir / "visual" / "model.obj", process=False, force="mesh")
     except Exception:  # noqa: BLE001 -- no visual mesh: no pictures for this asset, the report goes on
         return {}
     camera = look_at_camera(visual.bounds, width_px=width_px, height_px=height_px)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    written: dict[str, Path] = {}
-    target = out_dir / f"{asset_dir.name}__visual.png"
-    write_bytes_atomic(target, _png_bytes(render_picture([(visual, None)], camera)))
-    written["visual"] = target
+    pictures = {"visual": _png_bytes(render_picture([(visual, None)], camera))}
     for collision_json in sorted(asset_dir.glob("*/collision.json")):
         rep_dir = collision_json.parent
         try:
@@ -57,7 +52,16 @@ def asset_pictures(asset_dir: Path, out_dir: Path, width_px: int = 320, height_p
                      for k, shape in enumerate(geometry.shapes)]
         except Exception:  # noqa: BLE001 -- one unreadable representation must not cost the others their pictures
             continue
-        target = out_dir / f"{asset_dir.name}__{rep_dir.name}.png"
-        write_bytes_atomic(target, _png_bytes(render_picture(parts, camera)))
-        written[rep_dir.name] = target
+        pictures[rep_dir.name] = _png_bytes(render_picture(parts, camera))
+    return pictures
+
+
+def asset_pictures(asset_dir: Path, out_dir: Path, width_px: int = 320, height_px: int = 240) -> dict[str, Path]:
+    """Write :func:`asset_picture_pngs` as ``out_dir/<asset>__<name>.png``; return {name: path}."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = {}
+    for name, data in asset_picture_pngs(asset_dir, width_px, height_px).items():
+        written[name] = out_dir / f"{Path(asset_dir).name}__{name}.png"
+        write_bytes_atomic(written[name], data)
     return written
