@@ -236,17 +236,21 @@ def normalise(source: Path, target: Path, config: NormaliseConfig, *, seed: int 
     source, target = Path(source), Path(target)
     ds = read_dataset(source)
     if progress:
-        progress("table plane")
+        progress("table plane, object height")
     robot_from_model, record = find_robot_frame(ds, read_sparse_points(source), _masks(ds), config, seed)
     truth, robot_from_world = model_from_world(source), None
-    if truth is not None and (source / "ground_truth").is_dir():
+    if truth is not None:  # model_from_world.json lives in ground_truth/
         robot_from_world = robot_from_model @ truth
         record["robot_from_world"] = robot_from_world.to_json()
         record["errors_vs_ground_truth"] = rf.frame_errors(robot_from_world)
+    elif (source / "ground_truth").is_dir():
+        record["ground_truth"] = f"not carried over: no ground_truth/{MODEL_FROM_WORLD} relates it to the model frame"
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
     try:
         for frame in ds.frames:
             for rel in (frame.file_path, frame.mask_path):
+                if not (source / rel).resolve().is_relative_to(source.resolve()):
+                    raise UserInputError(f"{rel}: path points outside the dataset folder {source}")
                 (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(source / rel, tmp / rel)
         moved = rf.transform_poses(robot_from_model, ds.poses_c2w_gl())
