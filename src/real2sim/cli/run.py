@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from real2sim.cli import positive_int
+from real2sim.cli import positive_float, positive_int
 from real2sim.cli.asset import add_asset_arguments
 
 # The reconstruction's table plane is z = 0 of the dataset's world frame: run always closes
@@ -30,6 +30,11 @@ def register(sub) -> None:
         "real2sim run can_ds --mass 0.35 --out can_asset --collision cylinders:10 --backend hull",
     )
     p.add_argument("dataset", type=Path, help="dataset folder (transforms.json, images/, masks/)")
+    p.add_argument("--object-height-m", type=positive_float, default=None, metavar="H", help="a COLMAP dataset "
+                   "(images/ + sparse/0, no transforms.json): the object's height above the table, metres; sets the "
+                   "scale (the table plane is found in the sparse points)")
+    p.add_argument("--scale", type=positive_float, default=None, metavar="S",
+                   help="COLMAP dataset: metres per model unit, instead of --object-height-m")
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR",
                    help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
     p.add_argument("--overwrite", action="store_true", help="discard ASSETDIR (and its cached stages) first")
@@ -118,7 +123,8 @@ def config_from_args(args: argparse.Namespace):
         args.executor, args.ray_address, args.simulation_error = "local", None, False
         evaluation = evaluation_config(args)
     return RunConfig(asset=asset, reconstruct=recon, mask_method=args.mask, mask=mask, refine=refine,
-                     evaluation=evaluation, device=args.device, seed=args.seed)
+                     evaluation=evaluation, device=args.device, seed=args.seed,
+                     object_height_m=args.object_height_m, scale=args.scale)
 
 
 class _Display:

@@ -1,14 +1,19 @@
 """`real2sim run`: a posed, masked dataset -> a simulation asset folder, stage by stage, resumable.
 
-Stages, in order (each one the existing stage function, called as it is):
+Stages, in order (each one the existing stage function, called as it is; ``masks``
+(with ``mask_method``) first makes the masks on a copy in ``ASSETDIR/.run/masked/``):
 
+0. ``robot_frame`` (a COLMAP dataset: images + ``sparse/0``, no transforms.json):
+   :func:`real2sim.pipeline.normalise.normalise` moves it into the robot frame (table
+   plane z = 0, z up, metres from ``object_height_m`` or ``scale``) -> ``ASSETDIR/.run/robot_frame/``;
 1. ``refine_poses`` (optional): :func:`real2sim.capture.refine_poses` on a copy of
    the dataset in ``ASSETDIR/.run/dataset/`` (the user's dataset is never written);
 2. ``reconstruct``: :func:`real2sim.reconstruct.stage.reconstruct` +
    ``write_reconstruction`` -> ``ASSETDIR/.run/reconstruct/`` (mesh.obj, report.json);
 3. ``asset``: :func:`real2sim.asset.build_asset` on that mesh (flat bottom at the
    table plane z = 0 of the dataset's world frame) -> the usual ASSETDIR layout;
-4. ``truth`` (when the dataset has ``ground_truth/``): ``ASSETDIR/truth.json``;
+4. ``truth`` (when the dataset has ``ground_truth/``; a COLMAP dataset also needs
+   ``ground_truth/model_from_world.json``, see :mod:`real2sim.pipeline.normalise`): ``ASSETDIR/truth.json``;
 5. ``evaluate`` (optional): :func:`real2sim.evaluate.sweep.evaluate` -> ``ASSETDIR/results/``.
 
 Caching, resuming and the manifest: :mod:`real2sim.pipeline.manifest`.
@@ -28,6 +33,7 @@ from real2sim.formats.dataset import read_dataset
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import MARKER_NAME, check_output_dir, make_output_dir, output_lock, publish_dir
 from real2sim.pipeline import manifest as mf
+from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, is_model_frame
 from real2sim.pipeline.truth import build_truth, has_ground_truth
 
 if TYPE_CHECKING:
@@ -54,7 +60,10 @@ class RunConfig:
     stage's defaults. mask_method: None -> the dataset's own masks (every frame must
     have one); else masks are made with :func:`real2sim.capture.compute_masks` (``mask``
     its settings, None -> defaults) on a copy. refine: None -> no pose refinement.
-    evaluation: None -> no evaluation.
+    evaluation: None -> no evaluation. object_height_m (the object's height above the table,
+    metres) or scale (metres per model unit): exactly one for a COLMAP dataset (poses in an
+    arbitrary frame and scale), which the ``robot_frame`` stage then normalises; neither for a
+    transforms.json dataset (already metric, table at z = 0).
     """
 
     asset: "AssetConfig"
@@ -65,6 +74,14 @@ class RunConfig:
     evaluation: "EvaluationConfig | None" = None
     device: str = "cpu"
     seed: int = 0
+    object_height_m: float | None = None
+    scale: float | None = None
+
+    def robot_frame(self) -> NormaliseConfig | None:
+        """The robot_frame stage's settings; None when neither object_height_m nor scale is given."""
+        if self.object_height_m is None and self.scale is None:
+            return None
+        return NormaliseConfig(object_height_m=self.object_height_m, scale=self.scale)
 
 
 class RunProgress(Protocol):
@@ -105,6 +122,8 @@ def _dataset_files(root: Path) -> list[str]:
     """What the stages read from a dataset: transforms.json, the frames' images and masks, ground_truth/."""
     ds = read_dataset(root, check_files=False)
     files = ["transforms.json"]
+    if (root / "sparse" / "0").is_dir():  # a COLMAP model: its poses and sparse points
+        files += [f"sparse/0/{rel}" for rel in mf.tree_files(root / "sparse" / "0")]
     for frame in ds.frames:
         files.append(frame.file_path)
         if frame.mask_path:
@@ -115,19 +134,22 @@ def _dataset_files(root: Path) -> list[str]:
     return files
 
 
-def check_dataset(dataset: Path, masks_needed: bool = True) -> Path:
-    """The resolved dataset folder; UserInputError when it cannot be used as it is (one line)."""
+def check_dataset(dataset: Path, masks_needed: bool = True, scale_given: bool = False) -> Path:
+    """The resolved dataset folder; UserInputError when it cannot be used as it is (one line).
+
+    ``scale_given``: --object-height-m or --scale was given; a COLMAP dataset needs one, a
+    transforms.json dataset (metric already) takes neither.
+    """
     dataset = Path(dataset).resolve()
     if dataset.is_file() and dataset.name == "transforms.json":
         dataset = dataset.parent
     ds = read_dataset(dataset)
-    if ds.extra.get("source") == "colmap":
-        raise UserInputError(f"{dataset} has no transforms.json: run needs poses in the robot frame, table at z = 0 "
-                             "(COLMAP-only captures are not supported by run yet)")
+    check_frame_options(ds, scale_given)
     missing = [f.file_path for f in ds.frames if not f.mask_path]
     if missing and masks_needed:
+        later = "" if is_model_frame(ds) else ", or make them first with `real2sim mask`"
         raise UserInputError(f"{len(missing)} of {len(ds.frames)} frames of {dataset} have no mask; pass "
-                             f"--mask provided|maskrcnn|background, or make them first with `real2sim mask`")
+                             f"--mask provided|maskrcnn|background{later}")
     return dataset
 
 
@@ -213,7 +235,10 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     from real2sim.reconstruct.stage import ReconstructConfig
 
     progress = progress or _Quiet()
-    dataset = check_dataset(Path(dataset), masks_needed=config.mask_method is None)
+    robot_frame = config.robot_frame()
+    dataset = check_dataset(Path(dataset), masks_needed=config.mask_method is None, scale_given=bool(robot_frame))
+    if robot_frame is not None:
+        robot_frame.validate()
     recon_cfg = config.reconstruct or ReconstructConfig()
     recon_cfg.validate()
     asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m)
@@ -233,13 +258,15 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
 
 def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: Path, config: RunConfig,
                 recon_cfg, asset_cfg, progress: RunProgress) -> RunResult:
-    truth = has_ground_truth(dataset)
+    robot_frame = config.robot_frame()
+    # A COLMAP dataset's ground truth is usable only when it says how the model frame relates to it.
+    truth = has_ground_truth(dataset) and (robot_frame is None or (dataset / "ground_truth" / MODEL_FROM_WORLD).is_file())
     if truth and config.evaluation is not None and not any(s.name == "mesh" for s in asset_cfg.specs):
         from real2sim.formats.spec import parse_spec
 
         # The reconstruction itself as a representation: its own dynamics against the truth.
         asset_cfg = replace(asset_cfg, specs=asset_cfg.specs + (parse_spec("mesh"),))
-    count = (2 + bool(config.mask_method) + bool(config.refine) + truth + bool(config.evaluation)
+    count = (2 + bool(config.mask_method) + bool(robot_frame) + bool(config.refine) + truth + bool(config.evaluation)
              + (truth and config.evaluation is not None))
     runner = _Runner(manifest, progress, count)
     try:
@@ -268,6 +295,17 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
     elif manifest.entry("masks"):
         manifest.forget("masks")
         shutil.rmtree(run_dir / "masked", ignore_errors=True)
+    truth_root, robot_frame = dataset, config.robot_frame()
+    if robot_frame is not None:
+        source = used
+        upstream = runner.stage("robot_frame", {"dataset": mf.files_digest(source, _dataset_files(source))},
+                                {"config": robot_frame, "seed": config.seed}, upstream,
+                                [f"{mf.RUN_DIRNAME}/robot_frame"],
+                                lambda: _robot_frame(source, run_dir, robot_frame, config.seed, progress))
+        used = truth_root = run_dir / "robot_frame"  # its ground_truth/ (if any) is re-expressed in the new frame
+    elif manifest.entry("robot_frame"):
+        manifest.forget("robot_frame")
+        shutil.rmtree(run_dir / "robot_frame", ignore_errors=True)
     if config.refine is not None:
         source = used
         upstream = runner.stage("refine_poses", {"dataset": mf.files_digest(source, _dataset_files(source))},
@@ -290,7 +328,7 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
                              lambda: _asset(recon_dir / "mesh.obj", asset_dir, asset_cfg, manifest, progress))
     asset_outputs = manifest.entry("asset")["outputs"]
 
-    gt_files = [f for f in _dataset_files(dataset) if f.startswith("ground_truth/")] if with_truth else []
+    gt_files = [f for f in _dataset_files(truth_root) if f.startswith("ground_truth/")] if with_truth else []
     eval_key = None
     if config.evaluation is not None:
         files = [f"{top}/{rel}" for top in asset_outputs if (asset_dir / top).is_dir()
@@ -302,18 +340,18 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
                                 [RESULTS_DIRNAME], lambda: _evaluate(asset_dir, config.evaluation, progress))
         if with_truth:
             eval_key = runner.stage(
-                "evaluate_truth", {"asset": asset_digest, "ground_truth": mf.files_digest(dataset, gt_files)},
+                "evaluate_truth", {"asset": asset_digest, "ground_truth": mf.files_digest(truth_root, gt_files)},
                 {**settings, "seed_properties": asset_cfg.seed}, eval_key, [TRUTH_RESULTS_DIRNAME],
-                lambda: _evaluate_truth(dataset, asset_dir, config.evaluation, asset_cfg.seed, progress))
+                lambda: _evaluate_truth(truth_root, asset_dir, config.evaluation, asset_cfg.seed, progress))
 
     truth = None
     if with_truth:
-        inputs = {"ground_truth": mf.files_digest(dataset, gt_files),
+        inputs = {"ground_truth": mf.files_digest(truth_root, gt_files),
                   "asset": mf.files_digest(asset_dir, ["physical_properties.json", "canonical_transform.json"]),
                   "reconstruct_report": mf.files_digest(recon_dir, ["report.json"])}
         runner.stage("truth", inputs, {"seed": asset_cfg.seed, "refined": config.refine is not None,
                                        "dynamics": config.evaluation is not None}, eval_key or asset_key,
-                     ["truth.json"], lambda: _truth(dataset, used, asset_dir, recon_dir, config, asset_cfg.seed, manifest))
+                     ["truth.json"], lambda: _truth(truth_root, used, asset_dir, recon_dir, config, asset_cfg.seed, manifest))
         truth = json.loads((asset_dir / "truth.json").read_text())
     elif manifest.entry("truth"):  # the dataset lost its ground_truth/: a stale truth.json would mislead
         manifest.forget("truth")
@@ -340,6 +378,10 @@ def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: RunPro
     from real2sim.capture.masking import compute_masks
 
     def edit(copy: Path) -> dict:
+        if not (copy / "transforms.json").exists():  # a COLMAP model: masks need a transforms.json to point from
+            from real2sim.pipeline.normalise import write_model_transforms
+
+            write_model_transforms(copy)
         result = compute_masks(copy, method, mask_cfg,
                                progress=lambda done, total: progress.update("masks", method, done, total))
         return {"result": {"num_frames": result.num_frames, "mean_object_fraction": result.mean_object_fraction,
@@ -356,6 +398,15 @@ def _refine(dataset: Path, run_dir: Path, refine_cfg, progress: RunProgress) -> 
         return {"result": result.to_json()}
 
     return _edited_copy(dataset, run_dir / "dataset", edit)
+
+
+def _robot_frame(dataset: Path, run_dir: Path, cfg: NormaliseConfig, seed: int, progress: RunProgress) -> dict:
+    from real2sim.pipeline.normalise import normalise
+
+    record = normalise(dataset, run_dir / "robot_frame", cfg, seed=seed,
+                       progress=lambda msg: progress.update("robot_frame", msg, 0, 0))
+    keep = ("scale_from", "hull_height_m", "sparse_points", "table_fit_rms_mm", "errors_vs_ground_truth")
+    return {"result": {"scale": record["robot_from_model"]["scale"], **{k: record[k] for k in keep if k in record}}}
 
 
 def _reconstruct(dataset: Path, out: Path, cfg, device: str, seed: int, progress: RunProgress) -> dict:
@@ -398,7 +449,9 @@ def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, config: 
     report = json.loads((recon_dir / "report.json").read_text())
     refine_entry = manifest.entry("refine_poses") if config.refine is not None else None
     refinement = refine_entry.get("result", {}) if refine_entry else None
-    record = build_truth(dataset, used, asset_dir, report, refinement=refinement, seed=seed)
+    frame_entry = manifest.entry("robot_frame") if config.robot_frame() is not None else None
+    record = build_truth(dataset, used, asset_dir, report, refinement=refinement, seed=seed,
+                         robot_frame=frame_entry.get("result") if frame_entry else None)
     results, results_truth = asset_dir / RESULTS_DIRNAME, asset_dir / TRUTH_RESULTS_DIRNAME
     if config.evaluation is not None and (results_truth / "summary.csv").is_file():
         from real2sim.pipeline.truth_dynamics import dynamics_record

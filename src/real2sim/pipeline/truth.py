@@ -13,6 +13,13 @@ Frames, checked here and recorded in the file:
   properties are computed there with the asset stage's own function
   (:func:`real2sim.asset.inertia.estimate_physical_properties`, same mass, same
   seed), so both sets of properties are in the asset frame about their own CoM.
+* A COLMAP capture (``run``'s ``robot_frame`` stage): ``dataset`` here is the stage's
+  copy, whose ``ground_truth/`` the stage re-expressed in the normalised frame by the
+  known similarity (``ground_truth/model_from_world.json`` of the source; the rigid part
+  of the map, so the true object keeps its true size): the comparison aligns by that
+  similarity, not by ICP, and every error of the normalisation (scale, table tilt and
+  height) stays in the errors below. The stage's own errors against the truth are
+  recorded under ``robot_frame``.
 * Inertia error: relative error of the sorted principal moments (eigenvalues),
   and the relative Frobenius error of the whole tensor in the asset axes (this
   one also catches axes that are swapped or turned).
@@ -98,9 +105,10 @@ def physical_errors(est: PhysicalProperties, true: PhysicalProperties) -> dict:
 
 
 def build_truth(dataset: Path, used_dataset: Path, asset_dir: Path, reconstruct_report: dict, *,
-                refinement: dict | None, seed: int) -> dict:
+                refinement: dict | None, seed: int, robot_frame: dict | None = None) -> dict:
     """The truth.json record (see the module docstring). ``used_dataset``: the refined copy, or ``dataset``;
-    ``refinement``: the refine stage's RefineResult as JSON, None when the run did not refine."""
+    ``refinement``: the refine stage's RefineResult as JSON, None when the run did not refine;
+    ``robot_frame``: the robot_frame stage's result (a COLMAP capture), None otherwise."""
     from real2sim.asset.inertia import estimate_physical_properties
 
     asset_dir = Path(asset_dir)
@@ -113,7 +121,7 @@ def build_truth(dataset: Path, used_dataset: Path, asset_dir: Path, reconstruct_
              "after_refinement": pose_error_summary(used_dataset, dataset) if refined else None,
              "refinement_asked": refinement is not None, "refined": refined,
              "refinement_outcome": None if refinement is None else refinement.get("reason")}
-    return {
+    record = {
         "dataset": os.path.relpath(Path(dataset).resolve(), asset_dir.resolve()),
         "camera_poses": poses,
         "masks_iou": mask_iou(used_dataset),
@@ -127,3 +135,9 @@ def build_truth(dataset: Path, used_dataset: Path, asset_dir: Path, reconstruct_
                           "(real2sim.asset.inertia.estimate_physical_properties) and seed",
         },
     }
+    if robot_frame is not None:
+        record["robot_frame"] = robot_frame
+        record["frames"]["true_mesh"] = ("ground_truth/mesh.obj placed by the robot_frame stage's copy of "
+                                         "object_pose.json (the source's, moved by the rigid part of the known "
+                                         "robot_from_world), then by canonical_transform.json T_asset_from_input")
+    return record

@@ -1,0 +1,268 @@
+"""The ``robot_frame`` stage of ``run``: a COLMAP capture (arbitrary frame and scale) -> a metric dataset copy.
+
+Input: a dataset folder with ``images/``, masks for every frame, and a COLMAP model in
+``sparse/0`` (cameras, images, points3D), or the masks stage's copy of one (which adds a
+``transforms.json`` holding the model's poses, still in the model frame). Output:
+``ASSETDIR/.run/robot_frame/``, a dataset in the robot frame -- z up, the table top at
+z = 0, the object's footprint centred at x = y = 0, metres -- with ``transforms.json``
+(OpenGL camera-to-world), the frames' images and masks, and ``robot_frame.json`` (the
+similarity ``robot_from_model`` and how it was found). The math is in
+:mod:`real2sim.pipeline.robot_frame`.
+
+Steps (all lengths before the last one in model units):
+
+1. the sparse points within ``near_radius`` x (median camera distance) of the point the
+   cameras look at, minus those inside the object's masks: the table around the object;
+2. RANSAC plane, normal towards the cameras -> a rigid "table frame" (z up, table z = 0,
+   origin under the look-at point);
+3. the object's height and footprint centre from the **visual hull of the masks, carved in
+   the table frame** (:func:`real2sim.reconstruct.hull.visual_hull_mesh`, ``hull_voxels``
+   along its longest side). Why the hull and not the sparse points above the plane: (a)
+   the silhouettes bound the top in every view, while a real capture's sparse cloud is
+   thin on the object, often empty on a plain lid; (b) the asset is built from the same
+   silhouettes, so with ``--object-height-m H`` the reconstruction comes out H tall (up
+   to the grids' voxels): the user's number is what the asset shows. The price: the hull
+   is an outer bound, so where no view grazes the top the measured height is too large and
+   the scale too small by the same factor -- the bias the reconstruction itself has;
+4. scale: ``scale`` (metres per model unit) as given, or ``object_height_m`` / measured height.
+
+Ground truth: a simulated capture moved into a COLMAP frame (tests, benchmarks) keeps
+``ground_truth/`` in its original robot frame and records the move as
+``ground_truth/model_from_world.json`` (``{"model_from_world": 4x4 similarity}``). The
+stage then knows ``robot_from_world = robot_from_model @ model_from_world`` -- ideally a
+turn about z and an x/y shift -- records its errors (scale, table tilt and height:
+:func:`real2sim.pipeline.robot_frame.frame_errors`), and writes the copy's
+``ground_truth/`` re-expressed in the new frame by the *rigid part* of that map (the true
+object keeps its true size, so a scale error shows as a reconstruction error; the map is
+exact at the true world's origin, the object's footprint centre on the table): the truth
+comparison of ``run`` then aligns by the known similarity, with no ICP. ``depth/`` is
+not copied (millimetres of the original frame; ``run`` does not read it). Without
+``model_from_world.json`` the copy has no ``ground_truth/`` and ``run`` has no truth stage.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from real2sim.formats.dataset import (
+    CV_FROM_GL,
+    Dataset,
+    load_mask,
+    read_colmap_model,
+    read_dataset,
+    read_ground_truth,
+    write_transforms,
+)
+from real2sim.formats.errors import UserInputError
+from real2sim.formats.outputs import publish_dir, write_json_atomic
+from real2sim.pipeline import robot_frame as rf
+
+MODEL_FROM_WORLD = "model_from_world.json"  # in ground_truth/: how a simulated capture was moved into the model frame
+RECORD_NAME = "robot_frame.json"
+# transforms.json keys that mark a dataset's frame: read_colmap_model's, and the masks stage's copy of a model.
+_FRAME_KEYS = ("source", "model_frame")
+
+
+@dataclass(frozen=True)
+class NormaliseConfig:
+    """How to find the robot frame. ``object_height_m`` (the object's height above the table, metres) or
+    ``scale`` (metres per model unit): exactly one. Distances as fractions of the median camera distance
+    from the look-at point, so they do not depend on the model's unknown scale."""
+
+    object_height_m: float | None = None
+    scale: float | None = None
+    near_radius: float = 1.0
+    inlier_threshold: float = 0.01
+    ransac_iterations: int = 1000
+    min_table_points: int = 30
+    object_vote_fraction: float = 0.8
+    hull_voxels: int = 128
+    hull_outlier_fraction: float = 0.03
+
+    def validate(self) -> None:
+        given = [v for v in (self.object_height_m, self.scale) if v is not None]
+        if len(given) != 1:
+            raise UserInputError("a COLMAP model has no metric scale: give exactly one of --object-height-m H "
+                                 "(the object's height above the table, m) or --scale S (metres per model unit)")
+        if not (np.isfinite(given[0]) and given[0] > 0):
+            raise UserInputError(f"--object-height-m / --scale must be a finite number > 0 (got {given[0]})")
+
+
+def is_model_frame(dataset: Dataset) -> bool:
+    """True for a COLMAP model read as a dataset, or the masks stage's transforms.json copy of one."""
+    return dataset.extra.get("source") == "colmap" or "model_frame" in dataset.extra
+
+
+def check_frame_options(ds: Dataset, scale_given: bool) -> None:
+    """UserInputError (one line) unless a COLMAP dataset comes with --object-height-m or --scale
+    (``scale_given``), and a transforms.json dataset (metric, table at z = 0) with neither."""
+    if is_model_frame(ds) and not scale_given:
+        raise UserInputError(f"{ds.root} is a COLMAP model (no transforms.json): its poses have no metric scale; "
+                             "pass --object-height-m H (the object's height above the table, m) or --scale S "
+                             "(metres per model unit)")
+    if scale_given and not is_model_frame(ds):
+        raise UserInputError(f"{ds.root} has a transforms.json (poses in metres, table at z = 0): --object-height-m "
+                             "and --scale are for a COLMAP model dataset (images + sparse/0, no transforms.json)")
+
+
+def write_model_transforms(root: Path) -> None:
+    """Give a COLMAP dataset folder a ``transforms.json`` with the model's poses (still in the model frame),
+    so that the masks stage can point its frames to masks; ``model_frame`` marks it."""
+    ds = read_colmap_model(root)
+    write_transforms(Path(root) / "transforms.json",
+                     replace(ds, extra={"model_frame": "COLMAP sparse/0: arbitrary frame and scale, not metres"}))
+
+
+def read_sparse_points(root: Path) -> np.ndarray:
+    """(P, 3) points3D of ``root/sparse/0`` in the model frame."""
+    import pycolmap
+
+    model = Path(root) / "sparse" / "0"
+    try:
+        rec = pycolmap.Reconstruction(str(model))
+    except Exception as exc:  # pycolmap raises generic errors on bad files
+        raise UserInputError(f"could not read COLMAP model {model}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+    points = np.array([p.xyz for p in rec.points3D.values()], dtype=float).reshape(-1, 3)
+    return points[np.all(np.isfinite(points), axis=1)]
+
+
+def _masks(ds: Dataset) -> np.ndarray:
+    missing = [f.file_path for f in ds.frames if f.mask_path is None]
+    if missing:
+        raise UserInputError(f"{len(missing)} frames of {ds.root} have no mask (first: {missing[0]}): a COLMAP "
+                             "capture needs masks to find the object; pass --mask provided|maskrcnn|background")
+    return np.stack([load_mask(ds.root / f.mask_path) for f in ds.frames])
+
+
+def measure_object(ds: Dataset, masks: np.ndarray, table: rf.Similarity, config: NormaliseConfig) -> tuple[float, np.ndarray]:
+    """(height, footprint centre (2,)) of the masks' visual hull in the rigid table frame ``table`` (model units)."""
+    from real2sim.reconstruct.hull import visual_hull_mesh
+    from real2sim.reconstruct.views import PosedViews
+
+    k = ds.intrinsics
+    c2w_cv = rf.transform_poses(table, ds.poses_c2w_gl()) @ CV_FROM_GL
+    # The hull reads masks and poses only: a zero-strided stand-in for the colour images costs no memory.
+    rgb = np.broadcast_to(np.zeros((1, 1, 1, 3), np.float32), (len(ds.frames), k.height, k.width, 3))
+    views = PosedViews(rgb, masks.astype(np.float32), c2w_cv, k, tuple(f.file_path for f in ds.frames))
+    mesh, _, _ = visual_hull_mesh(views, longest_side_voxels=config.hull_voxels,
+                                  outlier_fraction=config.hull_outlier_fraction, table_z_m=0.0)
+    lo, hi = mesh.bounds
+    return float(hi[2]), 0.5 * (lo[:2] + hi[:2])
+
+
+def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config: NormaliseConfig,
+                     seed: int) -> tuple[rf.Similarity, dict]:
+    """``robot_from_model`` and a JSON-ready record of how it was found (steps 1-4 of the module docstring)."""
+    c2w_cv = ds.poses_c2w_cv()
+    centres = c2w_cv[:, :3, 3]
+    look_at = rf.optical_axes_point(c2w_cv)
+    distance = float(np.median(np.linalg.norm(centres - look_at, axis=1)))
+    near = points[np.linalg.norm(points - look_at, axis=1) <= config.near_radius * distance]
+    on_object = rf.object_point_mask(near, ds.intrinsics, c2w_cv, masks, config.object_vote_fraction)
+    plane = rf.fit_plane_ransac(near[~on_object], config.inlier_threshold * distance, seed=seed,
+                                iterations=config.ransac_iterations, min_inliers=config.min_table_points)
+    plane = rf.orient_towards_cameras(plane, centres)
+    table = rf.table_similarity(plane, centre=look_at)
+    height, centre_xy = measure_object(ds, masks, table, config)
+    if not height > 0:
+        raise UserInputError("the masks' visual hull has no height above the fitted table plane")
+    scale = config.scale if config.scale is not None else config.object_height_m / height
+    centre = table.inverse().apply(np.array([centre_xy[0], centre_xy[1], 0.0]))
+    robot_from_model = rf.table_similarity(plane, centre=centre, scale=scale)
+    record = {
+        "robot_from_model": robot_from_model.to_json(),
+        "scale_from": "scale" if config.scale is not None else "object_height_m",
+        "object_height_m_given": config.object_height_m,
+        "scale_given": config.scale,
+        "hull_height_units": height,
+        "hull_height_m": height * scale,
+        "sparse_points": {"total": len(points), "near_object": len(near), "on_object": int(on_object.sum()),
+                          "table_inliers": plane.inliers},
+        "table_plane_model": {"normal": plane.normal.tolist(), "offset_units": plane.offset},
+        "table_fit_rms_mm": 1000.0 * plane.rms * scale,
+        "inlier_threshold_mm": 1000.0 * plane.threshold * scale,
+        "median_camera_distance_m": distance * scale,
+        "seed": seed,
+        "height_from": f"visual hull of the masks in the table frame, {config.hull_voxels} voxels on its longest side",
+    }
+    return robot_from_model, record
+
+
+def _copy_ground_truth(source: Path, target: Path, robot_from_world: rf.Similarity) -> None:
+    """``source/ground_truth`` re-expressed in the robot frame by the rigid part of ``robot_from_world``."""
+    rigid = robot_from_world.rigid_part()
+    gt_src, gt_dst = source / "ground_truth", target / "ground_truth"
+    skip = {"depth", "transforms.json", "object_pose.json", MODEL_FROM_WORLD}
+    gt_dst.mkdir()
+    for entry in gt_src.iterdir():
+        if entry.name not in skip:
+            (shutil.copytree if entry.is_dir() else shutil.copy2)(entry, gt_dst / entry.name)
+    pose_file = gt_src / "object_pose.json"
+    world_from_mesh = (np.asarray(json.loads(pose_file.read_text())["world_from_mesh"], float)
+                       if pose_file.is_file() else np.eye(4))
+    write_json_atomic(gt_dst / "object_pose.json", {
+        "world_from_mesh": (rigid.matrix() @ world_from_mesh).tolist(),
+        "note": "4x4 placing ground_truth/mesh.obj in this copy's robot frame: the source's world_from_mesh "
+                "moved by the rigid part of robot_from_world (robot_frame.json), metres"})
+    true_poses = read_ground_truth(source)
+    if true_poses is not None:
+        moved = rf.transform_poses(rigid, true_poses.poses_c2w_gl())
+        frames = tuple(replace(f, transform_matrix=m) for f, m in zip(true_poses.frames, moved))
+        write_transforms(gt_dst / "transforms.json", replace(true_poses, frames=frames))
+
+
+def model_from_world(source: Path) -> rf.Similarity | None:
+    path = Path(source) / "ground_truth" / MODEL_FROM_WORLD
+    if not path.is_file():
+        return None
+    try:
+        matrix = json.loads(path.read_text())["model_from_world"]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise UserInputError(f"{path}: no readable model_from_world ({exc})") from None
+    return rf.Similarity.from_matrix(matrix)
+
+
+def normalise(source: Path, target: Path, config: NormaliseConfig, *, seed: int = 0,
+              progress: Callable[[str], None] | None = None) -> dict:
+    """Write the robot-frame copy of ``source`` to ``target`` (whole or not at all); return the record."""
+    config.validate()
+    source, target = Path(source), Path(target)
+    ds = read_dataset(source)
+    if progress:
+        progress("table plane, object height")
+    robot_from_model, record = find_robot_frame(ds, read_sparse_points(source), _masks(ds), config, seed)
+    truth, robot_from_world = model_from_world(source), None
+    if truth is not None:  # model_from_world.json lives in ground_truth/
+        robot_from_world = robot_from_model @ truth
+        record["robot_from_world"] = robot_from_world.to_json()
+        record["errors_vs_ground_truth"] = rf.frame_errors(robot_from_world)
+    elif (source / "ground_truth").is_dir():
+        record["ground_truth"] = f"not carried over: no ground_truth/{MODEL_FROM_WORLD} relates it to the model frame"
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    try:
+        for frame in ds.frames:
+            for rel in (frame.file_path, frame.mask_path):
+                if not (source / rel).resolve().is_relative_to(source.resolve()):
+                    raise UserInputError(f"{rel}: path points outside the dataset folder {source}")
+                (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(source / rel, tmp / rel)
+        moved = rf.transform_poses(robot_from_model, ds.poses_c2w_gl())
+        frames = tuple(replace(f, transform_matrix=m) for f, m in zip(ds.frames, moved))
+        extra = {k: v for k, v in ds.extra.items() if k not in _FRAME_KEYS}
+        extra["robot_frame"] = f"normalised from a COLMAP model by real2sim run: see {RECORD_NAME}"
+        write_transforms(tmp / "transforms.json", Dataset(tmp, ds.intrinsics, frames, extra))
+        if robot_from_world is not None:
+            _copy_ground_truth(source, tmp, robot_from_world)
+        write_json_atomic(tmp / RECORD_NAME, record)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    publish_dir(tmp, target)
+    return record
