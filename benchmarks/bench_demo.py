@@ -68,7 +68,7 @@ def main() -> int:
         command = "real2sim demo --quick" if quick else "real2sim demo"
         rows.append([command, wall / 60, cpu / 60])
         truths.append([command] + truth_row(out))
-        with open(out / "results" / "summary.csv") as f:
+        with open(out / "bottle_asset" / "results" / "summary.csv") as f:
             summary = [[r["representation"], float(r["ocae_m"]), float(r["ate_m"]), float(r["cpd_m_per_s"]),
                         float(r["sim_time_s"])] for r in csv.DictReader(f)]
         table = markdown_table(["representation", "OCAE m", "ATE m", "CPD m/s", "ST s"], summary)

@@ -30,7 +30,9 @@ def test_quick_demo_from_capture_to_report(tmp_path, capsys):
     assert (asset / ".run" / "run.json").is_file()
     urdfs = sorted(asset.glob("*/model.urdf"))
     names = sorted(p.parent.name for p in urdfs)
-    assert names == sorted(s.replace(":", "_").replace("+", "_") for s in QUICK.specs)
+    # The demo's SPECs, and the reconstruction itself ("mesh"), whose dynamics are judged against the truth.
+    assert names == sorted([s.replace(":", "_").replace("+", "_") for s in QUICK.specs] + ["mesh"])
+    assert all((urdf.parent / "model.xml").is_file() for urdf in urdfs)  # MuJoCo too
     for urdf in urdfs:  # each loads in Drake as it is
         plant = MultibodyPlant(0.0)
         assert Parser(plant).AddModels(str(urdf))
@@ -43,15 +45,21 @@ def test_quick_demo_from_capture_to_report(tmp_path, capsys):
     assert truth["physical_properties"]["com_error_mm"] < 2.0
     assert truth["camera_poses"]["before_refinement"]["trans_max_mm"] < 1e-3  # noise-free capture
 
-    with open(out / "results" / "summary.csv") as f:
+    results = asset / "results"
+    with open(results / "summary.csv") as f:
         rows = list(csv.DictReader(f))
     assert {r["representation"] for r in rows} == {f"{n}_{c}" for n in names for c in QUICK.contact_models}
     for r in rows:
         assert int(r["runs_failed"]) == 0
         assert 0 <= float(r["ate_m"]) < 0.5 and float(r["sim_time_s"]) > 0
-    assert len(list((out / "results").glob("pareto_*.png"))) == 4
-    html = (out / "results" / "report.html").read_text()
+    assert len(list(results.glob("pareto_*.png"))) == 4
+    html = (results / "report.html").read_text()
     assert "coacd" in html and "<table" in html
+    assert "Against the truth" in html and html.count("class='pic'") == len(names) + 1
+    dynamics = truth["dynamics"]
+    assert {r["contact_model"] for r in dynamics["reconstruction_vs_truth"]} == set(QUICK.contact_models)
+    assert all(r["ocae_vs_truth_m"] is not None for r in dynamics["representations"])
+    assert (asset / "results_truth" / "summary.csv").is_file()
     assert not list(tmp_path.glob(".demo.tmp-*"))  # the temporary folder was renamed into place
 
 

@@ -2,17 +2,19 @@
 
 simulated wrist-camera capture of the bundled bottle (calibration noise on the robot's
 poses; rendered masks) -> COLMAP pose refinement -> reconstruction -> asset with several
-collision representations + CoACD -> ``truth.json`` (each stage against the true
-bottle) -> Drake evaluation against the reconstruction (the paper's protocol) ->
-Pareto plots and report.html. The chain from the dataset on is
-:func:`real2sim.pipeline.run.run_pipeline`, as ``real2sim run`` calls it.
+collision representations + CoACD (URDF and MuJoCo MJCF) -> Drake evaluation against the
+reconstruction (the paper's protocol) and against the true bottle -> ``truth.json`` (each
+stage against the true bottle, dynamics included) -> Pareto plots and report.html. The
+chain from the dataset on is :func:`real2sim.pipeline.run.run_pipeline`, as ``real2sim run
+--evaluate`` calls it.
 
 Layout of ``--out`` (written into a temporary folder beside it and renamed at the end,
 so it appears whole or not at all; an interrupted demo starts again from the capture)::
 
     OUT/capture/        the dataset (transforms.json, images/, masks/, ground_truth/)
-    OUT/bottle_asset/   the run's ASSETDIR: <representation>/model.urdf, truth.json, .run/
-    OUT/results/        summary.csv, runs.csv, pareto_*.png, report.html
+    OUT/bottle_asset/   the run's ASSETDIR: <representation>/model.urdf + model.xml, truth.json, .run/,
+                        results/ (summary.csv, runs.csv, pareto_*.png, report.html: against the
+                        reconstruction) and results_truth/ (the same against the true bottle)
 """
 
 from __future__ import annotations
@@ -69,13 +71,13 @@ def register(sub) -> None:
         "an asset with several collision representations plus CoACD -> OUT/bottle_asset/truth.json (pose, "
         "reconstruction and mass-property errors against the true bottle) -> Drake evaluation of each "
         "representation against the reconstruction (planar pushing, actuated ramp; point and hydroelastic "
-        "contact) -> Pareto plots and report.html in OUT/results. About 12 minutes on 2 idle CPU cores "
+        "contact) and against the true bottle -> Pareto plots and report.html in OUT/bottle_asset/results. About 12 minutes on 2 idle CPU cores "
         "(21.5 measured on 2 shared ones). --quick: 60 noise-free views at 160x120 px, no pose refinement, "
         "visual-hull reconstruction, three representations, one run per task: under 2 minutes.",
     )
     p.add_argument("--out", type=Path, default=Path("demo_out"),
                    help="output folder (default demo_out): capture/ (the dataset), bottle_asset/ (URDFs, truth.json, "
-                   ".run/), results/; it appears whole at the end (an interrupted demo starts over)")
+                   ".run/, results/, results_truth/); it appears whole at the end (an interrupted demo starts over)")
     p.add_argument("--quick", action="store_true",
                    help="small noise-free capture, visual hull, fewer and smaller representations, one run per task")
     p.add_argument("--overwrite", action="store_true", help="replace the output folder if it exists")
@@ -84,7 +86,7 @@ def register(sub) -> None:
 
 
 def run_config(plan: DemoPlan):
-    """The RunConfig of the demo's `run` (no evaluation: the demo evaluates into OUT/results)."""
+    """The RunConfig of the demo's `run`, without its evaluation (the demo adds it with the user's --jobs)."""
     from dataclasses import replace
 
     from real2sim.asset.build import AssetConfig
@@ -131,7 +133,9 @@ def run(args: argparse.Namespace) -> int:
 
     from real2sim.capture.wrist_camera import capture
     from real2sim.cli.run import _Display
-    from real2sim.evaluate.sweep import EvaluationConfig, evaluate
+    from dataclasses import replace
+
+    from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.formats.outputs import atomic_output_dir, check_output_dir
     from real2sim.geometry.objects import make_textured_object
     from real2sim.pipeline.run import StageFailed, run_pipeline
@@ -154,8 +158,9 @@ def run(args: argparse.Namespace) -> int:
                         progress=lambda done, total: bar.update(task, completed=done, total=total))
                 bar.remove_task(task)
                 console.log(f"capture: done ({plan.views} views)")
-                result = run_pipeline(tmp / "capture", tmp / "bottle_asset", config, progress=_Display(bar, console))
-            evaluate([tmp / "bottle_asset"], tmp / "results", eval_config, progress=True)
+                # run evaluates too: against the reconstruction (results/) and the true bottle (results_truth/).
+                result = run_pipeline(tmp / "capture", tmp / "bottle_asset", replace(config, evaluation=eval_config),
+                                      progress=_Display(bar, console))
     except StageFailed as exc:
         print(f"real2sim demo: error: {exc}; nothing was written to {out}", file=sys.stderr)
         return 1
@@ -180,9 +185,12 @@ def _print_summary(out: Path, plan: DemoPlan, cap_cfg, truth: dict | None, minut
     print(f"  URDFs:   {out / 'bottle_asset'}/<representation>/model.urdf")
     for urdf in sorted((out / "bottle_asset").glob("*/model.urdf")):
         print(f"           {urdf}")
-    print(f"  table:   {out / 'results' / 'summary.csv'}")
-    print(f"  plots:   {out / 'results'}/pareto_*.png")
-    print(f"  report:  {out / 'results' / 'report.html'}")
+    results = out / "bottle_asset" / "results"
+    print(f"  MuJoCo:  {out / 'bottle_asset'}/<representation>/model.xml")
+    print(f"  table:   {results / 'summary.csv'}  (against the reconstruction, the paper's protocol)")
+    print(f"           {out / 'bottle_asset' / 'results_truth' / 'summary.csv'}  (against the true bottle)")
+    print(f"  plots:   {results}/pareto_*.png")
+    print(f"  report:  {results / 'report.html'}")
     for line in truth_lines(truth):
         print(line)
     print(f"           ({out / 'bottle_asset' / 'truth.json'})")
@@ -212,4 +220,17 @@ def truth_lines(truth: dict | None) -> list[str]:
         else:
             text += " (no refinement)"
         lines.append(f"    camera poses (mean error): {text}")
+    dynamics = truth.get("dynamics") or {}
+    for row in dynamics.get("reconstruction_vs_truth") or []:
+        lines.append(f"    dynamics: the reconstruction's OCAE against the true bottle ({row['contact_model']} contact): "
+                     f"{_metres(row['ocae_vs_truth_m'])}")
+    best = dynamics.get("best_primitive_by_paper_protocol")
+    if best:
+        lines.append(f"    dynamics: best primitive {best['representation']} ({best['contact_model']}): OCAE "
+                     f"{_metres(best['ocae_vs_reconstruction_m'])} against the reconstruction, "
+                     f"{_metres(best['ocae_vs_truth_m'])} against the true bottle")
     return lines
+
+
+def _metres(value) -> str:
+    return "n/a" if value is None else f"{value:.4f} m"
