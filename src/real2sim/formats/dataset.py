@@ -283,6 +283,23 @@ def check_frame_files(ds: Dataset, label: str | None = None) -> None:
             check_image_file(Path(ds.root) / frame.mask_path, size, f"{flabel} mask")
 
 
+def check_dataset_outputs(root: Path | str, files: tuple[str, ...] = (), folders: tuple[str, ...] = (),
+                          what: str = "output") -> None:
+    """Before a stage writes ``files`` / ``folders`` into a dataset folder: each can be made there.
+
+    UserInputError (one line) for a folder where a file goes or a file where a folder goes,
+    a folder that cannot be written (permission), or a name the file system refuses."""
+    from real2sim.formats.outputs import check_output_path
+
+    root = Path(root)
+    for name, folder in [(n, False) for n in files] + [(n, True) for n in folders]:
+        path = root / name
+        if path.exists() and path.is_dir() != folder:
+            kind, expected = ("a file", "a folder") if folder else ("a folder", "a file")
+            raise UserInputError(f"{what} {path} is {kind}; it must be {expected} (move it away)")
+        check_output_path(path, what=what)
+
+
 def _colmap_intrinsics(camera) -> CameraIntrinsics:
     p = np.asarray(camera.params, dtype=float)
     name = camera.model.name if hasattr(camera.model, "name") else str(camera.model)
