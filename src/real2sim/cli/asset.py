@@ -80,7 +80,7 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR", help="output asset folder (must not exist)")
     p.add_argument("--overwrite", action="store_true", help="replace ASSETDIR if it exists")
     add_asset_arguments(p)
-    options.document_ranges(p)
+    options.finish(p)
     p.set_defaults(func=run)
 
 

@@ -40,7 +40,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=seed(), default=0, help="seed of the pose noise (default 0)")
     p.add_argument("--with-background", action="store_true",
                    help="also render the empty table from the same poses into background/ (for mask --method background)")
-    options.document_ranges(p)
+    options.finish(p)
     p.set_defaults(func=run_capture)
 
     p = sub.add_parser(
@@ -65,7 +65,7 @@ def register(sub) -> None:
     p.add_argument("--pose-noise-deg", type=NOISE_DEG, default=None, metavar="DEG",
                    help="RMS orientation noise of the given poses, degrees (default: from transforms.json, else 1)")
     p.add_argument("--seed", type=seed(COLMAP_SEED_MAX), default=0, help="COLMAP random seed (default 0)")
-    options.document_ranges(p)
+    options.finish(p)
     p.set_defaults(func=run_refine)
 
     p = sub.add_parser(
@@ -91,7 +91,7 @@ def register(sub) -> None:
                    help="upper bound on the longer side after resizing, px (default 1333)")
     p.add_argument("--maskrcnn-max-instances", type=integer(1, 1000), default=100, metavar="N",
                    help="detections kept per image before choosing the object (default 100)")
-    options.document_ranges(p)
+    options.finish(p)
     p.set_defaults(func=run_mask)
 
 

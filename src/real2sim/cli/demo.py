@@ -82,7 +82,7 @@ def register(sub) -> None:
                    help="small noise-free capture, visual hull, fewer and smaller representations, one run per task")
     p.add_argument("--overwrite", action="store_true", help="replace the output folder if it exists")
     p.add_argument("--jobs", type=options.jobs, default=None, help="parallel simulations (default: CPU cores)")
-    options.document_ranges(p)
+    options.finish(p)
     p.set_defaults(func=run)
 
 

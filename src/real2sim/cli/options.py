@@ -5,7 +5,7 @@ A bad value fails inside ``parse_args`` with one line naming the option
 and exit status 2, before any heavy import or work. Every numeric option of every verb
 uses a :class:`Number` (``tests/cli/test_bad_inputs.py`` fails on a bare ``type=int``
 or ``type=float``); its range travels with it (``min_value``, ``max_value``, ...) so that
-the tests and the help text (:func:`document_ranges`) read it from the parser itself.
+the tests and the help text (:func:`finish`) read it from the parser itself.
 
 Only the standard library is imported here; ``device`` imports torch only when a CUDA
 device is asked for.
@@ -228,9 +228,22 @@ def cache_dir(text: str) -> str:
     return text
 
 
-def document_ranges(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Append each numeric option's accepted values to its help text (``[allowed: 1..2000]``)."""
+class _OneValueStore(argparse._StoreAction):
+    """argparse's store, refusing the empty list Python 3.11's argparse stores for ``--opt=--``
+    (it drops the ``--`` and never calls the type)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if isinstance(values, list) and self.nargs is None:
+            parser.error(f"argument {'/'.join(self.option_strings) or self.dest}: expected one value, got '--'")
+        super().__call__(parser, namespace, values, option_string)
+
+
+def finish(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Call at the end of a verb's ``register()``: append each numeric option's accepted values to
+    its help text (``[allowed: 1..2000]``), and make every single-value option refuse ``--opt=--``."""
     for action in parser._actions:  # argparse has no public list of a parser's actions
+        if type(action) is argparse._StoreAction:
+            action.__class__ = _OneValueStore
         if isinstance(action.type, Number) and action.help is not argparse.SUPPRESS and "[allowed:" not in (action.help or ""):
             action.help = f"{action.help or ''} [allowed: {action.type.describe()}]".strip()
     return parser

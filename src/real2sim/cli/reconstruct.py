@@ -45,7 +45,7 @@ def register(sub) -> None:
                    help="import this mesh exported by nerfstudio instead of reconstructing")
     p.add_argument("--dataparser-transforms", type=existing_file, default=None, metavar="JSON",
                    help="nerfstudio's dataparser_transforms.json for --from-mesh")
-    options.document_ranges(p)
+    options.finish(p)
     p.set_defaults(func=run_reconstruct)
 
 

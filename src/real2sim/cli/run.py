@@ -72,7 +72,7 @@ def register(sub) -> None:
     e.add_argument("--jobs", type=jobs, default=None, metavar="N", help="simulations in parallel (default CPU count)")
     e.add_argument("--duration-scale", type=DURATION_SCALE, default=1.0, metavar="K",
                    help="multiply the tasks' durations by K (default 1)")
-    options.document_ranges(p)
+    options.finish(p)
     p.set_defaults(func=run)
 
 
@@ -82,12 +82,13 @@ def config_from_args(args: argparse.Namespace):
 
     from real2sim.cli.asset import config_from_args as asset_config
     from real2sim.formats.errors import UserInputError
-    from real2sim.pipeline.run import RunConfig
+    from real2sim.pipeline.run import RunConfig, check_dataset
     from real2sim.reconstruct.stage import ReconstructConfig, resolve_device
     from real2sim.reconstruct.train import FieldConfig
 
     if args.seed < 0 or args.seed >= 2**63:
         raise UserInputError(f"--seed must be in 0..2^63-1 (got {args.seed})")
+    check_dataset(args.dataset, masks_needed=args.mask is None)  # every image and mask, before any display
     args.flat_bottom, args.support_height = True, 0.0
     asset = asset_config(args)
     resolve_device(args.device)

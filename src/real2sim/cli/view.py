@@ -25,7 +25,7 @@ def register(sub) -> None:
                    help="Meshcat port (default: Drake's, 7000 or the next free one up to 7099)")
     p.add_argument("--seconds", type=options.nonnegative(1.0e6), default=None, metavar="S",
                    help="serve this long then exit, s (default: until Ctrl-C)")
-    options.document_ranges(p)
+    options.finish(p)
     p.set_defaults(func=run)
 
 
