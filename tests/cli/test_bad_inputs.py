@@ -16,12 +16,9 @@ import io
 import json
 import math
 import os
-import shutil
-import socket
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import pytest
 import trimesh
 from hypothesis import HealthCheck, Phase, given, settings
