@@ -1,19 +1,48 @@
-"""`real2sim view`: serves an asset in Meshcat (loopback only) and exits after --seconds."""
+"""`real2sim view`: serves an asset in Meshcat (loopback only unless --host says otherwise) and exits
+after --seconds; a model Drake cannot load, or a port it cannot listen on, is one line and exit 2."""
 
 from __future__ import annotations
 
-from real2sim.cli import main
+import shutil
+import socket
+from pathlib import Path
+
+import pytest
+
+from real2sim.cli import build_parser, main
+from real2sim.cli.view import start_meshcat
 from real2sim.geometry.objects import export_object
 
 
-def test_view_serves_asset_then_exits(tmp_path, capsys):
-    mesh = export_object("can", tmp_path / "can" / "model.obj")
-    asset = tmp_path / "asset"
+@pytest.fixture(scope="module")
+def can_asset(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("view")
+    mesh = export_object("can", root / "can" / "model.obj")
+    asset = root / "asset"
     assert main(["asset", str(mesh), "--mass", "0.35", "--out", str(asset), "--collision", "mesh"]) == 0
+    return asset
+
+
+def run_cli(capsys, *argv) -> tuple[int, str, str]:
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exc:
+        code = exc.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def assert_one_line(code: int, err: str, text: str) -> None:
+    lines = [line for line in err.splitlines() if not line.startswith("INFO:drake:")]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
+    assert text in lines[0], err
+
+
+def test_view_serves_asset_then_exits(can_asset, capsys):
     capsys.readouterr()
-    assert main(["view", str(asset), "--seconds", "0.2"]) == 0
+    assert main(["view", str(can_asset), "--seconds", "0.2"]) == 0
     out = capsys.readouterr().out
-    assert "mesh/model.urdf" in out and "http://" in out
+    assert "mesh/model.urdf" in out and "http://127.0.0.1:" in out
 
 
 def test_view_bad_input(tmp_path, capsys):
@@ -22,3 +51,66 @@ def test_view_bad_input(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     assert main(["view", str(tmp_path / "empty")]) == 2
     assert "no representation" in capsys.readouterr().err
+
+
+def _listening(port: int) -> set[str]:
+    """Local addresses (hex, as /proc/net/tcp* writes them) listening on ``port``."""
+    found = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            rows = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for row in rows:
+            local, state = row.split()[1], row.split()[3]
+            address, hex_port = local.split(":")
+            if state == "0A" and int(hex_port, 16) == port:
+                found.add(address)
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="needs Linux's /proc/net/tcp")
+def test_view_listens_on_loopback_only_by_default():
+    assert build_parser().parse_args(["view", "x"]).host == "127.0.0.1"
+    meshcat = start_meshcat("127.0.0.1", None)
+    try:
+        assert _listening(meshcat.port()) == {"0100007F"}  # 127.0.0.1, and nothing else
+    finally:
+        del meshcat
+    everywhere = start_meshcat(build_parser().parse_args(["view", "x", "--host", "*"]).host, None)
+    try:
+        assert _listening(everywhere.port()) & {"00000000", "00000000000000000000000000000000"}
+    finally:
+        del everywhere
+
+
+def test_busy_port_is_one_line(can_asset, capsys):
+    with socket.socket() as busy:
+        busy.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        code, _, err = run_cli(capsys, "view", can_asset, "--port", port, "--seconds", "0")
+    assert_one_line(code, err, f"--port {port}: cannot listen on 127.0.0.1:{port}")
+
+
+@pytest.mark.parametrize("case, text", [
+    ("malformed URDF", "Failed to parse XML"),
+    ("URDF without a link", "cannot load"),
+    ("missing visual mesh", "does not exist"),
+    ("missing collision mesh", "does not exist"),
+])
+def test_model_drake_cannot_load_is_one_line(case, text, can_asset, tmp_path, capsys):
+    asset = Path(shutil.copytree(can_asset, tmp_path / "asset"))
+    urdf = asset / "mesh" / "model.urdf"
+    if case == "malformed URDF":
+        urdf.write_text("<robot><link")
+    elif case == "URDF without a link":
+        urdf.write_text('<?xml version="1.0"?><robot name="x"><joint name="j" type="fixed"/></robot>')
+    elif case == "missing visual mesh":
+        (asset / "visual" / "model.obj").unlink()
+    else:
+        shutil.rmtree(asset / "mesh" / "pieces")
+    code, out, err = run_cli(capsys, "view", asset, "--seconds", "0")
+    assert_one_line(code, err, text)
+    assert "http://" not in out, "no server for a model that does not load"

@@ -167,3 +167,58 @@ def test_colmap_model_import(tmp_path):
     (tmp_path / "sparse/0/cameras.bin").write_bytes(b"garbage")
     with pytest.raises(UserInputError, match="COLMAP model"):
         read_dataset(tmp_path)
+
+
+def _damage(root, name, how):
+    """Damage one file of a `_make_dataset` folder: empty, truncated, not an image, or another size."""
+    path = root / name
+    if how == "empty":
+        path.write_bytes(b"")
+    elif how == "truncated":
+        path.write_bytes(path.read_bytes()[:40])
+    elif how == "garbage":
+        path.write_bytes(b"not an image at all" * 10)
+    elif how == "other size":
+        mode = "L" if name.startswith("masks") else "RGB"
+        Image.new(mode, (16, 12)).save(path)
+
+
+@pytest.mark.parametrize("name", ["images/im2.png", "masks/im1.png"])
+@pytest.mark.parametrize("how,message", [
+    ("empty", "is empty"), ("truncated", "not a readable image"), ("garbage", "not a readable image"),
+    ("other size", "is 16x12 px, but the dataset's camera is 32x24"),
+])
+def test_bad_image_or_mask_is_refused_up_front(tmp_path, name, how, message):
+    _make_dataset(tmp_path)
+    _damage(tmp_path, name, how)
+    with pytest.raises(UserInputError, match=message) as err:
+        read_dataset(tmp_path)
+    assert name in str(err.value) and "\n" not in str(err.value)
+    read_dataset(tmp_path, check_files=False)  # the poses alone are still readable
+
+
+def test_images_must_match_the_intrinsics(tmp_path):
+    _make_dataset(tmp_path)
+    _edit(tmp_path, lambda d: d.update(w=64, h=48, cx=32.0, cy=24.0))
+    with pytest.raises(UserInputError, match="is 32x24 px, but the dataset's camera is 64x48"):
+        read_dataset(tmp_path)
+
+
+@pytest.mark.parametrize("key", ["file_path", "mask_path"])
+@pytest.mark.parametrize("path", ["../outside.png", "images/../../outside.png", "/etc/passwd"])
+def test_paths_outside_the_dataset_are_refused(tmp_path, key, path):
+    root = tmp_path / "ds"
+    _make_dataset(root)
+    Image.new("RGB", (32, 24)).save(tmp_path / "outside.png")
+    _edit(root, lambda d: d["frames"][1].update({key: path}))
+    with pytest.raises(UserInputError, match=f"{key} '.*' points outside the dataset folder"):
+        read_dataset(root)
+    with pytest.raises(UserInputError, match="points outside"):
+        read_dataset(root, check_files=False)
+
+
+def test_absolute_paths_inside_the_dataset_are_kept(tmp_path):
+    _make_dataset(tmp_path)
+    inside = str(tmp_path / "images" / "im1.png")
+    _edit(tmp_path, lambda d: d["frames"][1].update(file_path=inside))
+    assert read_dataset(tmp_path).frames[1].file_path == inside

@@ -90,8 +90,8 @@ def test_unusable_dataset(case, bad_datasets, tmp_path, capsys):
     (["--backend", "nerf"], "invalid choice"),
     (["--extraction", "poisson"], "invalid choice"),
     (["--steps", "0"], "positive integer"),
-    (["--voxels", "-3"], "positive integer"),
-    (["--texture-px", "32"], "texture size"),
+    (["--voxels", "-3"], "16..512"),
+    (["--texture-px", "32"], "64..8192"),
     (["--seed", "-1"], "--seed"),
     (["--device", "tpu"], "cpu or cuda"),
 ], ids=["backend", "extraction", "steps", "voxels", "texture-px", "seed", "device"])

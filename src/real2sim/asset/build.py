@@ -35,6 +35,17 @@ from real2sim.formats.spec import CollisionSpec
 
 VISUAL_RELPATH = "visual/model.obj"
 
+#: Largest object (bounding-box side), m: real2sim models objects a robot handles; a bigger
+#: mesh is almost always in other units (millimetres read as metres).
+MAX_EXTENT_M = 10.0
+#: Largest object per resolution hint: Drake meshes compliant curved primitives with edges about
+#: the hint long. Measured (Drake 1.51, compliant sphere): 100 hints across took 0.4 GB and 7 s
+#: to mesh, 300 hints 1.4 GB and 41 s; past that a single primitive costs gigabytes.
+MAX_EXTENT_PER_RESOLUTION_HINT = 300.0
+#: How far below the mesh the support plane may lie, as a fraction of the mesh's height:
+#: a reconstruction's bottom may stop a little above the table.
+SUPPORT_BELOW_TOLERANCE = 0.05
+
 
 @dataclass(frozen=True)
 class AssetConfig:
@@ -133,6 +144,42 @@ def config_record(config: AssetConfig) -> dict:
     }
 
 
+def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str = "mesh") -> None:
+    """Refuse, before any work, a mesh this configuration cannot turn into a usable asset.
+
+    UserInputError (one line): an object larger than :data:`MAX_EXTENT_M`; an object more than
+    :data:`MAX_EXTENT_PER_RESOLUTION_HINT` resolution hints across when its shapes are
+    hydroelastic (Drake would mesh them with millions of elements); with ``flat_bottom``, a
+    support plane that is not finite, that leaves nothing of the mesh above it, or that lies
+    below the mesh by more than :data:`SUPPORT_BELOW_TOLERANCE` of its height (nothing to crop,
+    no bottom to close there).
+    """
+    vertices = np.asarray(mesh.vertices, dtype=float)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    extent = float((hi - lo).max())
+    if extent > MAX_EXTENT_M:
+        raise UserInputError(f"{label} is {extent:.4g} m across, over the {MAX_EXTENT_M:g} m limit of real2sim's objects "
+                             "(a mesh in millimetres? real2sim reads metres)")
+    hint = config.contact.resolution_hint_m
+    if config.contact.hydroelastic != "none" and extent > MAX_EXTENT_PER_RESOLUTION_HINT * hint:
+        raise UserInputError(f"{label} is {extent:.4g} m across, over {MAX_EXTENT_PER_RESOLUTION_HINT:g} x "
+                             f"--resolution-hint {hint:g} m = {MAX_EXTENT_PER_RESOLUTION_HINT * hint:.4g} m: Drake would "
+                             f"mesh its shapes with millions of elements; use --resolution-hint "
+                             f">= {extent / MAX_EXTENT_PER_RESOLUTION_HINT:.3g}")
+    if config.flat_bottom:
+        height = config.support_height_m
+        bottom, top = float(lo[2]), float(hi[2])
+        if not np.isfinite(height):
+            raise UserInputError(f"--support-height must be a finite number of metres, got {height}")
+        if height >= top:
+            raise UserInputError(f"--support-height {height:g} m leaves nothing of {label} above it "
+                                 f"(the mesh spans z = {bottom:.4g} .. {top:.4g} m)")
+        if height < bottom - SUPPORT_BELOW_TOLERANCE * (top - bottom):
+            raise UserInputError(f"--support-height {height:g} m lies {bottom - height:.4g} m below {label} "
+                                 f"(the mesh spans z = {bottom:.4g} .. {top:.4g} m): nothing to crop and no bottom to "
+                                 "close there; give the table's height in the mesh frame")
+
+
 def geometry_only(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """The mesh's surface with coincident vertices merged (UV seams closed), no visuals."""
     solid = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=True)
@@ -195,6 +242,7 @@ def build_asset(
     mesh = load_mesh(mesh_path)
     solid = geometry_only(mesh)
     validate_mesh(solid, str(mesh_path))
+    check_mesh_for_config(solid, config, str(mesh_path))
 
     from real2sim.asset.writers import write_representation
     from real2sim.asset.canonical import canonical_transform

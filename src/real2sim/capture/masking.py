@@ -29,7 +29,8 @@ from typing import Callable
 
 import numpy as np
 
-from real2sim.formats.dataset import Dataset, Frame, load_image_rgb, load_mask, read_dataset, write_transforms
+from real2sim.formats.dataset import (Dataset, Frame, check_dataset_outputs, load_image_rgb, load_mask, read_dataset,
+                                      write_transforms)
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import current_umask
 
@@ -245,6 +246,8 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
     ds = read_dataset(root)
     if ds.extra.get("source") == "colmap":
         raise UserInputError(f"{root} has no transforms.json; masks need one to point to them")
+    if method != "provided":  # `provided` writes transforms.json only when a frame gains its mask
+        check_dataset_outputs(root, files=("transforms.json",), folders=(f"masks_{method}",), what="mask output")
     w, h = ds.intrinsics.width, ds.intrinsics.height
     n = len(ds.frames)
     ious, fractions = [], []

@@ -40,6 +40,7 @@ import numpy as np
 from real2sim.formats.dataset import (
     CV_FROM_GL,
     Dataset,
+    check_dataset_outputs,
     pose_errors,
     read_dataset,
     read_ground_truth,
@@ -491,6 +492,8 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
     ds = read_dataset(root)
     if ds.extra.get("source") == "colmap":
         raise UserInputError(f"{root} has no transforms.json (its poses come from COLMAP already)")
+    check_dataset_outputs(root, files=("transforms.json", "transforms_unrefined.json", "refine_report.json"),
+                          what="refine-poses output")
     poses, result = refine_dataset_poses(ds, cfg, progress)
     names = [f.file_path for f in ds.frames]
     result = _with_errors(result, read_ground_truth(root), names, ds.poses_c2w_gl(), poses)

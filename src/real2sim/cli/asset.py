@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from real2sim.cli import positive_float
+from real2sim.cli import options
+from real2sim.cli.options import SEED_MAX, cache_dir, device, integer, number, positive, seed
 
 DEFAULT_SPECS = ("cylinders:10",)
 
@@ -15,21 +16,22 @@ def add_contact_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("contact properties (Drake proximity properties of the object)")
     g.add_argument("--hydroelastic", choices=["compliant", "rigid", "none"], default="compliant",
                    help="hydroelastic type of the collision shapes (default: compliant, as the paper)")
-    g.add_argument("--hydroelastic-modulus", type=positive_float, default=1.0e7, metavar="PA",
+    g.add_argument("--hydroelastic-modulus", type=number(1.0e3, 1.0e12), default=1.0e7, metavar="PA",
                    help="hydroelastic modulus, Pa (default 1e7)")
-    g.add_argument("--point-stiffness", type=positive_float, default=1.0e4, metavar="N_PER_M",
+    g.add_argument("--point-stiffness", type=positive(1.0e9), default=1.0e4, metavar="N_PER_M",
                    help="point-contact stiffness, N/m (default 1e4)")
-    g.add_argument("--dissipation", type=positive_float, default=1.0, metavar="S_PER_M",
+    g.add_argument("--dissipation", type=positive(100.0), default=1.0, metavar="S_PER_M",
                    help="Hunt-Crossley dissipation, s/m (default 1.0)")
-    g.add_argument("--mu-static", type=positive_float, default=0.5, help="static friction coefficient (default 0.5)")
-    g.add_argument("--mu-dynamic", type=positive_float, default=0.5, help="dynamic friction coefficient (default 0.5)")
-    g.add_argument("--resolution-hint", type=positive_float, default=0.01, metavar="M",
+    g.add_argument("--mu-static", type=positive(10.0), default=0.5, help="static friction coefficient (default 0.5)")
+    g.add_argument("--mu-dynamic", type=positive(10.0), default=0.5,
+                   help="dynamic friction coefficient, at most --mu-static (default 0.5)")
+    g.add_argument("--resolution-hint", type=number(1.0e-4, 1.0), default=0.01, metavar="M",
                    help="edge length Drake meshes curved compliant primitives with, m (default 0.01)")
 
 
-def add_asset_arguments(p: argparse.ArgumentParser) -> None:
-    """Flags shared by `asset` and verbs that build assets (demo, run)."""
-    p.add_argument("--mass", type=positive_float, required=True, metavar="KG", help="measured mass of the object, kg")
+def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX) -> None:
+    """Flags shared by `asset` and verbs that build assets (demo, run); ``seed_max``: the largest --seed."""
+    p.add_argument("--mass", type=positive(1000.0), required=True, metavar="KG", help="measured mass of the object, kg")
     p.add_argument("--collision", action="append", metavar="SPEC",
                    help="collision representation, repeatable: spheres:128, boxes:100, rotated_boxes:50, "
                    "cylinders:10, ellipsoids:64, capsules:16, superquadrics:2 (written as convex mesh pieces), "
@@ -37,30 +39,31 @@ def add_asset_arguments(p: argparse.ArgumentParser) -> None:
                    f"baselines coacd, vhacd, mesh (default: {' '.join(DEFAULT_SPECS)})")
     p.add_argument("--flat-bottom", action="store_true",
                    help="crop below the support plane and close the bottom flat (paper IV-C1)")
-    p.add_argument("--support-height", type=float, default=0.0, metavar="M",
-                   help="support (table) height in the input mesh frame, +z up, m (default 0)")
+    p.add_argument("--support-height", type=number(-100.0, 100.0), default=0.0, metavar="M",
+                   help="support (table) height in the input mesh frame, +z up, m (default 0); it must cut the mesh "
+                   "or lie just below it")
     p.add_argument("--keep-up", action="store_true",
                    help="keep the input's +z as the asset's up axis instead of the longest principal axis "
                    "(for squat objects such as mugs)")
     p.add_argument("--format", action="append", choices=["urdf", "sdf", "mjcf"], dest="formats",
                    help="model formats to write (repeatable; URDF always): sdf writes model.sdf, "
                    "mjcf writes model.xml for MuJoCo")
-    p.add_argument("--seed", type=int, default=0, help="random seed of sampling and fitting (default 0)")
-    p.add_argument("--device", default="cpu", help="torch device for primitive fitting: cpu, cuda, cuda:N (default cpu)")
+    p.add_argument("--seed", type=seed(seed_max), default=0, help="random seed of sampling and fitting (default 0)")
+    p.add_argument("--device", type=device, default="cpu", help="torch device for primitive fitting: cpu, cuda, cuda:N (default cpu)")
     g = p.add_argument_group("primitive fitting (paper IV-C3)")
-    g.add_argument("--iterations", type=int, default=None, metavar="N", help="maximum fitting iterations (default 1000)")
+    g.add_argument("--iterations", type=integer(1, 100_000), default=None, metavar="N", help="maximum fitting iterations (default 1000)")
     g.add_argument("--fit-parameterization", choices=["direct", "network"], default=None,
                    help="optimise the primitive parameters directly (default, measured better) or through the "
                    "paper's over-parameterized network g_theta()")
     g.add_argument("--fit-paper-loss", action="store_true",
                    help="use eq. 9's linear hinge inside the object instead of the squared hinge (default)")
-    g.add_argument("--sdf-cache", default=None, metavar="DIR",
+    g.add_argument("--sdf-cache", type=cache_dir, default=None, metavar="DIR",
                    help="cache signed-distance samples across runs in DIR ('auto': $REAL2SIM_CACHE or "
                    "~/.cache/real2sim); default: within this build only")
-    p.add_argument("--coacd-threshold", type=positive_float, default=0.05,
+    p.add_argument("--coacd-threshold", type=number(0.01, 1.0), default=0.05,
                    help="CoACD concavity threshold (default 0.05, the paper's setting)")
-    p.add_argument("--coacd-max-hulls", type=int, default=-1, help="CoACD maximum convex hulls (-1: no limit)")
-    p.add_argument("--vhacd-max-hulls", type=int, default=32, help="V-HACD maximum convex hulls (default 32)")
+    p.add_argument("--coacd-max-hulls", type=integer(1, 1000, also=(-1,)), default=-1, help="CoACD maximum convex hulls (-1: no limit)")
+    p.add_argument("--vhacd-max-hulls", type=integer(1, 1000), default=32, help="V-HACD maximum convex hulls (default 32)")
     add_contact_arguments(p)
 
 
@@ -78,6 +81,7 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR", help="output asset folder (must not exist)")
     p.add_argument("--overwrite", action="store_true", help="replace ASSETDIR if it exists")
     add_asset_arguments(p)
+    options.finish(p)
     p.set_defaults(func=run)
 
 
@@ -88,6 +92,11 @@ def config_from_args(args: argparse.Namespace):
     from real2sim.formats.spec import parse_spec
 
     specs = tuple(parse_spec(s) for s in (args.collision or DEFAULT_SPECS))
+    if args.mu_dynamic > args.mu_static:
+        from real2sim.formats.errors import UserInputError
+
+        raise UserInputError(f"--mu-dynamic {args.mu_dynamic:g} is greater than --mu-static {args.mu_static:g}; "
+                             "Drake needs dynamic friction <= static friction")
     if args.device.startswith("cuda"):
         import torch
 

@@ -5,17 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from real2sim.cli import positive_int
+from real2sim.cli import options
+from real2sim.cli.options import COLMAP_SEED_MAX, device, integer, nonnegative, seed
 
-
-def _nonneg_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (0 <= value < float("inf")):
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
-    return value
+#: Image sides, px (the capture's renderer and COLMAP work within this).
+IMAGE_PX = integer(16, 8192)
+#: RMS calibration noise of robot camera poses: position, mm, and orientation, degrees.
+NOISE_MM = nonnegative(100.0)
+NOISE_DEG = nonnegative(30.0)
 
 
 def register(sub) -> None:
@@ -33,16 +30,17 @@ def register(sub) -> None:
                    "name (bottle, can, mug)")
     p.add_argument("--out", type=Path, required=True, metavar="DATASET", help="output dataset folder (must not exist)")
     p.add_argument("--overwrite", action="store_true", help="replace DATASET if it exists")
-    p.add_argument("--views", type=int, default=200, help="number of images (default 200)")
-    p.add_argument("--width", type=int, default=640, help="image width, px (default 640)")
-    p.add_argument("--height", type=int, default=480, help="image height, px (default 480)")
-    p.add_argument("--pose-noise-mm", type=_nonneg_float, default=5.0, metavar="MM",
+    p.add_argument("--views", type=integer(1, 2000), default=200, help="number of images (default 200)")
+    p.add_argument("--width", type=IMAGE_PX, default=640, help="image width, px (default 640)")
+    p.add_argument("--height", type=IMAGE_PX, default=480, help="image height, px (default 480)")
+    p.add_argument("--pose-noise-mm", type=NOISE_MM, default=5.0, metavar="MM",
                    help="RMS camera-position error of the robot poses, mm (default 5)")
-    p.add_argument("--pose-noise-deg", type=_nonneg_float, default=1.0, metavar="DEG",
+    p.add_argument("--pose-noise-deg", type=NOISE_DEG, default=1.0, metavar="DEG",
                    help="RMS camera-orientation error of the robot poses, degrees (default 1)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the pose noise (default 0)")
+    p.add_argument("--seed", type=seed(), default=0, help="seed of the pose noise (default 0)")
     p.add_argument("--with-background", action="store_true",
                    help="also render the empty table from the same poses into background/ (for mask --method background)")
+    options.finish(p)
     p.set_defaults(func=run_capture)
 
     p = sub.add_parser(
@@ -54,19 +52,20 @@ def register(sub) -> None:
         "refine_report.json; when COLMAP fails, the poses are kept and a warning says why.",
     )
     p.add_argument("dataset", type=Path, help="dataset folder with transforms.json")
-    p.add_argument("--neighbors", type=int, default=10, metavar="K", help="views matched with each view (default 10)")
+    p.add_argument("--neighbors", type=integer(1, 200), default=10, metavar="K", help="views matched with each view (default 10)")
     p.add_argument("--features", choices=["all", "object"], default="all",
                    help="where to detect features: the whole image (default; the table helps) or the object masks")
-    p.add_argument("--max-features", type=int, default=4096, help="SIFT features per image (default 4096)")
+    p.add_argument("--max-features", type=integer(64, 32768), default=4096, help="SIFT features per image (default 4096)")
     p.add_argument("--align", choices=["poses", "centres"], default="poses",
                    help="how the refined model is put back onto the robot frame: similarity from camera centres "
                    "and orientations weighted by the pose noise (default), or centres only (COLMAP's model aligner)")
-    p.add_argument("--pose-noise-mm", type=_nonneg_float, default=None, metavar="MM",
+    p.add_argument("--pose-noise-mm", type=NOISE_MM, default=None, metavar="MM",
                    help="RMS position noise of the given poses, mm, weighting --align poses "
                    "(default: from transforms.json's real2sim block, else 5)")
-    p.add_argument("--pose-noise-deg", type=_nonneg_float, default=None, metavar="DEG",
+    p.add_argument("--pose-noise-deg", type=NOISE_DEG, default=None, metavar="DEG",
                    help="RMS orientation noise of the given poses, degrees (default: from transforms.json, else 1)")
-    p.add_argument("--seed", type=int, default=0, help="COLMAP random seed (default 0)")
+    p.add_argument("--seed", type=seed(COLMAP_SEED_MAX), default=0, help="COLMAP random seed (default 0)")
+    options.finish(p)
     p.set_defaults(func=run_refine)
 
     p = sub.add_parser(
@@ -82,16 +81,17 @@ def register(sub) -> None:
     p.add_argument("--method", choices=["provided", "maskrcnn", "background"], required=True)
     p.add_argument("--weights", type=Path, default=None, metavar="PATH",
                    help="Mask R-CNN (torchvision ResNet-50 FPN) weights file, for --method maskrcnn")
-    p.add_argument("--threshold", type=_nonneg_float, default=12.0,
+    p.add_argument("--threshold", type=nonnegative(255.0), default=12.0,
                    help="background difference threshold, 0-255 (default 12)")
-    p.add_argument("--device", default="cpu", help="torch device for Mask R-CNN (default cpu)")
-    p.add_argument("--maskrcnn-min-size", type=positive_int, default=800, metavar="PX",
+    p.add_argument("--device", type=device, default="cpu", help="torch device for Mask R-CNN: cpu, cuda, cuda:N (default cpu)")
+    p.add_argument("--maskrcnn-min-size", type=integer(32, 4096), default=800, metavar="PX",
                    help="Mask R-CNN resizes the shorter image side to this, px (default 800, as trained; "
                    "smaller is faster on a CPU)")
-    p.add_argument("--maskrcnn-max-size", type=positive_int, default=1333, metavar="PX",
+    p.add_argument("--maskrcnn-max-size", type=integer(32, 8192), default=1333, metavar="PX",
                    help="upper bound on the longer side after resizing, px (default 1333)")
-    p.add_argument("--maskrcnn-max-instances", type=positive_int, default=100, metavar="N",
+    p.add_argument("--maskrcnn-max-instances", type=integer(1, 1000), default=100, metavar="N",
                    help="detections kept per image before choosing the object (default 100)")
+    options.finish(p)
     p.set_defaults(func=run_mask)
 
 

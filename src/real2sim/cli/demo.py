@@ -23,6 +23,8 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
+from real2sim.cli import options
+
 
 @dataclass(frozen=True)
 class DemoPlan:
@@ -81,7 +83,8 @@ def register(sub) -> None:
     p.add_argument("--quick", action="store_true",
                    help="small noise-free capture, visual hull, fewer and smaller representations, one run per task")
     p.add_argument("--overwrite", action="store_true", help="replace the output folder if it exists")
-    p.add_argument("--jobs", type=int, default=None, help="parallel simulations (default: CPU cores)")
+    p.add_argument("--jobs", type=options.jobs, default=None, help="parallel simulations (default: CPU cores)")
+    options.finish(p)
     p.set_defaults(func=run)
 
 

@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from real2sim.cli import positive_int
+from real2sim.cli import options
+from real2sim.cli.options import device, existing_file, integer, seed
+
+#: Training steps, grid voxels along the object's longest side, texture image side (px).
+STEPS = integer(1, 100_000)
+VOXELS = integer(16, 512)
+TEXTURE_PX = integer(64, 8192)
 
 
 def register(sub) -> None:
@@ -28,17 +34,18 @@ def register(sub) -> None:
     p.add_argument("--backend", choices=["field", "hull"], default="field", help="reconstruction method (default field)")
     p.add_argument("--extraction", choices=["density", "tsdf"], default="density",
                    help="field backend: surface by marching cubes on the density (default) or TSDF fusion")
-    p.add_argument("--device", default="cpu", help="cpu (default) or cuda")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the field's training (default 0)")
-    p.add_argument("--steps", type=positive_int, default=None,
+    p.add_argument("--device", type=device, default="cpu", help="cpu (default), cuda or cuda:N")
+    p.add_argument("--seed", type=seed(), default=0, help="random seed of the field's training (default 0)")
+    p.add_argument("--steps", type=STEPS, default=None,
                    help="fine-grid training steps (default from the field settings); the coarse grid gets half")
-    p.add_argument("--voxels", type=positive_int, default=None,
+    p.add_argument("--voxels", type=VOXELS, default=None,
                    help="fine-grid voxels along the object's longest side (default from the field settings)")
-    p.add_argument("--texture-px", type=positive_int, default=1024, help="texture image size, px (default 1024)")
-    p.add_argument("--from-mesh", type=Path, default=None, metavar="MESH",
+    p.add_argument("--texture-px", type=TEXTURE_PX, default=1024, help="texture image size, px (default 1024)")
+    p.add_argument("--from-mesh", type=existing_file, default=None, metavar="MESH",
                    help="import this mesh exported by nerfstudio instead of reconstructing")
-    p.add_argument("--dataparser-transforms", type=Path, default=None, metavar="JSON",
+    p.add_argument("--dataparser-transforms", type=existing_file, default=None, metavar="JSON",
                    help="nerfstudio's dataparser_transforms.json for --from-mesh")
+    options.finish(p)
     p.set_defaults(func=run_reconstruct)
 
 

@@ -6,8 +6,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from real2sim.cli import positive_float, positive_int
+from real2sim.cli import options
 from real2sim.cli.asset import add_asset_arguments
+from real2sim.cli.options import COLMAP_SEED_MAX, existing_file, integer, jobs, nonnegative, positive
+from real2sim.cli.reconstruct import STEPS, TEXTURE_PX, VOXELS
+
+#: Evaluation: runs per task, scale of the tasks' durations.
+RUNS = integer(1, 1000)
+DURATION_SCALE = positive(100.0)
 
 # The reconstruction's table plane is z = 0 of the dataset's world frame: run always closes
 # the bottom there, so these two `asset` flags are hidden (and ignored).
@@ -30,10 +36,10 @@ def register(sub) -> None:
         "real2sim run can_ds --mass 0.35 --out can_asset --collision cylinders:10 --backend hull",
     )
     p.add_argument("dataset", type=Path, help="dataset folder (transforms.json, images/, masks/)")
-    p.add_argument("--object-height-m", type=positive_float, default=None, metavar="H", help="a COLMAP dataset "
+    p.add_argument("--object-height-m", type=positive(10.0), default=None, metavar="H", help="a COLMAP dataset "
                    "(images/ + sparse/0, no transforms.json): the object's height above the table, metres; sets the "
                    "scale (the table plane is found in the sparse points)")
-    p.add_argument("--scale", type=positive_float, default=None, metavar="S",
+    p.add_argument("--scale", type=positive(1e6), default=None, metavar="S",
                    help="COLMAP dataset: metres per model unit, instead of --object-height-m")
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR",
                    help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
@@ -43,22 +49,22 @@ def register(sub) -> None:
                    help="make the masks first (on a copy in ASSETDIR/.run/masked): provided (masks/<image stem>.png), "
                    "maskrcnn (needs --mask-weights), background (background/<image name>); default: use the "
                    "masks the frames name, all frames must have one")
-    p.add_argument("--mask-weights", type=Path, default=None, metavar="PATH",
+    p.add_argument("--mask-weights", type=existing_file, default=None, metavar="PATH",
                    help="local Mask R-CNN weights file for --mask maskrcnn")
-    p.add_argument("--mask-threshold", type=float, default=12.0,
+    p.add_argument("--mask-threshold", type=nonnegative(255.0), default=12.0,
                    help="--mask background: difference threshold, 0-255 (default 12)")
     g = p.add_argument_group("reconstruction")
     g.add_argument("--backend", choices=["field", "hull"], default="field",
                    help="radiance field (default) or visual hull (fast)")
     g.add_argument("--extraction", choices=["density", "tsdf"], default="density",
                    help="field backend: surface by marching cubes on the density (default) or TSDF fusion")
-    g.add_argument("--steps", type=positive_int, default=None, help="field: fine-grid training steps")
-    g.add_argument("--voxels", type=positive_int, default=None,
+    g.add_argument("--steps", type=STEPS, default=None, help="field: fine-grid training steps")
+    g.add_argument("--voxels", type=VOXELS, default=None,
                    help="voxels along the object's longest side (field: fine grid; hull: carving grid, default 192)")
-    g.add_argument("--texture-px", type=positive_int, default=1024, help="texture image size, px (default 1024)")
-    g.add_argument("--max-faces", type=positive_int, default=None, help="simplify the mesh to this many faces "
+    g.add_argument("--texture-px", type=TEXTURE_PX, default=1024, help="texture image size, px (default 1024)")
+    g.add_argument("--max-faces", type=integer(100, 5_000_000), default=None, help="simplify the mesh to this many faces "
                    "(default 40000)")
-    add_asset_arguments(p)
+    add_asset_arguments(p, seed_max=COLMAP_SEED_MAX)  # the seed reaches COLMAP with --refine-poses
     for action in p._actions:  # argparse has no public way to hide an inherited flag
         if action.dest in _FORCED_ASSET_FLAGS:
             action.help = argparse.SUPPRESS
@@ -67,10 +73,11 @@ def register(sub) -> None:
     e.add_argument("--tasks", default="push,ramp", metavar="LIST", help="comma-separated tasks (default push,ramp)")
     e.add_argument("--contact", default="point,hydroelastic", metavar="LIST",
                    help="comma-separated contact models (default point,hydroelastic)")
-    e.add_argument("--runs", type=int, default=10, metavar="N", help="runs per task (default 10)")
-    e.add_argument("--jobs", type=int, default=None, metavar="N", help="simulations in parallel (default CPU count)")
-    e.add_argument("--duration-scale", type=float, default=1.0, metavar="K",
+    e.add_argument("--runs", type=RUNS, default=10, metavar="N", help="runs per task (default 10)")
+    e.add_argument("--jobs", type=jobs, default=None, metavar="N", help="simulations in parallel (default CPU count)")
+    e.add_argument("--duration-scale", type=DURATION_SCALE, default=1.0, metavar="K",
                    help="multiply the tasks' durations by K (default 1)")
+    options.finish(p)
     p.set_defaults(func=run)
 
 
@@ -80,12 +87,13 @@ def config_from_args(args: argparse.Namespace):
 
     from real2sim.cli.asset import config_from_args as asset_config
     from real2sim.formats.errors import UserInputError
-    from real2sim.pipeline.run import RunConfig
+    from real2sim.pipeline.run import RunConfig, check_dataset
     from real2sim.reconstruct.stage import ReconstructConfig, resolve_device
     from real2sim.reconstruct.train import FieldConfig
 
     if args.seed < 0 or args.seed >= 2**63:
         raise UserInputError(f"--seed must be in 0..2^63-1 (got {args.seed})")
+    check_dataset(args.dataset, masks_needed=args.mask is None)  # every image and mask, before any display
     args.flat_bottom, args.support_height = True, 0.0
     asset = asset_config(args)
     resolve_device(args.device)

@@ -5,19 +5,27 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from real2sim.cli import options
+
 
 def register(sub) -> None:
     p = sub.add_parser(
         "view",
         help="show an asset in the browser (Drake's Meshcat): visual and collision geometry",
         description="Loads ASSETDIR/<representation>/model.urdf into a Drake MultibodyPlant and serves it "
-        "with Meshcat on localhost; open the printed URL. Illustration (visual) and proximity (collision) "
-        "layers can be toggled in Meshcat's menu. Ctrl-C stops.",
+        "with Meshcat on this machine only (127.0.0.1) unless --host says otherwise; open the printed URL. "
+        "Illustration (visual) and proximity (collision) layers can be toggled in Meshcat's menu. Ctrl-C stops.",
     )
     p.add_argument("asset", type=Path, metavar="ASSETDIR")
     p.add_argument("--representation", help="representation folder to show (default: the first)")
-    p.add_argument("--port", type=int, default=None, help="Meshcat port (default: Drake's, 7000 or next free)")
-    p.add_argument("--seconds", type=float, default=None, help="serve this long then exit (default: until Ctrl-C)")
+    p.add_argument("--host", type=options.host, default="127.0.0.1",
+                   help="interface to listen on (default 127.0.0.1: this machine only; '*' or 0.0.0.0: every "
+                   "interface, so that other machines can connect)")
+    p.add_argument("--port", type=options.port, default=None,
+                   help="Meshcat port (default: Drake's, 7000 or the next free one up to 7099)")
+    p.add_argument("--seconds", type=options.nonnegative(1.0e6), default=None, metavar="S",
+                   help="serve this long then exit, s (default: until Ctrl-C)")
+    options.finish(p)
     p.set_defaults(func=run)
 
 
@@ -33,13 +41,55 @@ def representation_urdfs(asset_dir: Path) -> list[Path]:
     return urdfs
 
 
-def run(args: argparse.Namespace) -> int:
-    import time
+def _first_line(exc: BaseException) -> str:
+    """The first line of Drake's message, without its ``FILE:LINE: error:`` prefix."""
+    import re
 
-    from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role, StartMeshcat
+    text = str(exc).strip()
+    line = text.splitlines()[0] if text else type(exc).__name__
+    return re.sub(r"^\S*:\d+: error: ", "", line)
+
+
+def load_model(urdf: Path):
+    """(builder, scene_graph) holding the model at ``urdf`` in a finalized plant; UserInputError
+    (one line) when Drake cannot load it (malformed URDF, a mesh that is missing or unreadable)."""
     from pydrake.multibody.parsing import Parser
     from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
     from pydrake.systems.framework import DiagramBuilder
+
+    from real2sim.formats.errors import UserInputError
+
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+    try:
+        Parser(plant).AddModels(str(urdf))
+        plant.Finalize()
+    except (RuntimeError, ValueError) as exc:  # Drake reports parse and mesh errors as RuntimeError
+        raise UserInputError(f"cannot load {urdf}: {_first_line(exc)}") from None
+    return builder, scene_graph
+
+
+def start_meshcat(host: str, port: int | None):
+    """Drake's Meshcat on ``host`` (``port`` None: the first free of 7000..7099); UserInputError
+    when it cannot listen there (port in use, not allowed, or no such interface)."""
+    from pydrake.geometry import Meshcat, MeshcatParams
+
+    from real2sim.formats.errors import UserInputError
+
+    try:
+        return Meshcat(MeshcatParams(host=host, port=port))
+    except RuntimeError:
+        if port is None:
+            raise UserInputError(f"cannot listen on {host}, ports 7000..7099 (all in use, or no such interface); "
+                                 "pass a free --port or another --host") from None
+        raise UserInputError(f"--port {port}: cannot listen on {host}:{port} (port in use, not allowed, or no such "
+                             "interface); pass a free --port or another --host") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    import time
+
+    from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role
 
     from real2sim.formats.errors import UserInputError
 
@@ -49,16 +99,15 @@ def run(args: argparse.Namespace) -> int:
         if not urdfs:
             raise UserInputError(f"no representation {args.representation!r} in {args.asset}")
     urdf = urdfs[0]
-    meshcat = StartMeshcat() if args.port is None else __import__("pydrake.geometry", fromlist=["Meshcat"]).Meshcat(args.port)
-    builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
-    Parser(plant).AddModels(str(urdf))
-    plant.Finalize()
+    builder, scene_graph = load_model(urdf)  # a model Drake cannot load fails here, before a port is opened
+    meshcat = start_meshcat(args.host, args.port)
     for role, prefix in ((Role.kIllustration, "visual"), (Role.kProximity, "collision")):
         MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, MeshcatVisualizerParams(role=role, prefix=prefix))
     diagram = builder.Build()
-    context = diagram.CreateDefaultContext()
-    diagram.ForcedPublish(context)
+    try:
+        diagram.ForcedPublish(diagram.CreateDefaultContext())
+    except RuntimeError as exc:
+        raise UserInputError(f"cannot show {urdf}: {_first_line(exc)}") from None
     print(f"showing {urdf} at {meshcat.web_url()}  (Ctrl-C to stop)", flush=True)
     deadline = None if args.seconds is None else time.monotonic() + args.seconds
     try:

@@ -26,6 +26,7 @@ latter on the fly (its poses are then in COLMAP's arbitrary frame and scale).
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -212,6 +213,9 @@ def read_transforms(path: Path, root: Path | None = None, check_files: bool = Tr
         seen.add(fp)
         m = check_rigid(fr["transform_matrix"], f"{flabel} ({fp})")
         mp = fr.get("mask_path")
+        check_inside(root, fp, f"{flabel}: file_path")
+        if mp is not None:
+            check_inside(root, str(mp), f"{flabel}: mask_path")
         if check_files:
             if not (root / fp).is_file():
                 raise UserInputError(f"{flabel}: image {root / fp} not found")
@@ -221,7 +225,79 @@ def read_transforms(path: Path, root: Path | None = None, check_files: bool = Tr
                             extra={k: v for k, v in fr.items() if k not in frame_keys}))
     extra = {k: v for k, v in data.items() if k not in ("frames", "camera_model", "fl_x", "fl_y", "cx", "cy",
                                                          "w", "h", "k1", "k2", "p1", "p2")}
-    return Dataset(root=root, intrinsics=intr, frames=tuple(frames), extra=extra)
+    ds = Dataset(root=root, intrinsics=intr, frames=tuple(frames), extra=extra)
+    if check_files:
+        check_frame_files(ds, label)
+    return ds
+
+
+def check_inside(root: Path, relpath: str, label: str) -> None:
+    """UserInputError unless ``relpath`` (relative to ``root``, or absolute) names a path inside ``root``.
+
+    Lexical: ``..`` and absolute paths elsewhere are refused; a symbolic link inside the
+    folder may still point anywhere (whoever made the folder chose it)."""
+    base = os.path.abspath(root)
+    full = os.path.normpath(os.path.join(base, relpath))
+    if os.path.commonpath([base, full]) != base:
+        raise UserInputError(f"{label} {relpath!r} points outside the dataset folder {root}")
+
+
+def check_image_file(path: Path, size: tuple[int, int], label: str) -> None:
+    """UserInputError unless ``path`` is a non-empty, readable image of ``size`` (width, height) px.
+
+    Reads the header and checks the file's structure (PIL ``verify``: chunk checksums of a PNG),
+    without decoding the pixels: milliseconds per image."""
+    from PIL import Image
+
+    try:
+        if path.stat().st_size == 0:
+            raise UserInputError(f"{label} {path} is empty (0 bytes)")
+        with Image.open(path) as im:
+            width, height = im.size
+            im.verify()
+    except UserInputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 -- PIL raises OSError, SyntaxError, struct.error... on bad files
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise UserInputError(f"{label} {path} is not a readable image ({reason})") from None
+    if width == 0 or height == 0:
+        raise UserInputError(f"{label} {path} is empty ({width}x{height} px)")
+    if (width, height) != tuple(size):
+        raise UserInputError(f"{label} {path} is {width}x{height} px, but the dataset's camera is "
+                             f"{size[0]}x{size[1]} (w, h): all images and masks must be of that one size")
+
+
+def check_frame_files(ds: Dataset, label: str | None = None) -> None:
+    """Every frame's image and mask: inside the folder, non-empty, readable, of the camera's size.
+
+    One line (UserInputError) naming the first bad file; nothing is decoded, so a dataset of
+    hundreds of images is checked in well under a second."""
+    label = label or str(ds.root)
+    size = (ds.intrinsics.width, ds.intrinsics.height)
+    for i, frame in enumerate(ds.frames):
+        flabel = f"{label} frame {i}:"
+        check_inside(ds.root, frame.file_path, f"{flabel} file_path")
+        check_image_file(Path(ds.root) / frame.file_path, size, f"{flabel} image")
+        if frame.mask_path is not None:
+            check_inside(ds.root, frame.mask_path, f"{flabel} mask_path")
+            check_image_file(Path(ds.root) / frame.mask_path, size, f"{flabel} mask")
+
+
+def check_dataset_outputs(root: Path | str, files: tuple[str, ...] = (), folders: tuple[str, ...] = (),
+                          what: str = "output") -> None:
+    """Before a stage writes ``files`` / ``folders`` into a dataset folder: each can be made there.
+
+    UserInputError (one line) for a folder where a file goes or a file where a folder goes,
+    a folder that cannot be written (permission), or a name the file system refuses."""
+    from real2sim.formats.outputs import check_output_path
+
+    root = Path(root)
+    for name, folder in [(n, False) for n in files] + [(n, True) for n in folders]:
+        path = root / name
+        if path.exists() and path.is_dir() != folder:
+            kind, expected = ("a file", "a folder") if folder else ("a folder", "a file")
+            raise UserInputError(f"{what} {path} is {kind}; it must be {expected} (move it away)")
+        check_output_path(path, what=what)
 
 
 def _colmap_intrinsics(camera) -> CameraIntrinsics:
@@ -270,7 +346,9 @@ def read_colmap_model(root: Path, model_dir: Path | None = None, images_dir: str
                             mask_path=mp if (root / mp).is_file() else None))
     if not frames:
         raise UserInputError(f"COLMAP model {model_dir} has no registered images")
-    return Dataset(root=root, intrinsics=intr, frames=tuple(frames), extra={"source": "colmap"})
+    ds = Dataset(root=root, intrinsics=intr, frames=tuple(frames), extra={"source": "colmap"})
+    check_frame_files(ds, str(model_dir))
+    return ds
 
 
 def read_dataset(path: Path | str, check_files: bool = True) -> Dataset:
