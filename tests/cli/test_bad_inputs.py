@@ -26,16 +26,9 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from real2sim.cli import build_parser, main
-from real2sim.cli.options import Number, integer, numeric_actions, positive, seed
+from real2sim.cli.options import Number, numeric_actions
 
 from tests.formats.test_dataset import _make_dataset
-
-# evaluate's options belong to the evaluate reliability branch; until they use range types, their
-# cases run but may fail (xfail), with this table standing in for the ranges they will have.
-EVALUATE_OWNER = "owned by evaluate reliability branch"
-EVALUATE_RANGES = {"--runs": integer(1, 1000), "--seed": seed(), "--jobs": integer(1, 256),
-                   "--duration-scale": positive(100.0)}
-
 
 @functools.lru_cache(maxsize=1)
 def verb_parsers() -> dict[str, argparse.ArgumentParser]:
@@ -50,11 +43,7 @@ def numeric_options() -> list[tuple[str, argparse.Action]]:
 
 
 def range_of(verb: str, action: argparse.Action) -> Number | None:
-    if isinstance(action.type, Number):
-        return action.type
-    if verb == "evaluate":
-        return EVALUATE_RANGES.get(action.option_strings[-1])
-    return None
+    return action.type if isinstance(action.type, Number) else None
 
 
 def _valid_text(t: Number) -> str:
@@ -111,26 +100,17 @@ def test_every_numeric_option_has_a_range_type():
     """A new `type=int` / `type=float` option (or a numeric default without a type) fails here:
     use a range type from real2sim.cli.options."""
     bare = [f"{verb} {a.option_strings[-1]}" for verb, a in numeric_options()
-            if not isinstance(a.type, Number) and verb != "evaluate"]
+            if not isinstance(a.type, Number)]
     assert not bare, f"numeric options without a range type (real2sim.cli.options): {bare}"
     assert {v for v, _ in numeric_options()} >= {"demo", "capture", "refine-poses", "mask", "reconstruct", "asset",
                                                  "run", "evaluate", "view"}
-
-
-def test_evaluate_options_have_range_types():
-    bare = [a.option_strings[-1] for verb, a in numeric_options() if verb == "evaluate" and not isinstance(a.type, Number)]
-    if bare:
-        pytest.xfail(f"{EVALUATE_OWNER}: {bare}")
 
 
 def _cases():
     cases = []
     for verb, action in numeric_options():
         option = action.option_strings[-1]
-        marks = ()
-        if verb == "evaluate" and not isinstance(action.type, Number):
-            marks = (pytest.mark.xfail(reason=EVALUATE_OWNER, strict=False),)
-        cases.append(pytest.param(verb, option, marks=marks, id=f"{verb} {option}"))
+        cases.append(pytest.param(verb, option, id=f"{verb} {option}"))
     return cases
 
 

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 # Light modules (numpy at most): the vocabulary of --tasks and --contact, defined once.
+from real2sim.cli.options import finish, integer, jobs, positive, seed
 from real2sim.evaluate.tasks import TASKS
 from real2sim.formats.contact import CONTACT_MODELS
 
@@ -45,9 +46,9 @@ def register(sub) -> None:
                    help=f"comma-separated tasks: {', '.join(TASKS)} (default all)")
     p.add_argument("--contact", default=contacts, metavar="LIST",
                    help=f"comma-separated contact models: {', '.join(CONTACT_MODELS)} (default all)")
-    p.add_argument("--runs", type=int, default=10, metavar="N", help="runs per object and task (default 10, as the paper)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the runs' initial conditions (default 0)")
-    p.add_argument("--jobs", type=int, default=None, metavar="N", help="simulations in parallel (default: CPU count); simulation times are measured under this load, "
+    p.add_argument("--runs", type=integer(1, 1000), default=10, metavar="N", help="runs per object and task (default 10, as the paper)")
+    p.add_argument("--seed", type=seed(), default=0, help="seed of the runs' initial conditions (default 0)")
+    p.add_argument("--jobs", type=jobs, default=None, metavar="N", help="simulations in parallel (default: CPU count); simulation times are measured under this load, "
                    "so use --jobs 1 on an idle machine for timings to publish")
     p.add_argument("--executor", choices=["local", "ray"], default="local",
                    help="local process pool (default) or Ray tasks")
@@ -56,19 +57,20 @@ def register(sub) -> None:
                    "on a file system the workers share")
     p.add_argument("--simulation-error", action="store_true",
                    help="free roll-outs from the same initial state instead of equation error (no resets)")
-    p.add_argument("--duration-scale", type=float, default=1.0, metavar="K",
+    p.add_argument("--duration-scale", type=positive(100.0), default=1.0, metavar="K",
                    help="multiply the push duration and the ramp's total duration by K (default 1; < 1 for quick looks)")
     p.add_argument("--recommend", choices=["accuracy", "speed", "smoothness"], default=None,
                    help="print the recommended representation for this preference (all three are in report.html)")
-    p.add_argument("--sim-timeout-s", type=float, default=600.0, metavar="S",
+    p.add_argument("--sim-timeout-s", type=positive(86400.0), default=600.0, metavar="S",
                    help="wall-clock limit of one simulation in seconds (default 600); past it the row is recorded as "
                    "failed with the reason 'timeout' and the sweep goes on")
-    p.add_argument("--ray-timeout-s", type=float, default=30.0, metavar="S",
+    p.add_argument("--ray-timeout-s", type=positive(3600.0), default=30.0, metavar="S",
                    help="how long to wait for the Ray cluster to answer, in seconds (default 30)")
     p.add_argument("--overwrite", action="store_true",
                    help="discard existing results in RESULTS and start afresh (only a folder real2sim made is "
                    "replaced; never an input)")
     p.set_defaults(func=run)
+    finish(p)
 
     r = sub.add_parser(
         "report",
@@ -78,6 +80,7 @@ def register(sub) -> None:
     )
     r.add_argument("results", type=Path, metavar="RESULTS", help="results folder written by `real2sim evaluate`")
     r.set_defaults(func=run_report)
+    finish(r)
 
 
 def config_from_args(args: argparse.Namespace):
