@@ -66,6 +66,9 @@ def register(sub) -> None:
                    "failed with the reason 'timeout' and the sweep goes on")
     p.add_argument("--ray-timeout-s", type=positive(3600.0), default=30.0, metavar="S",
                    help="how long to wait for the Ray cluster to answer, in seconds (default 30)")
+    p.add_argument("--no-animations", action="store_true",
+                   help="do not write RESULTS/animations/<task>.html (the reference beside the representation "
+                   "recommended for accuracy, one run per task; two extra simulations)")
     p.add_argument("--overwrite", action="store_true",
                    help="discard existing results in RESULTS and start afresh (only a folder real2sim made is "
                    "replaced; never an input)")
@@ -180,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
     with _reference_properties(args) as reference_properties:
         result = evaluate(args.assets, args.out, config, reference_mesh=args.reference, progress=True,
                           overwrite=args.overwrite, log=lambda m: print(m, flush=True),
-                          reference_properties=reference_properties)
+                          reference_properties=reference_properties, animations=not args.no_animations)
     _print_summary(result.summary, args.recommend)
     print(f"{result.simulated} simulations run, {result.skipped} reused, {result.failed} failed; "
           f"results in {result.out_dir} (report: {result.report_path})")

@@ -152,6 +152,7 @@ def evaluate(
     overwrite: bool = False,
     log: Callable[[str], None] | None = None,
     reference_properties: Path | str | None = None,
+    animations: bool = False,
 ) -> EvaluationResult:
     """Run the sweep and write the results folder (see the module docstring).
 
@@ -165,6 +166,8 @@ def evaluate(
         (physical_properties.json); a physical_properties.json file (asset frame) -> the
         reference has those instead, e.g. the true object's (one asset only). With
         ``reference_mesh`` this simulates a different object altogether: the truth.
+    animations: also write RESULTS/animations/<task>.html, the reference beside the representation
+        recommended for accuracy (:mod:`real2sim.evaluate.animation`), linked from report.html.
 
     UserInputError, with nothing written, for unusable assets or reference, an ``out_dir``
     that is not ours to write, or another sweep writing ``out_dir`` now.
@@ -181,12 +184,12 @@ def evaluate(
     target = check_results_dir(target, overwrite, inputs)
     with output_lock(target):  # one sweep per --out, from here to the publication
         return _evaluate_locked(reps, assets, target, inputs, config, reference_mesh, progress, overwrite, say,
-                                Path(reference_properties).resolve() if reference_properties else None)
+                                Path(reference_properties).resolve() if reference_properties else None, animations)
 
 
 def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfig, reference_mesh, progress: bool,
                      overwrite: bool, say: Callable[[str], None],
-                     reference_properties: Path | None = None) -> EvaluationResult:
+                     reference_properties: Path | None = None, animations: bool = False) -> EvaluationResult:
     partial = partial_dir(target)
     if check_partial(partial, overwrite, inputs):
         source: Path | None = partial  # an interrupted sweep: resume it
@@ -256,6 +259,8 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
 
     all_rows = sorted(rows.values(), key=row_key)
     write_runs_csv(runs_path, all_rows)
+    if animations:
+        _write_animations(partial, all_rows, config, say)
     from real2sim.report.html import build_outputs
 
     summary, plots, report_path = build_outputs(partial, all_rows)
@@ -271,6 +276,21 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
         skipped=skipped,
         failed=failed,
     )
+
+
+def _write_animations(partial: Path, rows: list[dict], config: EvaluationConfig, say: Callable[[str], None]) -> None:
+    """The animations are a view of the results, not a result: a failure is one warning line."""
+    from real2sim.evaluate.animation import ANIMATION_DIRNAME, write_animations
+    from real2sim.formats.results import summarize
+
+    shutil.rmtree(partial / ANIMATION_DIRNAME, ignore_errors=True)  # those of an earlier sweep may be stale
+    try:
+        written = write_animations(partial, summarize(rows), timeout_s=config.sim_timeout_s)
+    except Exception as exc:  # noqa: BLE001
+        say(f"warning: no animations ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})")
+        return
+    if written:
+        say(f"animations: {', '.join(sorted(written))} ({ANIMATION_DIRNAME}/)")
 
 
 @contextmanager

@@ -483,5 +483,5 @@ def _evaluate(asset_dir: Path, cfg, progress: RunProgress) -> dict:
     from real2sim.evaluate.sweep import evaluate
 
     result = evaluate([asset_dir], asset_dir / RESULTS_DIRNAME, cfg, progress=False, overwrite=True,
-                      log=lambda msg: progress.update("evaluate", msg, 0, 0))
+                      log=lambda msg: progress.update("evaluate", msg, 0, 0), animations=True)
     return {"summary": {"simulated": result.simulated, "failed": result.failed}}

@@ -334,10 +334,11 @@ def render_html(summary: Sequence[Mapping], rows: Sequence[Mapping], config: Map
     With ``results_dir``, the asset folders its config.json names add two sections: pictures
     of every representation, and the truth (for assets with a truth.json).
     """
-    from real2sim.report.sections import pictures_section, truth_section
+    from real2sim.report.sections import animations_section, pictures_section, truth_section
 
     truth = truth_section(results_dir, config) if results_dir is not None else ""
     pictures = pictures_section(results_dir, config, rows) if results_dir is not None else ""
+    animations = animations_section(results_dir) if results_dir is not None else ""
     try:
         paper = read_paper_table()
     except Exception:  # pragma: no cover - the CSV ships with the package
@@ -389,6 +390,8 @@ points are outlined and labelled (the paper's Fig. 9 flips both axes).</p>
 
 <h2>Representations</h2>
 {pictures}
+
+{animations}
 
 <h2>Per object and task</h2>
 {_breakdown_table(rows)}

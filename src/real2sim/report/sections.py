@@ -131,3 +131,14 @@ def truth_section(results_dir: Path, config: Mapping) -> str:
         return ""
     return ("<h2>Against the truth</h2><p>The capture was simulated from a known object, so every stage is "
             "judged against it (ASSETDIR/truth.json).</p>" + "\n".join(parts))
+
+
+def animations_section(results_dir: Path) -> str:
+    """Links to RESULTS/animations/*.html (self-contained Meshcat pages), or ''."""
+    pages = sorted((Path(results_dir) / "animations").glob("*.html"))
+    if not pages:
+        return ""
+    links = "".join(f"<li><a href='animations/{html.escape(p.name)}'>{html.escape(p.stem)}</a></li>" for p in pages)
+    return ("<h2>Animations</h2><p>One run of each task: the reference (grey) beside the representation "
+            "recommended for accuracy (orange), simulated from the same start without resets. Each page is "
+            f"self-contained (Drake's Meshcat, no network); press play in its controls.</p><ul>{links}</ul>")
