@@ -48,38 +48,12 @@ def build_bottle_asset(out: Path) -> Path:
     return build_asset(mesh, out / "bottle_asset", config, log=lambda m: print(m, flush=True)).asset_dir
 
 
-def _lowest_z(model, data, mujoco) -> float:
-    """Lowest world z of the object's collision geoms (vertices for meshes, support function otherwise)."""
-    g_t = mujoco.mjtGeom
-    low = np.inf
-    body = model.body("object").id
-    for g in range(model.ngeom):
-        if model.geom_bodyid[g] != body or not (model.geom_contype[g] or model.geom_conaffinity[g]):
-            continue
-        r, p, s = data.geom_xmat[g].reshape(3, 3), data.geom_xpos[g], model.geom_size[g]
-        kind = model.geom_type[g]
-        if kind == g_t.mjGEOM_SPHERE:
-            z = p[2] - s[0]
-        elif kind == g_t.mjGEOM_BOX:
-            z = p[2] - np.abs(r[2]) @ s
-        elif kind == g_t.mjGEOM_CYLINDER:
-            z = p[2] - (abs(r[2, 2]) * s[1] + s[0] * np.sqrt(max(0.0, 1 - r[2, 2] ** 2)))
-        elif kind == g_t.mjGEOM_CAPSULE:
-            z = p[2] - (abs(r[2, 2]) * s[1] + s[0])
-        elif kind == g_t.mjGEOM_ELLIPSOID:
-            z = p[2] - np.sqrt(((r[2] * s) ** 2).sum())
-        else:
-            mesh_id = model.geom_dataid[g]
-            start, count = model.mesh_vertadr[mesh_id], model.mesh_vertnum[mesh_id]
-            z = (p + model.mesh_vert[start:start + count] @ r.T)[:, 2].min()
-        low = min(low, float(z))
-    return low
-
-
 def mujoco_rates(model_xml: Path, pusher_radius_m: float, pusher_speed_m_per_s: float, push_s: float,
                  time_step_s: float) -> dict:
     """Wall seconds per simulated second resting (1 s) and pushed (``push_s``), and the push's travel."""
     import mujoco
+
+    from real2sim.asset.mjcf import lowest_collision_z
 
     def scene(with_pusher: bool):
         spec = mujoco.MjSpec.from_file(str(model_xml))
@@ -91,7 +65,7 @@ def mujoco_rates(model_xml: Path, pusher_radius_m: float, pusher_speed_m_per_s: 
         model = spec.compile()
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
-        data.qpos[2] += 0.001 - _lowest_z(model, data, mujoco)
+        data.qpos[2] += 0.001 - lowest_collision_z(model, data)
         mujoco.mj_forward(model, data)
         return model, data
 

@@ -13,7 +13,7 @@ import pytest
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is a dependency (pip install mujoco)")
 
 from real2sim.asset.build import AssetConfig, build_asset  # noqa: E402
-from real2sim.asset.mjcf import mjcf_size, write_model_mjcf_string  # noqa: E402
+from real2sim.asset.mjcf import lowest_collision_z, mjcf_size, write_model_mjcf_string  # noqa: E402
 from real2sim.formats.collision import CollisionGeometry, CollisionShape, read_collision_json  # noqa: E402
 from real2sim.formats.contact import ContactProperties  # noqa: E402
 from real2sim.formats.physical import PhysicalProperties, read_physical_properties  # noqa: E402
@@ -55,31 +55,6 @@ def _load(xml_path: Path, floor: bool = False):
 def _collision_geoms(model) -> list[int]:
     return [g for g in range(model.ngeom) if model.geom_contype[g] or model.geom_conaffinity[g]
             if model.geom_bodyid[g] != 0]
-
-
-def _lowest_z(model, data) -> float:
-    """Lowest world z of the object's collision geoms (support function along -z, per geom type)."""
-    g_t = mujoco.mjtGeom
-    low = np.inf
-    for g in _collision_geoms(model):
-        r, p, s = data.geom_xmat[g].reshape(3, 3), data.geom_xpos[g], model.geom_size[g]
-        kind = model.geom_type[g]
-        if kind == g_t.mjGEOM_SPHERE:
-            z = p[2] - s[0]
-        elif kind == g_t.mjGEOM_BOX:
-            z = p[2] - np.abs(r[2]) @ s
-        elif kind == g_t.mjGEOM_CYLINDER:
-            z = p[2] - (abs(r[2, 2]) * s[1] + s[0] * np.sqrt(max(0.0, 1 - r[2, 2] ** 2)))
-        elif kind == g_t.mjGEOM_CAPSULE:
-            z = p[2] - (abs(r[2, 2]) * s[1] + s[0])
-        elif kind == g_t.mjGEOM_ELLIPSOID:
-            z = p[2] - np.sqrt(((r[2] * s) ** 2).sum())
-        else:
-            mesh_id = model.geom_dataid[g]
-            start, count = model.mesh_vertadr[mesh_id], model.mesh_vertnum[mesh_id]
-            z = (p + model.mesh_vert[start:start + count] @ r.T)[:, 2].min()
-        low = min(low, float(z))
-    return low
 
 
 def test_every_representation_loads_with_its_geoms_and_mass_properties(can_asset):
@@ -139,7 +114,7 @@ def test_mesh_pieces_sit_where_collision_json_puts_them(can_asset):
 def test_dropped_1mm_onto_a_floor_it_rests_upright(can_asset, rep_name):
     model, data = _load(can_asset / rep_name / "model.xml", floor=True)
     mujoco.mj_forward(model, data)
-    data.qpos[2] += 0.001 - _lowest_z(model, data)
+    data.qpos[2] += 0.001 - lowest_collision_z(model, data)
     mujoco.mj_forward(model, data)
     start = data.qpos[:3].copy()
     while data.time < 1.0:

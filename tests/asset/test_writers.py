@@ -297,7 +297,7 @@ def test_urdf_text_is_plain_xml_with_drake_namespace(asset):
 def test_bad_inputs_raise(tmp_path):
     rep, geometry = _make_asset(tmp_path / "ASSET")
     with pytest.raises(ValueError, match="format"):
-        write_representation(rep, geometry, _props(), CONTACT, formats=("mjcf",))
+        write_representation(rep, geometry, _props(), CONTACT, formats=("stl",))
     missing = CollisionGeometry("m", "m", (CollisionShape("convex", (), mesh_file="pieces/nope.obj"),))
     with pytest.raises(ValueError, match="not found"):
         write_representation(rep, missing, _props(), CONTACT)

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from real2sim.cli import main
 from real2sim.geometry.objects import OBJECTS, export_object
+from tests.cli_helpers import run_cli
 
 
 @pytest.fixture(scope="module")
@@ -20,14 +20,6 @@ def can_obj(tmp_path_factory) -> Path:
     return export_object("can", tmp_path_factory.mktemp("objects") / "can" / "model.obj")
 
 
-def run_cli(capsys, *argv) -> tuple[int, str, str]:
-    """Run the CLI in-process; argparse usage errors exit through SystemExit."""
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def assert_one_line_error(code: int, err: str) -> None:

@@ -20,15 +20,9 @@ import pytest
 
 from real2sim.cli import main
 from real2sim.formats.outputs import MARKER_NAME
+from tests.cli_helpers import run_cli
 
 
-def run_cli(capsys, *argv) -> tuple[int, str, str]:
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def assert_refused(code: int, err: str) -> None:

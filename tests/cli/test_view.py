@@ -12,6 +12,7 @@ import pytest
 from real2sim.cli import build_parser, main
 from real2sim.cli.view import start_meshcat
 from real2sim.geometry.objects import export_object
+from tests.cli_helpers import run_cli
 
 
 @pytest.fixture(scope="module")
@@ -23,13 +24,6 @@ def can_asset(tmp_path_factory) -> Path:
     return asset
 
 
-def run_cli(capsys, *argv) -> tuple[int, str, str]:
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def assert_one_line(code: int, err: str, text: str) -> None:

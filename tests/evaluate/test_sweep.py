@@ -295,7 +295,10 @@ def _cli(*args: str) -> tuple[int, str]:
 
     err = io.StringIO()
     with contextlib.redirect_stderr(err):
-        code = main(list(args))
+        try:
+            code = main(list(args))
+        except SystemExit as exc:  # a bad option value is refused by the parser itself
+            code = exc.code
     return code, err.getvalue()
 
 

@@ -291,7 +291,7 @@ def test_bad_colmap_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
         "no scale": ([moved], "--object-height-m H"),
         "both": ([moved, "--object-height-m", "0.1", "--scale", "0.2"], "exactly one"),
         "metric dataset": ([robot, "--scale", "0.2"], "COLMAP model dataset"),
-        "zero height": ([moved, "--object-height-m", "0"], "finite number > 0"),
+        "zero height": ([moved, "--object-height-m", "0"], "--object-height-m: expected a number > 0"),
         "few points": ([captures["few_points"], "--object-height-m", "0.1"], "sparse points"),
     }
     for label, (args, words) in cases.items():

@@ -13,9 +13,9 @@ import trimesh
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from real2sim.cli import main
 from real2sim.formats.errors import UserInputError
 from real2sim.reconstruct.external import import_nerfstudio_mesh, read_dataparser_transforms, world_from_nerfstudio
+from tests.cli_helpers import run_cli as _run
 
 LIFT_M = 0.005  # the test meshes float 5 mm above the table, clear of the clean-up at z = 0
 
@@ -163,13 +163,6 @@ def test_mesh_wholly_below_the_table_is_refused(world_can, tmp_path):
         import_nerfstudio_mesh(tmp_path / "mesh.ply", _write_transforms(tmp_path / "dp.json", transform, scale))
 
 
-def _run(capsys, *argv):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def test_cli_from_mesh(can_without_truth, world_can, tmp_path, capsys):

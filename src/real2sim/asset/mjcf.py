@@ -148,3 +148,35 @@ def write_model_mjcf_string(geometry: CollisionGeometry, props: PhysicalProperti
     root = build_mjcf(geometry, props, contact, rep_dir, visual_mesh_relpath, model_name)
     ET.indent(root, space=" ")
     return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def lowest_collision_z(model, data) -> float:
+    """Lowest world z (m) of the ``object`` body's collision geoms in MuJoCo's current state
+    (``mj_forward`` first): each geom's support point along -z, the vertices for mesh geoms.
+    Used to set a loaded model down on a floor at a known gap."""
+    import mujoco
+
+    kinds = mujoco.mjtGeom
+    body = model.body(BODY_NAME).id
+    low = np.inf
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] != body or not (model.geom_contype[g] or model.geom_conaffinity[g]):
+            continue
+        r, p, s = data.geom_xmat[g].reshape(3, 3), data.geom_xpos[g], model.geom_size[g]
+        kind = model.geom_type[g]
+        if kind == kinds.mjGEOM_SPHERE:
+            z = p[2] - s[0]
+        elif kind == kinds.mjGEOM_BOX:
+            z = p[2] - np.abs(r[2]) @ s
+        elif kind == kinds.mjGEOM_CYLINDER:
+            z = p[2] - (abs(r[2, 2]) * s[1] + s[0] * np.sqrt(max(0.0, 1.0 - r[2, 2] ** 2)))
+        elif kind == kinds.mjGEOM_CAPSULE:
+            z = p[2] - (abs(r[2, 2]) * s[1] + s[0])
+        elif kind == kinds.mjGEOM_ELLIPSOID:
+            z = p[2] - np.sqrt(((r[2] * s) ** 2).sum())
+        else:
+            mesh_id = model.geom_dataid[g]
+            start, count = model.mesh_vertadr[mesh_id], model.mesh_vertnum[mesh_id]
+            z = (p + model.mesh_vert[start:start + count] @ r.T)[:, 2].min()
+        low = min(low, float(z))
+    return low

@@ -93,7 +93,13 @@ def config_from_args(args: argparse.Namespace):
 
     if args.seed < 0 or args.seed >= 2**63:
         raise UserInputError(f"--seed must be in 0..2^63-1 (got {args.seed})")
-    check_dataset(args.dataset, masks_needed=args.mask is None)  # every image and mask, before any display
+    scale_given = args.object_height_m is not None or args.scale is not None
+    if scale_given:
+        from real2sim.pipeline.normalise import NormaliseConfig
+
+        NormaliseConfig(object_height_m=args.object_height_m, scale=args.scale).validate()
+    # Every image and mask, and the frame options against the dataset's kind, before any display.
+    check_dataset(args.dataset, masks_needed=args.mask is None, scale_given=scale_given)
     args.flat_bottom, args.support_height = True, 0.0
     asset = asset_config(args)
     resolve_device(args.device)
