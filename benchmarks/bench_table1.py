@@ -125,7 +125,7 @@ def main() -> int:
     ours = {r["representation"]: r for r in result.summary}
     for label in sorted(ours):
         r = ours[label]
-        p = paper.get(paper_name(label), {})
+        p = paper.get(paper_name(r["collision"], r["contact_model"]), {})
         rows.append([label, r["ocae_m"], p.get("ocae_m", "-"), r["ate_m"], p.get("ate_m", "-"),
                      r["cpd_m_per_s"], p.get("cpd_m_per_s", "-"), r["sim_time_s"], p.get("sim_time_s", "-"),
                      r.get("cpd_force_weighted_m_per_s", float("nan"))])
@@ -156,8 +156,9 @@ def main() -> int:
             lines.append(f"- {cm} only, {metric}: best primitive {bp[0]} {bp[1]:.4g} vs {bc[0]} {bc[1]:.4g}: "
                          f"{verdict(bp, bc)}")
     for metric in ("ocae_m", "ate_m", "cpd_m_per_s"):
-        pairs = [(ours[lab][metric], paper[paper_name(lab)][metric]) for lab in ours
-                 if paper_name(lab) in paper and ours[lab][metric] == ours[lab][metric]]
+        named = {lab: paper_name(r["collision"], r["contact_model"]) for lab, r in ours.items()}
+        pairs = [(ours[lab][metric], paper[named[lab]][metric]) for lab in ours
+                 if named[lab] in paper and ours[lab][metric] == ours[lab][metric]]
         better = sum(o < p for o, p in pairs)
         lines.append(f"- {metric}: ours lower than the paper's in {better} of {len(pairs)} rows")
     fits = fit_table(args.work, specs)

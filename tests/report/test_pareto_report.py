@@ -79,14 +79,14 @@ def test_recommendations_follow_their_rules_and_are_pareto_optimal():
 
 
 def test_paper_names():
-    assert paper_name("boxes_20_cylinders_20_point") == "mixed_20boxes_20cylinders_point"
-    assert paper_name("boxes_100_cylinders_50_hydroelastic") == "mixed_100boxes_50cylinders_hydroelastic"
-    assert paper_name("rotated_boxes_50_point") == "rotated_boxes_50_point"
-    assert paper_name("coacd_hydroelastic") == "coacd_hydroelastic"
+    assert paper_name("boxes_20_cylinders_20", "point") == "mixed_20boxes_20cylinders_point"
+    assert paper_name("boxes_100_cylinders_50", "hydroelastic") == "mixed_100boxes_50cylinders_hydroelastic"
+    assert paper_name("rotated_boxes_50", "point") == "rotated_boxes_50_point"
+    assert paper_name("coacd", "hydroelastic") == "coacd_hydroelastic"
     table = read_paper_table()
     assert len(table) == 64
     assert table["boxes_400_hydroelastic"]["ate_m"] == pytest.approx(0.0013)
-    assert paper_name("boxes_20_cylinders_20_hydroelastic") in table
+    assert paper_name("boxes_20_cylinders_20", "hydroelastic") in table
 
 
 def _runs():

@@ -27,17 +27,16 @@ from real2sim.formats.errors import UserInputError
 
 METRICS = ("ocae_m", "ate_m", "cpd_m_per_s", "sim_time_s")
 METRIC_TITLES = {"ocae_m": "OCAE [m]", "ate_m": "ATE [m]", "cpd_m_per_s": "CPD [m/s]", "sim_time_s": "ST [s]"}
-_CONTACTS = ("hydroelastic", "point")
 
 
-def paper_name(label: str) -> str:
-    """Our ``<collision>_<contact>`` label as the paper's Table I writes it.
-
-    ``boxes_20_cylinders_20_point`` -> ``mixed_20boxes_20cylinders_point``; single-family
-    and baseline names are the same in both (``boxes_150_hydroelastic``, ``coacd_point``).
+def paper_name(collision: str, contact_model: str | None = None) -> str:
+    """Our representation (the folder name of its SPEC) and contact model as the paper's Table I
+    writes them: (``boxes_20_cylinders_20``, ``point``) -> ``mixed_20boxes_20cylinders_point``;
+    single-family and baseline names are the same in both (``boxes_150_hydroelastic``,
+    ``coacd_point``). The two are summary.csv's ``collision`` and ``contact_model`` columns.
     """
-    contact = next((c for c in _CONTACTS if label.endswith("_" + c)), None)
-    collision = label[: -len(contact) - 1] if contact else label
+    contact = contact_model
+    label = f"{collision}_{contact}" if contact else collision
     tokens = collision.split("_")
     parts: list[tuple[str, str]] = []
     family: list[str] = []
@@ -222,7 +221,7 @@ def _summary_table(summary: Sequence[Mapping], paper: dict[str, dict]) -> str:
             v = float(r[k])
             text = _f(v)
             cells.append(f"<td><b>{text}</b></td>" if math.isfinite(v) and v == best[k] else f"<td>{text}</td>")
-        p = paper.get(paper_name(str(r["representation"])))
+        p = paper.get(paper_name(str(r["collision"]), str(r["contact_model"])))
         paper_cells = "".join(f"<td class='paper'>{_f(p[k])}</td>" for k in METRICS) if p else (
             "<td class='paper' colspan='4'>not in the paper's table</td>")
         failed = int(r.get("runs_failed", 0) or 0)
@@ -350,7 +349,7 @@ def render_html(summary: Sequence[Mapping], rows: Sequence[Mapping], config: Map
                     f"<figcaption>{html.escape(p.name)}</figcaption></figure>")
     objects = sorted({r["object"] for r in rows})
     tasks = sorted({r["task"] for r in rows})
-    matched = sum(1 for r in summary if paper_name(str(r["representation"])) in paper)
+    matched = sum(1 for r in summary if paper_name(str(r["collision"]), str(r["contact_model"])) in paper)
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     style = (
         "body{font-family:system-ui,sans-serif;margin:2em;max-width:1400px}"

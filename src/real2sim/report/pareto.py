@@ -76,9 +76,9 @@ def front_rows(rows: Sequence[Mapping], x_key: str, y_key: str) -> list[Mapping]
     return sorted(chosen, key=lambda r: float(r[x_key]))
 
 
-def _family(label: str) -> str:
-    """Collision family of a ``<collision>_<contact>`` label: boxes, rotated_boxes, coacd, mixed..."""
-    tokens = [t for t in label.split("_") if t not in ("point", "hydroelastic")]
+def _family(collision: str) -> str:
+    """Collision family of a representation's folder name: boxes, rotated_boxes, coacd, mixed..."""
+    tokens = collision.split("_")
     if tokens and tokens[0] == "mixed":
         return "mixed"
     names: list[str] = []
@@ -92,11 +92,7 @@ def _family(label: str) -> str:
             current.append(tok)
     if current:
         names.append("_".join(current))
-    return "mixed" if len(names) > 1 else (names[0] if names else label)
-
-
-def _contact(label: str) -> str:
-    return "hydroelastic" if label.endswith("_hydroelastic") else "point" if label.endswith("_point") else "other"
+    return "mixed" if len(names) > 1 else (names[0] if names else collision)
 
 
 def plot_pareto(rows: Sequence[Mapping], x_key: str, y_key: str, path: Path, title: str = "") -> Path:
@@ -124,7 +120,7 @@ def plot_pareto(rows: Sequence[Mapping], x_key: str, y_key: str, path: Path, tit
         floor = positive.min() / 3.0 if len(positive) else 1e-6
         zero |= tiny
         v[tiny] = floor
-    families = sorted({_family(str(r["representation"])) for r in rows})
+    families = sorted({_family(str(r["collision"])) for r in rows})
     cmap = plt.get_cmap("tab10")
     colour = {f: cmap(i % 10) for i, f in enumerate(families)}
     markers = {"point": "o", "hydroelastic": "^", "other": "s"}
@@ -133,9 +129,9 @@ def plot_pareto(rows: Sequence[Mapping], x_key: str, y_key: str, path: Path, tit
     for i, r in enumerate(rows):
         if not ok[i]:
             continue
-        label = str(r["representation"])
         ax.scatter(
-            x[i], y[i], s=60 if mask[i] else 30, marker=markers[_contact(label)], color=colour[_family(label)],
+            x[i], y[i], s=60 if mask[i] else 30, marker=markers.get(str(r["contact_model"]), "s"),
+            color=colour[_family(str(r["collision"]))],
             edgecolors="black" if mask[i] else "none", linewidths=1.2, alpha=1.0 if mask[i] else 0.6, zorder=3,
         )
     idx = np.flatnonzero(mask)
