@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 from pathlib import Path
 from typing import Mapping
 
@@ -86,7 +87,13 @@ def write_animation(reference, candidate, reference_mesh: Path, rep_dir: Path, s
     from real2sim.formats.collision import read_collision_json
     from real2sim.formats.outputs import write_text_atomic
 
-    meshcat = Meshcat(MeshcatParams(host="localhost", port=None, show_stats_plot=False))
+    drake_log = logging.getLogger("drake")
+    level = drake_log.level
+    drake_log.setLevel(logging.WARNING)  # "Meshcat listening at ..." is noise: nobody connects to it
+    try:
+        meshcat = Meshcat(MeshcatParams(host="localhost", port=None, show_stats_plot=False))
+    finally:
+        drake_log.setLevel(level)
     try:
         meshcat.SetObject("reference/object/mesh", DrakeMesh(str(reference_mesh)), Rgba(*REFERENCE_RGBA))
         geometry = read_collision_json(rep_dir / "collision.json")

@@ -153,6 +153,7 @@ def evaluate(
     log: Callable[[str], None] | None = None,
     reference_properties: Path | str | None = None,
     animations: bool = False,
+    skip_representations: Sequence[str] = (),
 ) -> EvaluationResult:
     """Run the sweep and write the results folder (see the module docstring).
 
@@ -166,6 +167,8 @@ def evaluate(
         (physical_properties.json); a physical_properties.json file (asset frame) -> the
         reference has those instead, e.g. the true object's (one asset only). With
         ``reference_mesh`` this simulates a different object altogether: the truth.
+    skip_representations: representation folder names not to simulate (e.g. ``mesh`` when it is
+        the reference itself).
     animations: also write RESULTS/animations/<task>.html, the reference beside the representation
         recommended for accuracy (:mod:`real2sim.evaluate.animation`), linked from report.html.
 
@@ -173,7 +176,9 @@ def evaluate(
     that is not ours to write, or another sweep writing ``out_dir`` now.
     """
     say = log or (lambda _m: None)
-    reps = discover_representations(asset_dirs)
+    reps = [r for r in discover_representations(asset_dirs) if r.name not in set(skip_representations)]
+    if not reps:
+        raise UserInputError("no representation left to evaluate")
     assets = discover_assets(asset_dirs)
     if reference_mesh is not None:
         for a in assets:
