@@ -12,7 +12,7 @@ import torch
 from real2sim.formats.rotations import quaternion_to_matrix
 from real2sim.geometry.collision_mesh import inside_collision
 from real2sim.collision.fit.config import FitConfig, FitResult
-from real2sim.collision.fit.convert import prune_dead, result_sdf, to_collision_geometry
+from real2sim.collision.fit.convert import result_sdf, to_collision_geometry
 from real2sim.collision.fit.loop import fit_primitives
 from real2sim.collision.fit.losses import rotation_penalty
 
@@ -150,17 +150,6 @@ def test_fit_is_repeatable_for_a_seed(l_shape_samples):
     assert a.parameters == b.parameters and a.kinds == b.kinds and a.final_loss == b.final_loss
     c = fit_primitives(pts, sdf, (("boxes", 3), ("cylinders", 2)), cfg, seed=6)
     assert c.parameters != a.parameters
-
-
-def test_dead_primitive_far_away_is_dropped(sphere_samples):
-    pts, sdf, c, r = sphere_samples
-    good = (*map(float, c), r)
-    far = (3.0, 3.0, 3.0, 0.2)
-    nested = (*map(float, c), 0.5 * r)  # inside the good one: never the closest at an interior sample
-    res = FitResult(("sphere",) * 3, (good, far, nested), float("nan"), 0, 0.0, 3, 3, "cpu")
-    pruned = prune_dead(res, pts, sdf)
-    assert pruned.parameters == (good,) and pruned.effective_count == 1
-    assert pruned.final_loss < 1e-6  # the remaining sphere is exact
 
 
 def test_fit_reports_effective_count_after_removal(sphere_samples):

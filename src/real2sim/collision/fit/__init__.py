@@ -52,7 +52,6 @@ _EXPORTS = {
     "FitResult": "config",
     "fit_collision": "stage",
     "fit_primitives": "loop",
-    "prune_dead": "convert",
     "result_sdf": "convert",
     "sdf_loss": "losses",
     "superquadric_parameters": "convert",

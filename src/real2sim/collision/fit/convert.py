@@ -3,7 +3,6 @@ collision geometry in metres in the asset frame (``asset = centre_m + scale_m * 
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -15,8 +14,7 @@ from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.spec import CollisionSpec, parse_spec
 from real2sim.collision.fit.config import FitResult
 from real2sim.collision.fit.params import _Layout
-from real2sim.collision.fit.losses import sdf_loss
-from real2sim.collision.fit.union import _closest, _alive
+from real2sim.collision.fit.union import _closest
 
 
 def result_sdf(result: FitResult, points_unit) -> np.ndarray:
@@ -37,32 +35,6 @@ def _result_layout(result: FitResult) -> tuple[_Layout, list[torch.Tensor], list
         packed.append(torch.as_tensor(result.packed(kind)))
         index.append(idx)
     return _Layout.of(tuple(parts)), packed, index
-
-
-def prune_dead(result: FitResult, points_unit, sdf) -> FitResult:
-    """Drop primitives that are the closest primitive of no interior sample they cover.
-
-    Such a primitive is redundant (nested in others) or lies where no interior sample is
-    (outside the object or in empty space); removing it never uncovers an interior sample.
-    ``effective_count`` and ``final_loss`` (eq. 9 over these samples) are updated.
-    """
-    layout, packed, index = _result_layout(result)
-    pts = torch.as_tensor(np.asarray(points_unit, dtype=np.float64))
-    target = torch.as_tensor(np.asarray(sdf, dtype=np.float64)).reshape(-1)
-    dist, arg = _closest(layout, packed, pts)
-    keep = _alive(arg, dist, target, layout.total).numpy()
-    if not keep.any():
-        keep[0] = True
-    order = np.concatenate(index)  # layout position -> index into result.parameters
-    kept = np.sort(order[keep])
-    pruned = dataclasses.replace(
-        result,
-        kinds=tuple(result.kinds[i] for i in kept),
-        parameters=tuple(result.parameters[i] for i in kept),
-        effective_count=len(kept),
-    )
-    final = result_sdf(pruned, pts.numpy())
-    return dataclasses.replace(pruned, final_loss=float(sdf_loss(torch.as_tensor(final), target).mean()))
 
 
 def to_collision_geometry(
