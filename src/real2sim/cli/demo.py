@@ -72,12 +72,13 @@ def register(sub) -> None:
         description="The paper's system on the bundled mustard-like bottle, judged against the true object: "
         "a simulated robot wrist-camera capture (100 views, 320x240 px, robot poses with 5 mm / 1 deg "
         "calibration noise, rendered masks) -> COLMAP pose refinement -> radiance-field reconstruction -> "
-        "an asset with several collision representations plus CoACD -> OUT/bottle_asset/truth.json (pose, "
-        "reconstruction and mass-property errors against the true bottle) -> Drake evaluation of each "
-        "representation against the reconstruction (planar pushing, actuated ramp; point and hydroelastic "
-        "contact) and against the true bottle -> Pareto plots and report.html in OUT/bottle_asset/results. About 12 minutes on 2 idle CPU cores "
-        "(21.5 measured on 2 shared ones). --quick: 60 noise-free views at 160x120 px, no pose refinement, "
-        "visual-hull reconstruction, three representations, one run per task: under 2 minutes.",
+        "an asset with several collision representations plus CoACD (URDF and MuJoCo model.xml) -> Drake "
+        "evaluation of each representation (planar pushing, actuated ramp; point and hydroelastic contact; "
+        "one run each) against the reconstruction and against the true bottle -> OUT/bottle_asset/truth.json "
+        "(pose, mask, reconstruction, mass-property and dynamics errors against the true bottle) -> Pareto "
+        "plots, animations and report.html in OUT/bottle_asset/results. 12.3 minutes on 2 idle CPU cores "
+        "(benchmarks/bench_demo.py). --quick: 60 noise-free views at 160x120 px, no pose refinement, "
+        "visual-hull reconstruction, three representations: 2.2 minutes.",
     )
     p.add_argument("--out", type=Path, default=Path("demo_out"),
                    help="output folder (default demo_out): capture/ (the dataset), bottle_asset/ (URDFs, truth.json, "
