@@ -57,6 +57,12 @@ def run_object(name: str, work: Path, quick: bool) -> tuple[dict, dict, float]:
             wall)
 
 
+def _plan(quick: bool):
+    from real2sim.cli.demo import FULL, QUICK
+
+    return QUICK if quick else FULL
+
+
 def _verdict(ok: bool) -> str:
     return "yes" if ok else "**no**"
 
@@ -94,8 +100,8 @@ def main() -> int:
                        if args.quick else
                        "The demo's settings: 100 views at 320x240 px with 5 mm / 1 deg robot-pose noise, COLMAP "
                        "refinement, radiance field, the demo's representations (+ the reconstruction itself as "
-                       "`mesh`), push and ramp x point and hydroelastic, 3 runs each; evaluated against the "
-                       "reconstruction (the paper's protocol) and against the true object.\n\n")
+                       f"`mesh`), push and ramp x point and hydroelastic, {_plan(args.quick).runs} run(s) each; "
+                       "evaluated against the reconstruction (the paper's protocol) and against the true object.\n\n")
                     + "Targets (issue #12): CoM within 2 mm, inertia eigenvalues within 5 %, and the best primitive "
                     "representation's OCAE against the truth within 1.5x of its OCAE against the reconstruction.\n\n"
                     + markdown_table(["object", "Chamfer mm", "IoU", "CoM error mm", "<= 2 mm", "inertia error %",

@@ -48,7 +48,9 @@ def test_quick_demo_from_capture_to_report(tmp_path, capsys):
     results = asset / "results"
     with open(results / "summary.csv") as f:
         rows = list(csv.DictReader(f))
-    assert {r["representation"] for r in rows} == {f"{n}_{c}" for n in names for c in QUICK.contact_models}
+    # The reconstruction (`mesh`) is the paper protocol's reference itself: only the truth sweep simulates it.
+    assert {r["representation"] for r in rows} == {f"{n}_{c}" for n in names if n != "mesh"
+                                                   for c in QUICK.contact_models}
     for r in rows:
         assert int(r["runs_failed"]) == 0
         assert 0 <= float(r["ate_m"]) < 0.5 and float(r["sim_time_s"]) > 0
