@@ -94,7 +94,8 @@ def main() -> int:
                 ratio, _verdict(best is not None and ratio <= TARGET_OCAE_RATIO)])
             for row in (truth.get("dynamics") or {}).get("representations", []):
                 dynamics_rows.append([name, row["representation"], row["contact_model"],
-                                      row["ocae_vs_reconstruction_m"], row["ocae_vs_truth_m"], row["ate_vs_truth_m"]])
+                                      *(("n/a" if row[k] is None else row[k])
+                                        for k in ("ocae_vs_reconstruction_m", "ocae_vs_truth_m", "ate_vs_truth_m"))])
             body = ((args.note + "\n\n" if args.note else "")
                     + ("Quick settings (60 noise-free views at 160x120, visual hull, one run per task).\n\n"
                        if args.quick else
