@@ -55,7 +55,8 @@ def _drake_shape(shape, rep_dir: Path):
     return Convex(path) if shape.kind == "convex" else Mesh(path)
 
 
-def _environment(meshcat, task: str, scene, offset_x_m: float, prefix: str) -> None:
+def _environment(meshcat, task: str, scene, prefix: str) -> None:
+    """The task's moving part under ``prefix`` (placed each frame by :func:`_environment_pose`)."""
     from pydrake.geometry import Box, Rgba, Sphere
     from pydrake.math import RigidTransform
 
@@ -65,7 +66,6 @@ def _environment(meshcat, task: str, scene, offset_x_m: float, prefix: str) -> N
         lx, ly, lz = scene.table_size_m
         meshcat.SetObject(f"{prefix}/table/slab", Box(lx, ly, lz), Rgba(0.55, 0.45, 0.35, 1.0))
         meshcat.SetTransform(f"{prefix}/table/slab", RigidTransform([0.0, -ly / 2, -lz / 2]))
-    del offset_x_m
 
 
 def _environment_pose(task: str, scene, actuated: np.ndarray, offset_x_m: float):
@@ -102,8 +102,8 @@ def write_animation(reference, candidate, reference_mesh: Path, rep_dir: Path, s
             meshcat.SetObject(path, _drake_shape(shape, rep_dir), Rgba(*CANDIDATE_RGBA))
             meshcat.SetTransform(path, _pose(shape.position_m, shape.quaternion_wxyz))
         task = reference.task
-        _environment(meshcat, task, scene, 0.0, "reference")
-        _environment(meshcat, task, scene, SIDE_BY_SIDE_OFFSET_M, "candidate")
+        _environment(meshcat, task, scene, "reference")
+        _environment(meshcat, task, scene, "candidate")
         animation = MeshcatAnimation(FRAMES_PER_SECOND)
         duration = min(float(reference.times_s[-1]), float(candidate.times_s[-1]))
         for frame in range(int(duration * FRAMES_PER_SECOND) + 1):
