@@ -416,7 +416,7 @@ def test_signals_end_the_workers_and_a_second_sweep_is_locked_out(tmp_path):
     out = tmp_path / "res"
     partial = tmp_path / ".res.partial"
     cmd = [sys.executable, "-m", "real2sim", "evaluate", str(asset), "--out", str(out), "--tasks", "push,ramp",
-           "--runs", "2", "--jobs", "2", "--duration-scale", "0.2"]
+           "--runs", "6", "--jobs", "2", "--duration-scale", "0.2", "--no-animations"]
     env = {**os.environ, "PYTHONPATH": SRC}
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
         before = _row_count(partial / "runs.csv")
@@ -460,7 +460,9 @@ def test_signals_end_the_workers_and_a_second_sweep_is_locked_out(tmp_path):
     assert f"{kept} already done" in done.stdout
     rows = read_runs_csv(out / "runs.csv")
     keys = [(r["representation"], r["contact_model"], r["task"], r["run"]) for r in rows]
-    assert len(keys) == len(set(keys)) == 2 * 2 * 2 * 2  # every row exactly once
+    # Every row exactly once. Six runs leave rows for all three signals even on an idle machine, where
+    # a box simulation takes a few milliseconds and two runs were sometimes all done before the last.
+    assert len(keys) == len(set(keys)) == 2 * 2 * 2 * 6
     assert not any(r["error"] for r in rows), [r["error"] for r in rows if r["error"]]
     assert not partial.exists() and not list(tmp_path.glob(".*.lock"))
 
