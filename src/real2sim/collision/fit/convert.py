@@ -20,21 +20,11 @@ from real2sim.collision.fit.union import _closest
 def result_sdf(result: FitResult, points_unit) -> np.ndarray:
     """Union signed distance (N,) of a fit at points in unit-sphere coordinates."""
     pts = torch.as_tensor(np.asarray(points_unit, dtype=np.float64))
-    layout, packed, _ = _result_layout(result)
+    kinds = tuple(dict.fromkeys(result.kinds))
+    layout = _Layout.of(tuple((kind, result.kinds.count(kind)) for kind in kinds))
+    packed = [torch.as_tensor(result.packed(kind)) for kind in kinds]
     dist, _ = _closest(layout, packed, pts)
     return dist.numpy()
-
-
-def _result_layout(result: FitResult) -> tuple[_Layout, list[torch.Tensor], list[np.ndarray]]:
-    """Layout, packed tensors per kind, and each kind's indices into ``result.parameters``."""
-    kinds_arr = np.asarray(result.kinds)
-    parts, packed, index = [], [], []
-    for kind in dict.fromkeys(result.kinds):
-        idx = np.flatnonzero(kinds_arr == kind)
-        parts.append((kind, len(idx)))
-        packed.append(torch.as_tensor(result.packed(kind)))
-        index.append(idx)
-    return _Layout.of(tuple(parts)), packed, index
 
 
 def to_collision_geometry(
