@@ -123,8 +123,14 @@ def test_changing_collision_refits_without_reconstructing(first_run, can_ds, tmp
     recon_before = manifest(out)["stages"]["reconstruct"]
     args = build_parser().parse_args(["run", str(can_ds), "--mass", "0.35", "--out", str(out), *FAST,
                                       "--collision", "boxes:4", "--iterations", "20"])
-    result = run_pipeline(can_ds, out, config_from_args(args))
+    from tests.progress_check import Recorder
+
+    progress = Recorder()
+    result = run_pipeline(can_ds, out, config_from_args(args), progress=progress)
     assert result.statuses == {"reconstruct": "skipped", "asset": "ran", "truth": "ran"}
+    events = progress.check()  # the fit's counted iterations, inside the asset stage
+    assert ("[1/3] reconstruct: unchanged, skipped", 0, 0) in events and ("[2/3] asset: done", 0, 0) in events
+    assert any(m.startswith("[2/3] asset - collision boxes:4: fit") and t > 0 for m, _, t in events)
     assert manifest(out)["stages"]["reconstruct"] == recon_before
     assert (out / ".run" / "reconstruct" / "mesh.obj").read_bytes() == mesh_before
     assert (out / "boxes_4" / "model.urdf").is_file() and not (out / "mesh").exists()

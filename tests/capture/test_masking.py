@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from tests.progress_check import Recorder
 from real2sim.capture.wrist_camera import CaptureConfig, capture
 from real2sim.formats.dataset import load_mask, read_dataset
 from real2sim.formats.errors import UserInputError
@@ -22,8 +23,10 @@ def captures(tmp_path_factory):
     out = {}
     for name in ("bottle", "can", "mug"):
         out[name] = root / name
+        progress = Recorder()
         capture(make_textured_object(name), out[name],
-                CaptureConfig(views=5, width=320, height=240, with_background=True, seed=1))
+                CaptureConfig(views=5, width=320, height=240, with_background=True, seed=1), progress=progress)
+        assert progress.check()[-1] == ("rendering", 10, 10)  # the views, then the empty scene's
     return out
 
 
@@ -34,7 +37,9 @@ def test_background_masks_match_rendered(captures, name, tmp_path):
     root = tmp_path / name
     shutil.copytree(captures[name], root)
     before = json.loads((root / "transforms.json").read_text())
-    result = compute_masks(root, "background")
+    progress = Recorder()
+    result = compute_masks(root, "background", progress=progress)
+    assert progress.check()[-1] == ("masks (background)", 5, 5)
     assert result.mean_iou >= 0.95, result
     assert result.min_iou >= 0.90, result
     ds = read_dataset(root)

@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
+from tests.progress_check import Recorder
 from real2sim.capture.wrist_camera import CaptureConfig, camera_poses, capture, object_frame
 from real2sim.formats.dataset import (
     Dataset,
@@ -79,7 +80,9 @@ def test_refine_small_capture_improves_or_falls_back(small_capture, tmp_path):
     original = (root / "transforms.json").read_bytes()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = refine_poses(root, RefineConfig(k_neighbors=6))  # warns when it falls back
+        progress = Recorder()
+        result = refine_poses(root, RefineConfig(k_neighbors=6), progress=progress)  # warns when it falls back
+    assert progress.check()[-1][1:] == (5, 5)  # features, matching, 2 bundle-adjustment rounds, writing
     assert (root / "transforms_unrefined.json").read_bytes() != b""
     assert np.allclose(read_transforms(root / "transforms_unrefined.json").poses_c2w_gl(),
                        read_transforms(small_capture / "transforms.json").poses_c2w_gl())

@@ -235,15 +235,21 @@ def test_fit_collision_on_a_mesh_gives_metres_in_the_asset_frame():
     from real2sim.collision.fit.stage import fit_collision
     from real2sim.formats.spec import parse_spec
 
+    from tests.progress_check import Recorder
+
     mesh = trimesh.creation.box(extents=(0.04, 0.06, 0.1))
     mesh.apply_translation((0.01, 0.0, 0.02))
+    progress = Recorder()
     geo, report = fit_collision(
         mesh,
         parse_spec("boxes:2"),
         fit_config=dataclasses.replace(FAST, max_iterations=150, min_iterations=150),
         sampling_config=SdfSamplingConfig(num_surface_samples=20_000, num_uniform_samples=200),
         cache_dir=None,
+        progress=progress,
     )
+    messages = {message for message, _, _ in progress.check()}
+    assert "fit" in messages and any(m.startswith("sdf: ") for m in messages)
     assert geo.name == "boxes_2" and 1 <= len(geo.shapes) == report["effective_count"] <= 2
     assert set(report) >= {"final_loss", "fit_seconds", "effective_count", "iterations", "device"}
     lo = np.min([np.asarray(s.position_m) - 0.5 * np.asarray(s.size_m) for s in geo.shapes], axis=0)
@@ -259,8 +265,7 @@ def test_fit_leaves_torch_global_state_as_found(box_samples):
     threads_before = torch.get_num_threads()
     deterministic_before = torch.are_deterministic_algorithms_enabled()
     cuda_before = torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None
-    other_threads = 1 if threads_before != 1 else 2
-    config = dataclasses.replace(FAST, max_iterations=20, min_iterations=20, num_threads=other_threads)
+    config = dataclasses.replace(FAST, max_iterations=20, min_iterations=20)
     fit_primitives(pts, sdf, (("boxes", 2),), config, seed=7)
     assert torch.are_deterministic_algorithms_enabled() == deterministic_before
     assert torch.get_num_threads() == threads_before

@@ -9,6 +9,7 @@ import trimesh
 
 from real2sim.formats.errors import UserInputError
 from real2sim.geometry.inside import signed_distance
+from tests.progress_check import Recorder
 from real2sim.collision.sdf_sampling import SdfSamplingConfig, boundary_edges, default_cache_dir, sample_sdf, unit_sphere_transform
 
 SMALL = SdfSamplingConfig(num_surface_samples=20_000, num_uniform_samples=500, seed=3)
@@ -214,8 +215,10 @@ def test_cache_hit_returns_identical_arrays(tmp_path):
 def test_default_cache_dir_follows_environment(tmp_path, monkeypatch):
     monkeypatch.setenv("REAL2SIM_CACHE", str(tmp_path))
     assert default_cache_dir() == tmp_path / "sdf"
-    samples = sample_sdf(_box(), SdfSamplingConfig(num_surface_samples=2000), progress=True)
+    progress = Recorder()
+    samples = sample_sdf(_box(), SdfSamplingConfig(num_surface_samples=2000), progress=progress)
     assert not samples.from_cache
+    assert progress.check()[-1] == ("sdf: sampled", 3, 3)
     assert len(list((tmp_path / "sdf").glob("*.npz"))) == 1
     monkeypatch.delenv("REAL2SIM_CACHE")
     assert default_cache_dir().parts[-3:] == (".cache", "real2sim", "sdf")

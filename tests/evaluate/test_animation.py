@@ -14,7 +14,7 @@ def test_one_self_contained_page_per_task_linked_from_the_report(tmp_path):
     shape = CollisionShape("box", tuple(float(v) * 1.2 for v in BOX_EXTENTS_M))
     write_collision_json(CollisionGeometry("boxes_1_x1p2", "boxes:1", (shape,)), box / "boxes_1_x1p2" / "collision.json")
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=("point",), runs=1, jobs=1, scene=SHORT_SCENE)
-    result = evaluate([box], tmp_path / "results", config, progress=False, animations=True)
+    result = evaluate([box], tmp_path / "results", config, animations=True)
     pages = sorted(p.name for p in (result.out_dir / "animations").glob("*.html"))
     assert pages == ["push.html", "ramp.html"]
     for name in pages:
@@ -24,5 +24,5 @@ def test_one_self_contained_page_per_task_linked_from_the_report(tmp_path):
     report = result.report_path.read_text()
     assert "href='animations/push.html'" in report and "href='animations/ramp.html'" in report
     # Without the option, no animations and no section.
-    plain = evaluate([box], tmp_path / "plain", config, progress=False)
+    plain = evaluate([box], tmp_path / "plain", config)
     assert not (plain.out_dir / "animations").exists() and "animations/" not in plain.report_path.read_text()

@@ -28,32 +28,32 @@ def _ocae(result) -> float:
 
 
 def test_reference_properties_are_the_ones_simulated(box, tmp_path):
-    default = evaluate([box], tmp_path / "default", PUSH, progress=False)
-    same = evaluate([box], tmp_path / "same", PUSH, progress=False,
+    default = evaluate([box], tmp_path / "default", PUSH)
+    same = evaluate([box], tmp_path / "same", PUSH,
                     reference_properties=box / "physical_properties.json")
     assert _ocae(same) == _ocae(default)  # the asset's own properties, given explicitly: the same sweep
     props = read_physical_properties(box / "physical_properties.json")
     heavier_side = PhysicalProperties(props.mass_kg, (0.012, 0.0, -0.01), props.inertia_kg_m2)
     other = tmp_path / "other_physical_properties.json"
     write_physical_properties(heavier_side, other)
-    moved = evaluate([box], tmp_path / "moved", PUSH, progress=False, reference_properties=other)
+    moved = evaluate([box], tmp_path / "moved", PUSH, reference_properties=other)
     assert _ocae(moved) != pytest.approx(_ocae(default), rel=1e-3)  # another object moves otherwise
     record = json.loads((tmp_path / "moved" / "config.json").read_text())
     assert record["reference_properties"]["file"] == other.name and len(record["reference_properties"]["sha1"]) == 40
     assert json.loads((tmp_path / "default" / "config.json").read_text())["reference_properties"] == "asset"
     # A resume may not mix references with different mass properties.
     with pytest.raises(UserInputError, match="reference_properties"):
-        evaluate([box], tmp_path / "moved", PUSH, progress=False)
+        evaluate([box], tmp_path / "moved", PUSH)
 
 
 def test_reference_properties_are_checked_and_belong_to_one_asset(box, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"mass_kg": float("nan"), "com_m": [0, 0, 0], "inertia_kg_m2": np.eye(3).tolist()}))
     with pytest.raises(UserInputError, match="bad.json"):
-        evaluate([box], tmp_path / "r1", PUSH, progress=False, reference_properties=bad)
+        evaluate([box], tmp_path / "r1", PUSH, reference_properties=bad)
     other = make_box_asset(tmp_path / "box2", reps=("boxes_1",))
     with pytest.raises(UserInputError, match="one object"):
-        evaluate([box, other], tmp_path / "r2", PUSH, progress=False,
+        evaluate([box, other], tmp_path / "r2", PUSH,
                  reference_properties=box / "physical_properties.json")
     assert not (tmp_path / "r1").exists() and not (tmp_path / "r2").exists()
 

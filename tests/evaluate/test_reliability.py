@@ -56,7 +56,7 @@ def box(tmp_path_factory) -> Path:
 def finished(box, tmp_path_factory) -> Path:
     """A finished results folder: 3 representations x point contact, one push run."""
     out = tmp_path_factory.mktemp("finished") / "res"
-    evaluate([box], out, PUSH_POINT, progress=False)
+    evaluate([box], out, PUSH_POINT)
     return out
 
 
@@ -71,17 +71,17 @@ def test_overwrite_never_deletes_inputs(box, tmp_path, monkeypatch):
     for out, needle in ((box, "is the input"), (box / "boxes_1", "is the input"), (box / "visual", "is the input"),
                         (box / "boxes_1" / "res", "lies inside the input"), (box.parent, "contains the input")):
         with pytest.raises(UserInputError, match=needle):
-            evaluate([box], out, PUSH_POINT, progress=False, overwrite=True)
+            evaluate([box], out, PUSH_POINT, overwrite=True)
     with pytest.raises(UserInputError, match="is the input"):
-        evaluate([box], ref, PUSH_POINT, reference_mesh=ref, progress=False, overwrite=True)
+        evaluate([box], ref, PUSH_POINT, reference_mesh=ref, overwrite=True)
     monkeypatch.chdir(tmp_path)
     with pytest.raises(UserInputError, match="working folder"):
-        evaluate([box], tmp_path, PUSH_POINT, progress=False, overwrite=True)
+        evaluate([box], tmp_path, PUSH_POINT, overwrite=True)
     # A folder real2sim did not make is not replaced, even with --overwrite.
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("keep")
     with pytest.raises(UserInputError, match="did not make"):
-        evaluate([box], tmp_path / "mine", PUSH_POINT, progress=False, overwrite=True)
+        evaluate([box], tmp_path / "mine", PUSH_POINT, overwrite=True)
     # The command line: one line, exit 2.
     code, err = _cli("evaluate", box, "--out", box, "--overwrite", "--tasks", "push", "--runs", "1")
     assert code == 2 and len(err.strip().splitlines()) == 1 and "is the input" in err
@@ -97,7 +97,7 @@ def test_results_inside_the_asset_folder_as_real2sim_run_writes_them(box, tmp_pa
     shutil.copytree(box, asset)
     before = _snapshot(asset)
     for _ in range(2):  # real2sim run: ASSETDIR/results, with overwrite=True each time
-        result = evaluate([asset], asset / "results", PUSH_POINT, progress=False, overwrite=True)
+        result = evaluate([asset], asset / "results", PUSH_POINT, overwrite=True)
         assert result.failed == 1 and (asset / "results" / MARKER_NAME).is_file()
     after = {k: v for k, v in _snapshot(asset).items() if not k.startswith("results/")}
     assert after == before
@@ -110,15 +110,15 @@ def test_results_of_an_older_version_are_resumed_and_replaced_only_when_all_ours
     old = tmp_path / "old"
     shutil.copytree(finished, old)
     (old / MARKER_NAME).unlink()  # made before the marker existed
-    result = evaluate([box], old, PUSH_POINT, progress=False)
+    result = evaluate([box], old, PUSH_POINT)
     assert result.skipped == 2 and (old / MARKER_NAME).is_file()  # resumed, and marked as ours
     (old / MARKER_NAME).unlink()
     (old / "my_notes.txt").write_text("mine")
     with pytest.raises(UserInputError, match="my_notes.txt"):
-        evaluate([box], old, PUSH_POINT, progress=False, overwrite=True)
+        evaluate([box], old, PUSH_POINT, overwrite=True)
     assert (old / "my_notes.txt").read_text() == "mine" and not (old / MARKER_NAME).exists()
     (old / "my_notes.txt").unlink()
-    result = evaluate([box], old, PUSH_POINT, progress=False, overwrite=True)
+    result = evaluate([box], old, PUSH_POINT, overwrite=True)
     assert result.skipped == 0 and result.simulated == 3
 
 
@@ -159,7 +159,7 @@ def test_torn_row_is_rerun_and_left_out_of_the_report(finished, box, tmp_path):
     assert "boxes_1_point" not in {r["representation"] for r in read_summary_csv(out / "summary.csv")}
 
     # resume: the torn row is simulated again (and the failed one); the complete one is kept.
-    result = evaluate([box], out, PUSH_POINT, progress=False)
+    result = evaluate([box], out, PUSH_POINT)
     assert result.simulated == 2 and result.skipped == 1
     redone = {r["representation"]: r for r in result.runs}
     assert not redone["boxes_1"]["error"] and redone["boxes_1"]["ate_m"] == pytest.approx(rows[good]["ate_m"])
@@ -239,7 +239,7 @@ def test_resume_from_a_binary_runs_csv_is_refused_with_nothing_written(finished,
 def test_simulation_past_its_time_limit_is_a_timeout_row_and_the_sweep_goes_on(box, tmp_path):
     config = EvaluationConfig(tasks=("push",), contact_models=("point",), runs=1, jobs=1, scene=SHORT_SCENE,
                               sim_timeout_s=1e-3)
-    result = evaluate([box], tmp_path / "res", config, progress=False)
+    result = evaluate([box], tmp_path / "res", config)
     assert len(result.runs) == 3 and result.failed == 3
     assert all(r["error"].startswith("timeout:") for r in result.runs), [r["error"] for r in result.runs]
     with pytest.raises(UserInputError, match="sim-timeout-s"):
@@ -273,7 +273,7 @@ def test_open_surface_reference_is_refused_up_front(box, tmp_path):
     shell = _open_half_shell(tmp_path / "shell.obj")
     t0 = time.monotonic()
     with pytest.raises(UserInputError, match="centre of mass .* open surface"):
-        evaluate([box], tmp_path / "res", PUSH_POINT, reference_mesh=shell, progress=False)
+        evaluate([box], tmp_path / "res", PUSH_POINT, reference_mesh=shell)
     # Below the up-front check, the placement fails at once instead of looping forever.
     with pytest.raises(ValueError, match="not inside the convex hull"):
         stable_rotations(trimesh.load(shell, process=False).vertices, com_m=(0.0, 0.0, 0.0))
@@ -285,7 +285,7 @@ def test_object_of_absurd_size_is_refused_up_front(box, tmp_path):
     huge = tmp_path / "huge.obj"
     trimesh.creation.box(extents=BOX_EXTENTS_M * 12500).export(huge)  # 1000 m long
     with pytest.raises(UserInputError, match=r"1000 m across .* 0.005 m to 1 m"):
-        evaluate([box], tmp_path / "res", PUSH_POINT, reference_mesh=huge, progress=False)
+        evaluate([box], tmp_path / "res", PUSH_POINT, reference_mesh=huge)
     assert not (tmp_path / "res").exists()
 
 
@@ -299,7 +299,7 @@ def test_unreachable_ray_cluster_fails_fast(box, tmp_path):
                               ray_address=f"127.0.0.1:{port}", ray_timeout_s=2, scene=SHORT_SCENE)
     t0 = time.monotonic()
     with pytest.raises(UserInputError, match="could not reach the Ray cluster"):
-        evaluate([box], tmp_path / "res", config, progress=False)
+        evaluate([box], tmp_path / "res", config)
     assert time.monotonic() - t0 < 10 and not (tmp_path / "res").exists()
     assert not list(tmp_path.glob(".*"))
 

@@ -29,6 +29,7 @@ from real2sim.formats.results import CHECK_COLUMN, RUN_COLUMNS, read_runs_csv
 from real2sim.formats.trajectory import load_trajectory, save_trajectory
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
 from real2sim.evaluate.scene_config import SceneConfig
+from tests.progress_check import Recorder
 
 BOX_EXTENTS_M = np.array([0.04, 0.05, 0.08])
 SHORT_SCENE = SceneConfig(settle_s=0.05, push_duration_s=0.25, pusher_start_distance_m=0.11,
@@ -81,11 +82,23 @@ def asset(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def sweep(asset, tmp_path_factory):
+def sweep_progress() -> Recorder:
+    return Recorder()
+
+
+@pytest.fixture(scope="module")
+def sweep(asset, tmp_path_factory, sweep_progress):
     out = tmp_path_factory.mktemp("results") / "res"
     config = EvaluationConfig(tasks=("push",), runs=1, jobs=1, scene=SHORT_SCENE)
-    result = evaluate([asset], out, config, progress=True)
+    result = evaluate([asset], out, config, progress=sweep_progress)
     return out, config, result
+
+
+def test_sweep_reports_progress(sweep, sweep_progress):
+    events = sweep_progress.check()
+    counted = [e for e in events if e[2] > 0]
+    assert counted[-1][1] == counted[-1][2]  # every reference and candidate simulation counted
+    assert any("simulations to run" in message for message, _, total in events if total == 0)
 
 
 def _by_key(rows):
@@ -239,7 +252,7 @@ def test_resume_skips_done_rows_and_retries_failures(sweep):
     recorded = json.loads((out / "config.json").read_text())["assets"]["box"]
     assert not Path(recorded).is_absolute()  # config.json does not tell where the user's files live
     asset_dir = out / recorded
-    result = evaluate([asset_dir], out, config, progress=False)
+    result = evaluate([asset_dir], out, config)
     assert result.skipped == 6 and result.simulated == 2
     assert cache[0].stat().st_mtime_ns == mtime  # the reference came from the cache
     after = _by_key(result.runs)
@@ -248,10 +261,9 @@ def test_resume_skips_done_rows_and_retries_failures(sweep):
             assert after[key] == r  # kept exactly, timings included
     # Settings that change what a row means must match.
     with pytest.raises(UserInputError, match="seed"):
-        evaluate([asset_dir], out, dataclasses.replace(config, seed=1), progress=False)
+        evaluate([asset_dir], out, dataclasses.replace(config, seed=1))
     with pytest.raises(UserInputError, match="scene"):
-        evaluate([asset_dir], out, dataclasses.replace(config, scene=dataclasses.replace(SHORT_SCENE, floor_mu=0.3)),
-                 progress=False)
+        evaluate([asset_dir], out, dataclasses.replace(config, scene=dataclasses.replace(SHORT_SCENE, floor_mu=0.3)))
 
 
 def test_output_that_is_not_a_results_folder_is_refused(asset, tmp_path):
@@ -269,7 +281,7 @@ def test_ray_executor_gives_the_same_rows(asset, sweep, tmp_path):
                               scene=SHORT_SCENE)
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
-        result = evaluate([asset], out, config, progress=False)
+        result = evaluate([asset], out, config)
     finally:
         ray.shutdown()
     local = _by_key(read_runs_csv(sweep[0] / "runs.csv"))
@@ -372,7 +384,7 @@ def test_process_pool_and_serial_give_identical_rows_on_both_tasks(tmp_path):
     rows = {}
     for jobs in (1, 2):
         config = EvaluationConfig(tasks=("push", "ramp"), runs=2, jobs=jobs, scene=SHORT_SCENE)
-        rows[jobs] = _by_key(evaluate([asset], tmp_path / f"res{jobs}", config, progress=False).runs)
+        rows[jobs] = _by_key(evaluate([asset], tmp_path / f"res{jobs}", config).runs)
     assert len(rows[1]) == 2 * 2 * 2 * 2
     for key, r in rows[1].items():
         assert not r["error"], r["error"]
@@ -431,7 +443,7 @@ def test_bundled_can_full_scenes_right_primitive_beats_wrong_one(tmp_path):
             "boxes_1": (CollisionShape("box", tuple(float(v) for v in solid.extents), centre),)}
     for name, shapes in reps.items():
         write_representation(root / name, CollisionGeometry(name, name, shapes), props, ContactProperties())
-    result = evaluate([root], tmp_path / "res", EvaluationConfig(runs=1, jobs=2), progress=False)
+    result = evaluate([root], tmp_path / "res", EvaluationConfig(runs=1, jobs=2))
     summary = {r["representation"]: r for r in result.summary}
     assert result.failed == 0
     for cm in ("point", "hydroelastic"):
@@ -454,7 +466,7 @@ def test_reference_uses_the_assets_own_contact_properties(tmp_path):
     assert recorded["contact"]["mu_static"] == 0.9 and recorded["collision"] == ["mesh"]
 
     config = EvaluationConfig(tasks=("push",), contact_models=("hydroelastic",), runs=1, jobs=1, scene=SHORT_SCENE)
-    result = evaluate([asset_dir], tmp_path / "res", config, progress=False)
+    result = evaluate([asset_dir], tmp_path / "res", config)
     (row,) = [r for r in result.runs if r["representation"] == "mesh"]
     assert not row["error"]
     assert row["ate_m"] < 1e-6 and row["ocae_m"] < 1e-6

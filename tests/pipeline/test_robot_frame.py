@@ -302,3 +302,12 @@ def test_bad_colmap_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
         assert not out.exists(), label
     code, _, err = run_cli(capsys, moved, "--out", tmp_path / "x", *FAST)
     assert "--scale" in err and "--object-height-m" in err
+
+
+def test_normalise_reports_progress(captures, tmp_path):
+    from real2sim.pipeline.normalise import NormaliseConfig, normalise
+    from tests.progress_check import Recorder
+
+    progress = Recorder()
+    normalise(captures["moved"], tmp_path / "robot", NormaliseConfig(object_height_m=CAN_HEIGHT_M), progress=progress)
+    assert progress.check(counted=False) == [("table plane, object height", 0, 0)]

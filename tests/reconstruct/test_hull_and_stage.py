@@ -23,8 +23,21 @@ HELD_OUT = [f"images/frame_{i:05d}.png" for i in range(5, 60, 10)]  # every 10th
 
 
 @pytest.fixture(scope="module")
-def field_result(can_without_truth, tiny_config):
-    return reconstruct(can_without_truth, tiny_config, seed=0)
+def field_progress():
+    from tests.progress_check import Recorder
+
+    return Recorder()
+
+
+@pytest.fixture(scope="module")
+def field_result(can_without_truth, tiny_config, field_progress):
+    return reconstruct(can_without_truth, tiny_config, seed=0, progress=field_progress)
+
+
+def test_field_training_reports_progress(field_result, field_progress):
+    events = field_progress.check()
+    training = [e for e in events if e[0].startswith("training field")]
+    assert training and training[-1][1] == training[-1][2]  # every step counted
 
 
 def _errors(mesh: trimesh.Trimesh, truth: trimesh.Trimesh) -> dict:

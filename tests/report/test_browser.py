@@ -100,7 +100,7 @@ def test_report_images_load_and_nothing_leaves_the_machine(tmp_path):
     scene = SceneConfig(settle_s=0.05, push_duration_s=0.25, pusher_start_distance_m=0.11,
                         pusher_speed_m_per_s=0.3, hold_s=0.05, tilt_time_s=0.3, total_duration_s=0.4)
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=("point",), runs=1, jobs=1, scene=scene)
-    result = evaluate([box], tmp_path / "results", config, progress=False, animations=True)
+    result = evaluate([box], tmp_path / "results", config, animations=True)
 
     report, urls = _open(result.report_path, tmp_path)
     assert report["images"] >= 4 + 3  # the four Pareto plots, the visual mesh and two representations

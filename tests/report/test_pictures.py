@@ -13,8 +13,13 @@ def test_one_picture_per_representation_and_the_visual(tmp_path):
     from real2sim.geometry.objects import export_object
 
     mesh = export_object("can", tmp_path / "can" / "can.obj")
+    from tests.progress_check import Recorder
+
+    progress = Recorder()
     asset = build_asset(mesh, tmp_path / "can_asset",
-                        AssetConfig(mass_kg=0.35, specs=(parse_spec("mesh"), parse_spec("coacd")))).asset_dir
+                        AssetConfig(mass_kg=0.35, specs=(parse_spec("mesh"), parse_spec("coacd"))),
+                        progress=progress).asset_dir
+    assert any(m.startswith("collision coacd: ") for m, _, _ in progress.check(counted=False))
     written = asset_pictures(asset, tmp_path / "pictures", width_px=96, height_px=72)
     assert sorted(written) == ["coacd", "mesh", "visual"]
     images = {name: Image.open(path) for name, path in written.items()}

@@ -19,8 +19,6 @@ import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
-
 import numpy as np
 import trimesh
 
@@ -31,6 +29,7 @@ from real2sim.formats.errors import UserInputError
 from real2sim.formats.mesh_io import export_textured_mesh, load_mesh, validate_mesh
 from real2sim.formats.outputs import atomic_output_dir
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
+from real2sim.formats.progress import ProgressFn, null_progress, prefixed
 from real2sim.formats.spec import CollisionSpec
 
 VISUAL_RELPATH = "visual/model.obj"
@@ -189,11 +188,12 @@ def geometry_only(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
 
 def build_collision(
     mesh_canonical: trimesh.Trimesh, spec: CollisionSpec, rep_dir: Path, config: AssetConfig,
-    sdf_cache_dir: Path | str | None = None,
+    sdf_cache_dir: Path | str | None = None, progress: ProgressFn | None = None,
 ) -> tuple[CollisionGeometry, dict]:
     """One collision representation of the canonical mesh, with its fitting report.
 
-    Baselines and superquadric fits write their convex pieces under ``rep_dir/pieces``.
+    Baselines and superquadric fits write their convex pieces under ``rep_dir/pieces``;
+    a primitive fit reports its SDF sampling and iterations to ``progress``.
     """
     start = time.perf_counter()
     if spec.baseline is not None:
@@ -218,6 +218,7 @@ def build_collision(
             rep_dir=rep_dir,
             device=config.device,
             seed=config.seed,
+            progress=progress,
         )
         report = dict(report)
         report.setdefault("method", "primitive fit (paper IV-C3)")
@@ -231,22 +232,21 @@ def build_asset(
     config: AssetConfig,
     *,
     overwrite: bool = False,
-    log: Callable[[str], None] | None = None,
+    progress: ProgressFn | None = None,
 ) -> AssetResult:
     """Build the asset folder ``out_dir`` from the mesh at ``mesh_path`` (metres).
 
-    The folder appears whole or not at all. ``log`` receives one line per step.
+    The folder appears whole or not at all. ``progress`` receives one message per step
+    (``total`` 0) and the counted work of each primitive fit.
     """
-    say = log or (lambda _msg: None)
+    say = progress or null_progress
     out_dir = Path(out_dir)
     mesh = load_mesh(mesh_path)
     solid = geometry_only(mesh)
     validate_mesh(solid, str(mesh_path))
     check_mesh_for_config(solid, config, str(mesh_path))
 
-    from real2sim.asset.writers import write_representation
     from real2sim.asset.canonical import canonical_transform
-    from real2sim.geometry.fidelity import measure_fidelity
     from real2sim.asset.inertia import estimate_physical_properties
 
     with atomic_output_dir(out_dir, overwrite=overwrite, inputs=[mesh_path], made_by="real2sim asset") as tmp:
@@ -254,7 +254,7 @@ def build_asset(
         if config.flat_bottom:
             from real2sim.asset.bottom import close_flat_bottom
 
-            say(f"closing a flat bottom at z = {config.support_height_m} m (input frame)")
+            say(f"closing a flat bottom at z = {config.support_height_m} m (input frame)", 0, 0)
             solid = close_flat_bottom(solid, support_height_m=config.support_height_m)
 
         transform = canonical_transform(solid, up_axis=(0.0, 0.0, 1.0) if config.keep_up else None)
@@ -276,47 +276,57 @@ def build_asset(
         # The closed geometry the collision and inertia stages saw: the reference for fidelity.
         solid.export(tmp / "visual" / "collision_reference.obj")
 
-        say(f"estimating inertia for {config.mass_kg} kg (uniform density)")
+        say(f"estimating inertia for {config.mass_kg} kg (uniform density)", 0, 0)
         props = estimate_physical_properties(solid, config.mass_kg, seed=config.seed)
         write_physical_properties(props, tmp / "physical_properties.json")
-
-        results = []
-        build_cache = tmp / ".sdf_cache"
-        sdf_cache = config.sdf_cache_dir if config.sdf_cache_dir is not None else build_cache
-        for spec in config.specs:
-            rep_dir = tmp / spec.name
-            rep_dir.mkdir()
-            say(f"collision {spec.text}: fitting")
-            geometry, report = build_collision(solid, spec, rep_dir, config, sdf_cache)
-            write_collision_json(geometry, rep_dir / "collision.json")
-            write_representation(
-                rep_dir, geometry, props, config.contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}",
-                formats=config.formats, model_name=spec.name,
-            )
-            fidelity = measure_fidelity(solid, geometry, rep_dir, seed=config.seed)
-            report = {
-                "spec": spec.text,
-                "num_primitives": len(geometry.shapes),
-                **fidelity,
-                **report,
-            }
-            if "mjcf" in config.formats:
-                from real2sim.asset.mjcf import mjcf_notes
-
-                notes = mjcf_notes(geometry)
-                if notes:
-                    report["mjcf_notes"] = notes
-                for note in notes:
-                    say(f"warning: {note}")
-            (rep_dir / "fit_report.json").write_text(json.dumps(report, indent=1, default=float))
-            say(
-                f"collision {spec.text}: {len(geometry.shapes)} pieces, IoU {report.get('iou', float('nan')):.3f}, "
-                f"Chamfer {report.get('chamfer_mm', float('nan')):.2f} mm, {report['fit_seconds']:.1f} s"
-            )
-            results.append(RepresentationResult(spec.name, out_dir / spec.name / "model.urdf", report))
-        shutil.rmtree(build_cache, ignore_errors=True)
+        results = _write_representations(solid, props, tmp, out_dir, config, say)
 
     return AssetResult(Path(out_dir), props, transform, tuple(results))
+
+
+def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tmp: Path, out_dir: Path,
+                           config: AssetConfig, say: ProgressFn) -> list[RepresentationResult]:
+    """Each SPEC's folder in ``tmp``: collision.json, the model files, fit_report.json."""
+    from real2sim.asset.writers import write_representation
+    from real2sim.geometry.fidelity import measure_fidelity
+
+    results = []
+    build_cache = tmp / ".sdf_cache"
+    sdf_cache = config.sdf_cache_dir if config.sdf_cache_dir is not None else build_cache
+    for spec in config.specs:
+        rep_dir = tmp / spec.name
+        rep_dir.mkdir()
+        say(f"collision {spec.text}: fitting", 0, 0)
+        geometry, report = build_collision(solid, spec, rep_dir, config, sdf_cache,
+                                           progress=prefixed(say, f"collision {spec.text}"))
+        write_collision_json(geometry, rep_dir / "collision.json")
+        write_representation(
+            rep_dir, geometry, props, config.contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}",
+            formats=config.formats, model_name=spec.name,
+        )
+        fidelity = measure_fidelity(solid, geometry, rep_dir, seed=config.seed)
+        report = {
+            "spec": spec.text,
+            "num_primitives": len(geometry.shapes),
+            **fidelity,
+            **report,
+        }
+        if "mjcf" in config.formats:
+            from real2sim.asset.mjcf import mjcf_notes
+
+            notes = mjcf_notes(geometry)
+            if notes:
+                report["mjcf_notes"] = notes
+            for note in notes:
+                say(f"warning: {note}", 0, 0)
+        (rep_dir / "fit_report.json").write_text(json.dumps(report, indent=1, default=float))
+        say(
+            f"collision {spec.text}: {len(geometry.shapes)} pieces, IoU {report.get('iou', float('nan')):.3f}, "
+            f"Chamfer {report.get('chamfer_mm', float('nan')):.2f} mm, {report['fit_seconds']:.1f} s", 0, 0
+        )
+        results.append(RepresentationResult(spec.name, out_dir / spec.name / "model.urdf", report))
+    shutil.rmtree(build_cache, ignore_errors=True)
+    return results
 
 
 def rewrite_models(asset_dir: Path | str, contact: ContactProperties, formats: tuple[str, ...] = ("urdf",)) -> list[Path]:

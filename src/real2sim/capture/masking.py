@@ -25,7 +25,6 @@ import shutil
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -33,9 +32,9 @@ from real2sim.formats.dataset import (Dataset, Frame, check_dataset_outputs, loa
                                       write_transforms)
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import current_umask
+from real2sim.formats.progress import ProgressFn
 
 METHODS = ("provided", "maskrcnn", "background")
-ProgressFn = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
@@ -267,7 +266,7 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
                 ious.append(iou(m, load_mask(gt)))
             new_frames.append(replace(f, mask_path=os.path.relpath(p, ds.root)))
             if progress:
-                progress(i + 1, n)
+                progress(f"masks ({method})", i + 1, n)
         if any(a.mask_path != b.mask_path for a, b in zip(new_frames, ds.frames)):
             write_transforms(root / "transforms.json", replace(ds, frames=tuple(new_frames)))
         return MaskResult(method, n, "masks", float(np.mean(fractions)),
@@ -305,7 +304,7 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
                 ious.append(iou(m, load_mask(gt)))
             new_frames.append(replace(f, mask_path=f"{out_name}/{name}"))
             if progress:
-                progress(i + 1, n)
+                progress(f"masks ({method})", i + 1, n)
         # Swap the folder in, then the transforms.json pointing to it.
         old = None
         if target.exists():

@@ -33,7 +33,7 @@ import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Iterator
 
 import numpy as np
 
@@ -48,8 +48,7 @@ from real2sim.formats.dataset import (
     write_transforms,
 )
 from real2sim.formats.errors import UserInputError
-
-ProgressFn = Callable[[str, float], None]
+from real2sim.formats.progress import ProgressFn
 
 
 @dataclass(frozen=True)
@@ -229,6 +228,11 @@ def _write_feature_masks(ds: Dataset, mask_root: Path, dilation_px: int) -> None
         Image.fromarray((m * 255).astype(np.uint8)).save(out)
 
 
+def _steps(cfg: RefineConfig) -> int:
+    """The refinement's counted steps: features, matching, each bundle-adjustment round, writing."""
+    return 3 + cfg.ba_rounds
+
+
 def _run_colmap(ds: Dataset, cfg: RefineConfig, work: Path, progress: ProgressFn | None
                 ) -> tuple[dict[str, np.ndarray], dict[str, int], int, int, float | None, dict]:
     """Run COLMAP in ``work``; return refined cam_from_world (3x4, COLMAP frame) by file_path,
@@ -254,7 +258,7 @@ def _run_colmap(ds: Dataset, cfg: RefineConfig, work: Path, progress: ProgressFn
     extraction.use_gpu = False
     t0 = time.perf_counter()
     if progress:
-        progress("extracting features", 0.05)
+        progress("extracting features", 0, _steps(cfg))
     pycolmap.extract_features(db_path, ds.root, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
                               reader_options=reader, extraction_options=extraction, device=pycolmap.Device.cpu)
     timings["features_s"] = time.perf_counter() - t0
@@ -271,7 +275,7 @@ def _run_colmap(ds: Dataset, cfg: RefineConfig, work: Path, progress: ProgressFn
     verification.min_num_inliers = cfg.min_num_inliers
     t0 = time.perf_counter()
     if progress:
-        progress(f"matching {len(pairs)} pairs", 0.35)
+        progress(f"matching {len(pairs)} pairs", 1, _steps(cfg))
     pycolmap.match_image_pairs(db_path, matching_options=matching, pairing_options=pairing,
                                verification_options=verification, device=pycolmap.Device.cpu)
     timings["matching_s"] = time.perf_counter() - t0
@@ -322,8 +326,7 @@ def _run_colmap(ds: Dataset, cfg: RefineConfig, work: Path, progress: ProgressFn
         tri_opts.triangulation.continue_max_angle_error = 2.0 if rnd else 6.0
         tri_opts.mapper.filter_max_reproj_error = err
         if progress:
-            progress(f"triangulating + bundle adjustment (round {rnd + 1}/{cfg.ba_rounds})",
-                     0.6 + 0.35 * rnd / cfg.ba_rounds)
+            progress(f"triangulating + bundle adjustment (round {rnd + 1}/{cfg.ba_rounds})", 2 + rnd, _steps(cfg))
         out = work / f"tri_{rnd}"
         out.mkdir()
         rec = pycolmap.triangulate_points(rec, db_path, ds.root, out, clear_points=True, options=tri_opts)
@@ -498,7 +501,7 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
     names = [f.file_path for f in ds.frames]
     result = _with_errors(result, read_ground_truth(root), names, ds.poses_c2w_gl(), poses)
     if progress:
-        progress("writing", 1.0)
+        progress("writing", _steps(cfg) - 1, _steps(cfg))
     unrefined = root / "transforms_unrefined.json"
     if not unrefined.exists():
         write_json_atomic(unrefined, __import__("json").loads((root / "transforms.json").read_text()))
@@ -509,4 +512,6 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
                       extra=extra)
         write_transforms(root / "transforms.json", new)
     write_json_atomic(root / "refine_report.json", result.to_json())
+    if progress:
+        progress("written", _steps(cfg), _steps(cfg))
     return result

@@ -30,7 +30,6 @@ import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import trimesh
@@ -45,11 +44,10 @@ from real2sim.formats.dataset import (
 )
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import atomic_output_dir
+from real2sim.formats.progress import ProgressFn
 
 OBJECT_LABEL = 1
 TABLE_LABEL = 2
-
-ProgressFn = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
@@ -409,7 +407,7 @@ def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: Cap
 
     ``mesh``: a trimesh (metres; textured or not -- untextured meshes get a
     procedural texture so feature matching has something to hold on to) or a
-    mesh file path. The folder appears whole or not at all. ``progress(done, total)``
+    mesh file path. The folder appears whole or not at all. ``progress("rendering", done, total)``
     is called after each rendered view.
     """
     from real2sim.formats.mesh_io import load_mesh, validate_mesh
@@ -461,14 +459,14 @@ def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: Cap
             frames_noisy.append(Frame(file_path=fp, transform_matrix=noisy[i], mask_path=mp))
             frames_exact.append(Frame(file_path=fp, transform_matrix=exact[i], mask_path=mp))
             if progress:
-                progress(i + 1, total)
+                progress("rendering", i + 1, total)
         if config.with_background:
             scene.remove_object()
             for i in range(n):
                 rgb, _, _ = scene.render(exact[i], depth=False, label=False)
                 _save_png(tmp / "background" / _frame_name(i), rgb)
                 if progress:
-                    progress(n + i + 1, total)
+                    progress("rendering", n + i + 1, total)
         render_s = time.perf_counter() - t_render
         del scene
         shutil.rmtree(render_dir)

@@ -16,7 +16,12 @@ import signal
 import sys
 
 from real2sim import __version__
+from real2sim.cli.options import integer
 from real2sim.formats.errors import UserInputError
+
+#: --threads: torch CPU threads; the environment variable that gives the default.
+THREADS = integer(1, 1024)
+THREADS_ENV = "REAL2SIM_THREADS"
 
 # Order is the order of `real2sim --help`.
 _VERB_MODULES = ("demo", "objects", "capture", "reconstruct", "asset", "run", "evaluate", "view")
@@ -39,6 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"real2sim {__version__}")
     parser.add_argument("--debug", action="store_true",
                         help="on an internal error, print the whole traceback (default: one line)")
+    parser.add_argument("--threads", type=THREADS, default=None, metavar="N",
+                        help=f"torch CPU threads for the whole command (default: ${THREADS_ENV}, else torch's own "
+                        f"choice) [allowed: {THREADS.describe()}]")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     for name in _VERB_MODULES:
         try:
@@ -64,6 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     previous_sigterm = signal.signal(signal.SIGTERM, _terminate) if _in_main_thread() else None
     try:
+        set_torch_threads(args.threads)
         return int(args.func(args) or 0)
     except UserInputError as exc:
         print(f"real2sim {args.verb}: error: {exc}", file=sys.stderr)
@@ -92,6 +101,22 @@ def main(argv: list[str] | None = None) -> int:
 
 
 _DISK_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def set_torch_threads(threads: int | None) -> None:
+    """The program's one choice of torch's CPU threads: ``--threads``, else ``$REAL2SIM_THREADS``,
+    else torch's default. The stages use what they are given and never change it."""
+    if threads is None:
+        text = os.environ.get(THREADS_ENV, "").strip()
+        if not text:
+            return
+        try:
+            threads = THREADS(text)
+        except argparse.ArgumentTypeError as exc:
+            raise UserInputError(f"${THREADS_ENV}: {exc}") from None
+    import torch
+
+    torch.set_num_threads(int(threads))
 
 
 class Terminated(KeyboardInterrupt):

@@ -157,20 +157,14 @@ def config_from_args(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
     from real2sim.asset.build import build_asset
+    from real2sim.cli.progress import progress_display
     from real2sim.formats.outputs import check_output_dir
 
     config = config_from_args(args)
     check_output_dir(args.out, args.overwrite, inputs=[args.mesh])  # fail before any heavy work
-    console = Console(stderr=True)
-    with console.status("building asset") as status:
-        def log(msg: str) -> None:
-            status.update(msg)
-            console.log(msg)
-
-        result = build_asset(args.mesh, args.out, config, overwrite=args.overwrite, log=log)
+    with progress_display() as progress:
+        result = build_asset(args.mesh, args.out, config, overwrite=args.overwrite, progress=progress)
     print(f"asset: {result.asset_dir}")
     for rep in result.representations:
         print(f"  {rep.name:28s} {rep.urdf_path}")

@@ -107,9 +107,8 @@ def _resolve_mesh(text: str):
 
 
 def run_capture(args: argparse.Namespace) -> int:
-    from rich.progress import Progress
-
     from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.cli.progress import progress_display
     from real2sim.formats.outputs import check_output_dir
 
     cfg = CaptureConfig(views=args.views, width=args.width, height=args.height, pose_noise_mm=args.pose_noise_mm,
@@ -117,10 +116,8 @@ def run_capture(args: argparse.Namespace) -> int:
     cfg.validate()
     check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
     mesh = _resolve_mesh(args.mesh)
-    with Progress(transient=True) as bar:
-        task = bar.add_task("rendering", total=None)
-        result = capture(mesh, args.out, cfg, progress=lambda done, total: bar.update(task, completed=done, total=total),
-                         overwrite=args.overwrite)
+    with progress_display() as progress:
+        result = capture(mesh, args.out, cfg, progress=progress, overwrite=args.overwrite)
     print(f"dataset: {result.out_dir} ({result.num_views} views, rendered in {result.render_seconds:.1f} s)")
     return 0
 
@@ -130,9 +127,11 @@ def run_refine(args: argparse.Namespace) -> int:
 
     from rich.console import Console
 
-    from real2sim.formats.errors import UserInputError
     from real2sim.capture.pose_refinement import RefineConfig, refine_poses
+    from real2sim.cli.progress import progress_display
+    from real2sim.formats.errors import UserInputError
     from real2sim.formats.outputs import output_lock
+    from real2sim.formats.progress import prefixed
 
     if args.neighbors < 1:
         raise UserInputError(f"--neighbors must be at least 1 (got {args.neighbors})")
@@ -144,9 +143,9 @@ def run_refine(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     # refine-poses edits the dataset in place: one writer at a time.
     with output_lock(args.dataset, inside=True), warnings.catch_warnings(record=True) as caught, \
-            console.status("refining poses") as status:
+            progress_display() as progress:
         warnings.simplefilter("always", RuntimeWarning)
-        result = refine_poses(args.dataset, cfg, progress=lambda msg, frac: status.update(f"refine-poses: {msg}"))
+        result = refine_poses(args.dataset, cfg, progress=prefixed(progress, "refine-poses"))
     for w in caught:
         console.print(f"warning: {w.message}")
     print(f"refined {result.num_refined_frames}/{result.num_frames} frames ({result.reason}); "
@@ -158,18 +157,15 @@ def run_refine(args: argparse.Namespace) -> int:
 
 
 def run_mask(args: argparse.Namespace) -> int:
-    from rich.progress import Progress
-
     from real2sim.capture.masking import MaskConfig, compute_masks
+    from real2sim.cli.progress import progress_display
     from real2sim.formats.outputs import output_lock
 
     cfg = MaskConfig(threshold=args.threshold, weights=args.weights, device=args.device,
                      maskrcnn_min_size_px=args.maskrcnn_min_size, maskrcnn_max_size_px=args.maskrcnn_max_size,
                      maskrcnn_max_instances=args.maskrcnn_max_instances)
-    with output_lock(args.dataset, inside=True), Progress(transient=True) as bar:  # masks are written into the dataset
-        task = bar.add_task(f"masks ({args.method})", total=None)
-        result = compute_masks(args.dataset, args.method, cfg,
-                               progress=lambda done, total: bar.update(task, completed=done, total=total))
+    with output_lock(args.dataset, inside=True), progress_display() as progress:  # masks are written into the dataset
+        result = compute_masks(args.dataset, args.method, cfg, progress=progress)
     line = f"masks: {result.num_frames} frames in {result.mask_dir}/, object covers {100 * result.mean_object_fraction:.1f}% of pixels"
     if result.mean_iou is not None:
         line += f"; IoU vs ground truth mean {result.mean_iou:.4f}, min {result.min_iou:.4f}"

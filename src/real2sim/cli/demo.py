@@ -134,15 +134,14 @@ def run(args: argparse.Namespace) -> int:
     import sys
     import time
 
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+    from dataclasses import replace
 
     from real2sim.capture.wrist_camera import capture
-    from real2sim.cli.run import _Display
-    from dataclasses import replace
+    from real2sim.cli.progress import progress_display
 
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.formats.outputs import atomic_output_dir, check_output_dir
+    from real2sim.formats.progress import prefixed
     from real2sim.geometry.objects import make_textured_object
     from real2sim.pipeline.run import StageFailed, run_pipeline
 
@@ -151,22 +150,17 @@ def run(args: argparse.Namespace) -> int:
     cap_cfg, config = capture_config(plan), run_config(plan)
     eval_config = EvaluationConfig(tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs,
                                    **({"jobs": args.jobs} if args.jobs else {}))
-    console = Console(stderr=True, log_path=False)
-    columns = (SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
     start, cpu_start = time.perf_counter(), _cpu_seconds()
     out: Path = args.out
-    console.log(f"capture: {_capture_line(plan, cap_cfg)}")
     try:
-        with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
-            with Progress(*columns, console=console, transient=True) as bar:
-                task = bar.add_task("capture: rendering the bundled bottle", total=plan.views)
-                capture(make_textured_object("bottle"), tmp / "capture", cap_cfg,
-                        progress=lambda done, total: bar.update(task, completed=done, total=total))
-                bar.remove_task(task)
-                console.log(f"capture: done ({plan.views} views)")
-                # run evaluates too: against the reconstruction (results/) and the true bottle (results_truth/).
-                result = run_pipeline(tmp / "capture", tmp / "bottle_asset", replace(config, evaluation=eval_config),
-                                      progress=_Display(bar, console))
+        with atomic_output_dir(out, overwrite=args.overwrite) as tmp, progress_display() as progress:
+            progress(f"capture: {_capture_line(plan, cap_cfg)}", 0, 0)
+            capture(make_textured_object("bottle"), tmp / "capture", cap_cfg,
+                    progress=prefixed(progress, "capture: the bundled bottle"))
+            progress(f"capture: done ({plan.views} views)", 0, 0)
+            # run evaluates too: against the reconstruction (results/) and the true bottle (results_truth/).
+            result = run_pipeline(tmp / "capture", tmp / "bottle_asset", replace(config, evaluation=eval_config),
+                                  progress=progress)
     except StageFailed as exc:
         print(f"real2sim demo: error: {exc}; nothing was written to {out}", file=sys.stderr)
         return 1

@@ -173,17 +173,20 @@ def _reference_properties(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from real2sim.formats.errors import UserInputError
+    from real2sim.cli.progress import progress_display
     from real2sim.evaluate.sweep import evaluate
+    from real2sim.formats.errors import UserInputError
 
     config = config_from_args(args)
     if args.reference is not None and not args.reference.is_file():
         raise UserInputError(f"reference mesh not found: {args.reference}")
     # SIGTERM unwinds as Ctrl-C does (real2sim.cli.main): the sweep ends its workers, keeps its rows.
-    with _reference_properties(args) as reference_properties:
-        result = evaluate(args.assets, args.out, config, reference_mesh=args.reference, progress=True,
-                          overwrite=args.overwrite, log=lambda m: print(m, flush=True),
-                          reference_properties=reference_properties, animations=not args.no_animations)
+    # The sweep's messages go to stdout, as they always have; the count of simulations to stderr.
+    with _reference_properties(args) as reference_properties, \
+            progress_display(echo=lambda m: print(m, flush=True)) as progress:
+        result = evaluate(args.assets, args.out, config, reference_mesh=args.reference, progress=progress,
+                          overwrite=args.overwrite, reference_properties=reference_properties,
+                          animations=not args.no_animations)
     _print_summary(result.summary, args.recommend)
     print(f"{result.simulated} simulations run, {result.skipped} reused, {result.failed} failed; "
           f"results in {result.out_dir} (report: {result.report_path})")

@@ -81,29 +81,14 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
         config = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
                                    texture_px=args.texture_px)
         config.validate()
-        result = _with_progress(lambda progress: reconstruct(args.dataset, config, device=args.device,
-                                                             seed=args.seed, progress=progress))
+        from real2sim.cli.progress import progress_display
+
+        with progress_display() as progress:
+            result = reconstruct(args.dataset, config, device=args.device, seed=args.seed, progress=progress)
     out = write_reconstruction(result, out, overwrite=args.overwrite,
                                inputs=tuple(p for p in (args.dataset, args.from_mesh) if p is not None))
     print(summary_line(out, result.report))
     return 0
-
-
-def _with_progress(work):
-    """Run ``work(progress)`` under one rich display: a bar with ETA for counted steps, a spinner otherwise."""
-    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-    columns = (SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-               TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn())
-    with Progress(*columns, transient=True) as bar:
-        tasks: dict[str, int] = {}
-
-        def progress(message: str, done: int, total: int) -> None:
-            if message not in tasks:
-                tasks[message] = bar.add_task(message, total=total or None)
-            bar.update(tasks[message], completed=done, total=total or None)
-
-        return work(progress)
 
 
 def summary_line(out: Path, report: dict) -> str:

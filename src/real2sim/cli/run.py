@@ -141,38 +141,14 @@ def config_from_args(args: argparse.Namespace):
                      object_height_m=args.object_height_m, scale=args.scale)
 
 
-class _Display:
-    """One rich display for the whole run: the stage (k of n) and the work inside it."""
-
-    def __init__(self, bar, console):
-        self.bar, self.console = bar, console
-        self.task = bar.add_task("starting", total=None)
-        self.label = ""
-
-    def stage(self, name: str, index: int, count: int, status: str) -> None:
-        label = self.label = f"[{index}/{count}] {name}"
-        if status == "running":
-            self.bar.update(self.task, description=label, completed=0, total=None)
-        else:
-            self.console.log(f"{label}: {'unchanged, skipped' if status == 'skipped' else 'done'}")
-
-    def update(self, name: str, message: str, done: float, total: float) -> None:
-        self.bar.update(self.task, description=f"{self.label} - {message}", completed=done, total=total or None)
-
-
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
-
+    from real2sim.cli.progress import progress_display
     from real2sim.pipeline.run import StageFailed, run_pipeline
 
     config = config_from_args(args)
-    console = Console(stderr=True, log_path=False)
-    columns = (SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
     try:
-        with Progress(*columns, console=console, transient=True) as bar:
-            result = run_pipeline(args.dataset, args.out, config, overwrite=args.overwrite,
-                                  progress=_Display(bar, console))
+        with progress_display() as progress:  # one display for the whole run (pipeline.run.RunProgress)
+            result = run_pipeline(args.dataset, args.out, config, overwrite=args.overwrite, progress=progress)
     except StageFailed as exc:
         print(f"real2sim run: error: {exc}; finished stages are kept in {Path(args.out) / '.run'}: "
               "fix the cause and run the same command again to resume", file=sys.stderr)

@@ -69,6 +69,7 @@ import numpy as np
 import trimesh
 
 from real2sim.formats.errors import UserInputError
+from real2sim.formats.progress import ProgressFn, null_progress
 from real2sim.geometry.inside import morton_order
 
 _CACHE_FORMAT = 2  # bump when the sampling algorithm changes what it returns
@@ -170,7 +171,7 @@ def sample_sdf(
     config: SdfSamplingConfig = SdfSamplingConfig(),
     *,
     cache_dir: Path | str | None = AUTO_CACHE,
-    progress: bool = False,
+    progress: ProgressFn | None = None,
 ) -> SdfSamples:
     """Signed-distance samples of ``mesh`` (metres, asset frame) in unit-sphere coordinates.
 
@@ -466,28 +467,22 @@ def _save_cache(path: Path, samples: SdfSamples) -> None:
 
 
 class _Steps:
-    """A small rich progress display over the stage's steps (no-op when disabled)."""
+    """The stage's steps as counted progress: sampling, distances and signs, signs."""
 
     _NAMES = ("sampling", "distances and signs", "signs")
 
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self._progress = None
-        self._task = None
+    def __init__(self, progress: ProgressFn | None) -> None:
+        self.progress = progress or null_progress
+        self.done = 0
 
     def __enter__(self) -> "_Steps":
-        if self.enabled:
-            from rich.progress import Progress
-
-            self._progress = Progress(transient=True)
-            self._progress.__enter__()
-            self._task = self._progress.add_task("sdf: sampling", total=len(self._NAMES))
+        self.progress(f"sdf: {self._NAMES[0]}", 0, len(self._NAMES))
         return self
 
     def advance(self, name: str) -> None:
-        if self._progress is not None:
-            self._progress.update(self._task, advance=1, description=f"sdf: {name}")
+        self.done += 1
+        self.progress(f"sdf: {name}", self.done, len(self._NAMES))
 
     def __exit__(self, *exc) -> None:
-        if self._progress is not None:
-            self._progress.__exit__(*exc)
+        if exc[0] is None:
+            self.progress("sdf: sampled", len(self._NAMES), len(self._NAMES))

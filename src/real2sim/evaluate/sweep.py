@@ -55,7 +55,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 from real2sim.evaluate.discovery import (Asset, Representation, discover_assets, discover_representations,
                                          place_reference_mesh, read_canonical_transform)
@@ -70,6 +70,7 @@ from real2sim.evaluate.workdir import (check_partial, check_results_dir, fresh_p
 from real2sim.formats.contact import CONTACT_MODELS
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import output_lock, publish_dir, write_json_atomic
+from real2sim.formats.progress import ProgressFn, null_progress
 from real2sim.formats.results import describe_torn, load_runs_csv, relative_paths_in_text, row_key, write_runs_csv
 
 
@@ -148,9 +149,8 @@ def evaluate(
     out_dir: Path | str,
     config: EvaluationConfig = EvaluationConfig(),
     reference_mesh: Path | str | None = None,
-    progress: bool = True,
+    progress: ProgressFn | None = None,
     overwrite: bool = False,
-    log: Callable[[str], None] | None = None,
     reference_properties: Path | str | None = None,
     animations: bool = False,
     skip_representations: Sequence[str] = (),
@@ -169,13 +169,15 @@ def evaluate(
         ``reference_mesh`` this simulates a different object altogether: the truth.
     skip_representations: representation folder names not to simulate (e.g. ``mesh`` when it is
         the reference itself).
+    progress: the sweep's messages (``total`` 0) and its count of reference and candidate
+        simulations.
     animations: also write RESULTS/animations/<task>.html, the reference beside the representation
         recommended for accuracy (:mod:`real2sim.evaluate.animation`), linked from report.html.
 
     UserInputError, with nothing written, for unusable assets or reference, an ``out_dir``
     that is not ours to write, or another sweep writing ``out_dir`` now.
     """
-    say = log or (lambda _m: None)
+    say = progress or null_progress
     reps = [r for r in discover_representations(asset_dirs) if r.name not in set(skip_representations)]
     if not reps:
         raise UserInputError("no representation left to evaluate")
@@ -188,12 +190,12 @@ def evaluate(
     inputs = protected_inputs(assets, target, reference_mesh)
     target = check_results_dir(target, overwrite, inputs)
     with output_lock(target):  # one sweep per --out, from here to the publication
-        return _evaluate_locked(reps, assets, target, inputs, config, reference_mesh, progress, overwrite, say,
+        return _evaluate_locked(reps, assets, target, inputs, config, reference_mesh, overwrite, say,
                                 Path(reference_properties).resolve() if reference_properties else None, animations)
 
 
-def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfig, reference_mesh, progress: bool,
-                     overwrite: bool, say: Callable[[str], None],
+def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfig, reference_mesh,
+                     overwrite: bool, say: ProgressFn,
                      reference_properties: Path | None = None, animations: bool = False) -> EvaluationResult:
     partial = partial_dir(target)
     if check_partial(partial, overwrite, inputs):
@@ -215,7 +217,7 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
     # Rows already done (resume); failed and torn rows are simulated again.
     rows: dict[tuple, dict] = {row_key(r): r for r in table.rows} if table is not None else {}
     if table is not None and table.torn_lines:
-        say(f"warning: {describe_torn(table, 'runs.csv')}: simulated again")
+        say(f"warning: {describe_torn(table, 'runs.csv')}: simulated again", 0, 0)
     done = {k for k, r in rows.items() if not r["error"]}
     specs = {task: make_run_specs(task, config.runs, config.seed) for task in config.tasks}
     todo: dict[tuple[str, str, int], list[tuple[Representation, str]]] = {}
@@ -231,7 +233,8 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
                     todo.setdefault((rep.object, task, int(spec.run)), []).append((rep, cm))
     spec_by = {(task, int(s.run)): s for task in config.tasks for s in specs[task]}
     n_candidates = sum(len(v) for v in todo.values())
-    say(f"{len(reps)} representations of {len(assets)} assets: {n_candidates} simulations to run, {skipped} already done")
+    say(f"{len(reps)} representations of {len(assets)} assets: {n_candidates} simulations to run, {skipped} already done",
+        0, 0)
 
     created = source is not partial
     executor = None
@@ -256,7 +259,7 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
         asset_by_name = {a.name: a for a in assets}
         try:
             simulated = _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows,
-                                   runs_path, progress, target, reference_properties)
+                                   runs_path, say, target, reference_properties)
         except BaseException:  # KeyboardInterrupt (Ctrl-C, SIGTERM) included: end the workers now
             executor.shutdown(abort=True)
             raise
@@ -283,7 +286,7 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
     )
 
 
-def _write_animations(partial: Path, rows: list[dict], config: EvaluationConfig, say: Callable[[str], None]) -> None:
+def _write_animations(partial: Path, rows: list[dict], config: EvaluationConfig, say: ProgressFn) -> None:
     """The animations are a view of the results, not a result: a failure is one warning line."""
     from real2sim.evaluate.animation import ANIMATION_DIRNAME, write_animations
     from real2sim.formats.results import summarize
@@ -292,10 +295,10 @@ def _write_animations(partial: Path, rows: list[dict], config: EvaluationConfig,
     try:
         written = write_animations(partial, summarize(rows), timeout_s=config.sim_timeout_s)
     except Exception as exc:  # noqa: BLE001
-        say(f"warning: no animations ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})")
+        say(f"warning: no animations ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})", 0, 0)
         return
     if written:
-        say(f"animations: {', '.join(sorted(written))} ({ANIMATION_DIRNAME}/)")
+        say(f"animations: {', '.join(sorted(written))} ({ANIMATION_DIRNAME}/)", 0, 0)
 
 
 @contextmanager
@@ -320,12 +323,11 @@ def _reference_failed(payload: str) -> str:
 
 
 def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows, runs_path,
-               progress, target: Path, reference_properties: Path | None = None) -> int:
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+               progress: ProgressFn, target: Path, reference_properties: Path | None = None) -> int:
+    """Simulate every reference of ``todo``, then its candidates, as the executor finishes them.
 
-    n_refs = len(todo)
-    n_candidates = sum(len(v) for v in todo.values())
+    ``progress`` counts both, references first: ("references and simulations", done, total)."""
+    total = len(todo) + sum(len(v) for v in todo.values())
     pending: dict[Any, tuple[str, Any, Any]] = {}  # handle -> (kind "ref" or "cand", row key, job)
     for (obj, task, run), _ in sorted(todo.items()):
         asset = asset_by_name[obj]
@@ -337,16 +339,10 @@ def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config,
                            cache, asset.contact, config.sim_timeout_s)
         pending[executor.submit(run_reference_job, job)] = ("ref", (obj, task, run), job)
 
-    simulated = 0
+    simulated = done = 0
     last_write = 0.0
-    columns = (
-        TextColumn("[progress.description]{task.description}"), BarColumn(), MofNCompleteColumn(),
-        TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
-    )
-    with Progress(*columns, console=Console(stderr=True), disable=not progress, transient=False) as bar, \
-            _checkpoint_on_exit(runs_path, rows):
-        bar_refs = bar.add_task("references", total=n_refs)
-        bar_cands = bar.add_task("simulations", total=n_candidates)
+    progress("references and simulations", 0, total)
+    with _checkpoint_on_exit(runs_path, rows):
         while pending:
             for handle in executor.wait(set(pending)):
                 kind, key, job = pending.pop(handle)
@@ -354,14 +350,14 @@ def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config,
                 if isinstance(result, _Retry):
                     pending[executor.submit(result.fn, result.arg, result.attempt)] = (kind, key, job)
                     continue
+                done += 1
                 if kind == "ref":
-                    bar.advance(bar_refs)
                     status, payload = result
                     for rep, cm in todo[key]:
                         ckey = (rep.object, rep.name, cm, key[1], key[2])
                         if status != "ok":
                             rows[ckey] = _private(_row(ckey, error=_reference_failed(payload)), target)
-                            bar.advance(bar_cands)
+                            done += 1
                             simulated += 1
                             continue
                         cjob = CandidateJob(rep.object, rep.name, cm, key[1], key[2], rep.urdf_path, job.run_spec,
@@ -370,7 +366,7 @@ def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config,
                 else:
                     rows[key] = _private(result, target)
                     simulated += 1
-                    bar.advance(bar_cands)
+                progress("references and simulations", done, total)
                 now = time.monotonic()
                 if now - last_write > 1.0 or not pending:
                     write_runs_csv(runs_path, sorted(rows.values(), key=row_key))

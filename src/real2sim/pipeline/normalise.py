@@ -47,7 +47,6 @@ import shutil
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -62,6 +61,7 @@ from real2sim.formats.dataset import (
 )
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import publish_dir, write_json_atomic
+from real2sim.formats.progress import ProgressFn
 from real2sim.pipeline import robot_frame as rf
 
 MODEL_FROM_WORLD = "model_from_world.json"  # in ground_truth/: how a simulated capture was moved into the model frame
@@ -230,13 +230,13 @@ def model_from_world(source: Path) -> rf.Similarity | None:
 
 
 def normalise(source: Path, target: Path, config: NormaliseConfig, *, seed: int = 0,
-              progress: Callable[[str], None] | None = None) -> dict:
+              progress: ProgressFn | None = None) -> dict:
     """Write the robot-frame copy of ``source`` to ``target`` (whole or not at all); return the record."""
     config.validate()
     source, target = Path(source), Path(target)
     ds = read_dataset(source)
     if progress:
-        progress("table plane, object height")
+        progress("table plane, object height", 0, 0)
     robot_from_model, record = find_robot_frame(ds, read_sparse_points(source), _masks(ds), config, seed)
     truth, robot_from_world = model_from_world(source), None
     if truth is not None:  # model_from_world.json lives in ground_truth/

@@ -24,16 +24,18 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Protocol
+from typing import TYPE_CHECKING, Any, Callable
 
 from real2sim.formats.dataset import read_dataset
 from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import MARKER_NAME, check_output_dir, make_output_dir, output_lock, publish_dir
+from real2sim.formats.outputs import check_output_dir, make_output_dir, output_lock
+from real2sim.formats.progress import ProgressFn, null_progress
 from real2sim.pipeline import manifest as mf
 from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, is_model_frame
+from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME, _asset, _evaluate,
+                                      _evaluate_truth, _masks, _reconstruct, _refine, _robot_frame)
 from real2sim.pipeline.truth import build_truth, has_ground_truth
 
 if TYPE_CHECKING:
@@ -43,10 +45,6 @@ if TYPE_CHECKING:
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.reconstruct.stage import ReconstructConfig
 
-RESULTS_DIRNAME = "results"
-TRUTH_RESULTS_DIRNAME = "results_truth"
-# Entries of ASSETDIR that the asset stage does not own.
-RESERVED = (mf.RUN_DIRNAME, "truth.json", RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME)
 # Evaluation settings that change how fast, not what: not part of the evaluate stage's key.
 _EVAL_SCHEDULING = ("jobs", "executor", "ray_address", "ray_timeout_s", "sim_timeout_s")
 
@@ -84,20 +82,28 @@ class RunConfig:
         return NormaliseConfig(object_height_m=self.object_height_m, scale=self.scale)
 
 
-class RunProgress(Protocol):
+class RunProgress:
+    """The whole run through one :class:`~real2sim.formats.progress.ProgressFn`.
+
+    A stage's start and end are messages ("[3/7] reconstruct", "[3/7] reconstruct: done",
+    "... unchanged, skipped"); called as a ProgressFn itself, it passes the running stage's
+    work on with the stage in front ("[3/7] reconstruct - training field ...").
+    """
+
+    def __init__(self, progress: ProgressFn | None = None):
+        self.progress = progress or null_progress
+        self.label = ""
+
     def stage(self, name: str, index: int, count: int, status: str) -> None:
         """``status``: "running", "skipped" (unchanged), "done"."""
+        self.label = f"[{index}/{count}] {name}"
+        if status == "running":
+            self.progress(self.label, 0, 0)
+        else:
+            self.progress(f"{self.label}: {'unchanged, skipped' if status == 'skipped' else 'done'}", 0, 0)
 
-    def update(self, name: str, message: str, done: float, total: float) -> None:
-        """Work inside a stage; ``total`` 0 when unknown."""
-
-
-class _Quiet:
-    def stage(self, name, index, count, status):
-        pass
-
-    def update(self, name, message, done, total):
-        pass
+    def __call__(self, message: str, done: int, total: int) -> None:
+        self.progress(f"{self.label} - {message}", done, total)
 
 
 class StageFailed(RuntimeError):
@@ -224,17 +230,18 @@ class _Runner:
 
 
 def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, *, overwrite: bool = False,
-                 progress: RunProgress | None = None) -> RunResult:
+                 progress: ProgressFn | None = None) -> RunResult:
     """Run (or resume) every stage for ``dataset`` into ``asset_dir``; see the module docstring.
 
     Bad input (unreadable dataset, frames without masks, an ASSETDIR that is neither
     new, nor ``overwrite``, nor a run of this dataset) raises UserInputError before
     anything is written. A failing stage raises StageFailed (or UserInputError naming
-    the stage); stages finished before it stay recorded for the next call.
+    the stage); stages finished before it stay recorded for the next call. ``progress``
+    receives every stage's start and end and, prefixed by the stage, its work (:class:`RunProgress`).
     """
     from real2sim.reconstruct.stage import ReconstructConfig
 
-    progress = progress or _Quiet()
+    run_progress = RunProgress(progress)
     robot_frame = config.robot_frame()
     dataset = check_dataset(Path(dataset), masks_needed=config.mask_method is None, scale_given=bool(robot_frame))
     if robot_frame is not None:
@@ -253,7 +260,7 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
         make_output_dir(asset_dir, made_by="real2sim run")
         _remove_stale_temporaries(asset_dir)
         manifest.save()
-        return _run_locked(manifest, created, dataset, asset_dir, config, recon_cfg, asset_cfg, progress)
+        return _run_locked(manifest, created, dataset, asset_dir, config, recon_cfg, asset_cfg, run_progress)
 
 
 def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: Path, config: RunConfig,
@@ -364,89 +371,6 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
     return RunResult(asset_dir, runner.statuses, manifest.path, truth, urdfs)
 
 
-def _edited_copy(dataset: Path, target: Path, edit: Callable[[Path], dict]) -> dict:
-    """Copy ``dataset`` beside ``target``, let ``edit`` change the copy, then rename it to ``target``."""
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
-    try:
-        shutil.copytree(dataset, tmp, dirs_exist_ok=True, ignore=shutil.ignore_patterns("refine_report.json"))
-        extra = edit(tmp)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    publish_dir(tmp, target)
-    return extra
-
-
-def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: RunProgress) -> dict:
-    from real2sim.capture.masking import compute_masks
-
-    def edit(copy: Path) -> dict:
-        if not (copy / "transforms.json").exists():  # a COLMAP model: masks need a transforms.json to point from
-            from real2sim.pipeline.normalise import write_model_transforms
-
-            write_model_transforms(copy)
-        result = compute_masks(copy, method, mask_cfg,
-                               progress=lambda done, total: progress.update("masks", method, done, total))
-        return {"result": {"num_frames": result.num_frames, "mean_object_fraction": result.mean_object_fraction,
-                           "mean_iou": result.mean_iou, "min_iou": result.min_iou}}
-
-    return _edited_copy(dataset, run_dir / "masked", edit)
-
-
-def _refine(dataset: Path, run_dir: Path, refine_cfg, progress: RunProgress) -> dict:
-    from real2sim.capture.pose_refinement import refine_poses
-
-    def edit(copy: Path) -> dict:
-        result = refine_poses(copy, refine_cfg, lambda msg, frac: progress.update("refine_poses", msg, frac, 1.0))
-        return {"result": result.to_json()}
-
-    return _edited_copy(dataset, run_dir / "dataset", edit)
-
-
-def _robot_frame(dataset: Path, run_dir: Path, cfg: NormaliseConfig, seed: int, progress: RunProgress) -> dict:
-    from real2sim.pipeline.normalise import normalise
-
-    record = normalise(dataset, run_dir / "robot_frame", cfg, seed=seed,
-                       progress=lambda msg: progress.update("robot_frame", msg, 0, 0))
-    keep = ("scale_from", "hull_height_m", "sparse_points", "table_fit_rms_mm", "errors_vs_ground_truth")
-    return {"result": {"scale": record["robot_from_model"]["scale"], **{k: record[k] for k in keep if k in record}}}
-
-
-def _reconstruct(dataset: Path, out: Path, cfg, device: str, seed: int, progress: RunProgress) -> dict:
-    from real2sim.reconstruct.stage import reconstruct, write_reconstruction
-
-    result = reconstruct(dataset, cfg, device=device, seed=seed,
-                         progress=lambda msg, done, total: progress.update("reconstruct", msg, done, total))
-    write_reconstruction(result, out, overwrite=True)
-    report = result.report
-    return {"summary": {"faces": report["mesh"]["faces"], "stage_seconds": report["total_seconds"],
-                        "truth": report.get("truth")}}
-
-
-def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: RunProgress) -> dict:
-    """build_asset into ``.run/asset`` (whole or not at all), then move its entries into ASSETDIR."""
-    from real2sim.asset.build import build_asset
-
-    built = asset_dir / mf.RUN_DIRNAME / "asset"
-    build_asset(mesh, built, cfg, overwrite=True, log=lambda msg: progress.update("asset", msg, 0, 0))
-    # Downstream outputs of the previous asset are stale now.
-    for stage, path in (("truth", asset_dir / "truth.json"), ("evaluate", asset_dir / RESULTS_DIRNAME),
-                        ("evaluate_truth", asset_dir / TRUTH_RESULTS_DIRNAME)):
-        manifest.forget(stage)
-        shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
-    for name in (RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME):
-        shutil.rmtree(asset_dir / f".{name}.partial", ignore_errors=True)
-    for entry in asset_dir.iterdir():
-        if entry.name not in RESERVED and not entry.name.startswith("."):
-            shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
-    (built / MARKER_NAME).unlink(missing_ok=True)  # ASSETDIR has its own
-    outputs = sorted(entry.name for entry in built.iterdir())
-    for name in outputs:
-        os.replace(built / name, asset_dir / name)
-    built.rmdir()
-    return {"outputs": outputs}
-
-
 def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, config: RunConfig, seed: int,
            manifest: mf.Manifest) -> None:
     report = json.loads((recon_dir / "report.json").read_text())
@@ -467,25 +391,3 @@ def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, config: 
         for folder in (results, results_truth):  # their reports show the truth now
             if (folder / "runs.csv").is_file():
                 write_report(folder)
-
-
-def _evaluate_truth(dataset: Path, asset_dir: Path, cfg, seed: int, progress: RunProgress) -> dict:
-    """The sweep again, against the true mesh with the true mass properties (see truth_dynamics)."""
-    from real2sim.evaluate.sweep import evaluate
-    from real2sim.pipeline.truth_dynamics import write_true_reference
-
-    mesh, properties = write_true_reference(dataset, asset_dir, asset_dir / mf.RUN_DIRNAME / "truth", seed)
-    shutil.rmtree(asset_dir / f".{TRUTH_RESULTS_DIRNAME}.partial", ignore_errors=True)
-    result = evaluate([asset_dir], asset_dir / TRUTH_RESULTS_DIRNAME, cfg, reference_mesh=mesh,
-                      reference_properties=properties, progress=False, overwrite=True,
-                      log=lambda msg: progress.update("evaluate_truth", msg, 0, 0))
-    return {"summary": {"simulated": result.simulated, "failed": result.failed}}
-
-
-def _evaluate(asset_dir: Path, cfg, progress: RunProgress, skip: tuple[str, ...] = ()) -> dict:
-    from real2sim.evaluate.sweep import evaluate
-
-    result = evaluate([asset_dir], asset_dir / RESULTS_DIRNAME, cfg, progress=False, overwrite=True,
-                      log=lambda msg: progress.update("evaluate", msg, 0, 0), animations=True,
-                      skip_representations=skip)
-    return {"summary": {"simulated": result.simulated, "failed": result.failed}}

@@ -26,7 +26,8 @@ import torch
 import trimesh
 
 from real2sim.formats.errors import UserInputError
-from real2sim.reconstruct.train import FieldConfig, ProgressFn
+from real2sim.formats.progress import ProgressFn
+from real2sim.reconstruct.train import FieldConfig
 from real2sim.reconstruct.views import PosedViews, held_out_split, load_views
 
 BACKENDS = ("field", "hull")

@@ -15,18 +15,15 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import torch
 from scipy.ndimage import binary_dilation
 
+from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.hull import VoxelGrid, carve
 from real2sim.reconstruct.views import PosedViews, pixel_rays
-
-# (message, done, total): the reconstruct stage's progress; total 0 = indeterminate
-ProgressFn = Callable[[str, int, int], None]
 
 
 @dataclass(frozen=True)

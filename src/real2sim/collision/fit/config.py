@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
 from real2sim.collision.primitive_sdf import PARAM_DIM, SUPERQUADRIC_EXPONENT_RANGE
-
-
-ProgressFn = Callable[[int, int, float], None]
 
 
 @dataclass(frozen=True)
@@ -59,7 +55,6 @@ class FitConfig:
     remove_dead: bool = True  # drop primitives that are still dead at the end
     seed: int = 0
     device: str = "cpu"
-    num_threads: int | None = None  # torch CPU threads during the fit; None leaves torch's setting
 
     def __post_init__(self) -> None:
         if self.parameterization not in ("network", "direct"):

@@ -1,4 +1,8 @@
-"""The optimisation loop (eq. 14) with dead-primitive revival; torch's global state is left as found."""
+"""The optimisation loop (eq. 14) with dead-primitive revival; torch's global state is left as found.
+
+The loop uses the torch CPU threads it is given: the program chooses them once (the CLI's
+``--threads``), a library call does not change them.
+"""
 
 from __future__ import annotations
 
@@ -10,18 +14,23 @@ import numpy as np
 import torch
 
 from real2sim.collision.primitive_sdf import HAS_ROTATION, PARAM_DIM, SIZE_DIM
-from real2sim.collision.fit.config import FitConfig, FitResult, ProgressFn
+from real2sim.collision.fit.config import FitConfig, FitResult
 from real2sim.collision.fit.params import _Layout, _unconstrain, _constrain_all, _PrimitiveNet, _DirectParams
 from real2sim.collision.fit.initialization import interior_fill_points, _initial_packed, _packed_from_blobs
 from real2sim.collision.fit.losses import sdf_loss, _regularizers
 from real2sim.collision.fit.union import _closest, _paired_distance, _truncate_estimates, _alive
+from real2sim.formats.progress import ProgressFn
 
 
 @contextmanager
 def _deterministic():
     """Deterministic kernels for the fit only: on 2 CPU threads, the accumulating scatter in the
     backward of the per-sample parameter gather otherwise differs in the last bit between runs,
-    and 1000 Adam steps amplify that into visibly different fits."""
+    and 1000 Adam steps amplify that into visibly different fits.
+
+    torch has no local form of this switch (``use_deterministic_algorithms`` is process-wide,
+    with no context manager or per-tensor option), so it is set for the fit and put back as it
+    was, warn-only flag included, however the fit ends."""
     before = torch.are_deterministic_algorithms_enabled()
     warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
     torch.use_deterministic_algorithms(True, warn_only=True)
@@ -29,19 +38,6 @@ def _deterministic():
         yield
     finally:
         torch.use_deterministic_algorithms(before, warn_only=warn_only)
-
-
-@contextmanager
-def _threads(n: int | None):
-    if n is None:
-        yield
-        return
-    before = torch.get_num_threads()
-    torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 def fit_primitives(
@@ -59,8 +55,8 @@ def fit_primitives(
     ``samples_points_unit`` (N, 3) and ``samples_sdf`` (N,) are in unit-sphere coordinates
     (numpy or torch). ``parts`` are (family, count) pairs as in :class:`real2sim.formats.spec.CollisionSpec`
     (``"boxes"`` or the kind ``"box"``). ``device``/``seed`` override the config's.
-    ``progress(iteration, max_iterations, loss)`` is called every few iterations.
-    Deterministic for a given seed, device and thread count.
+    ``progress("fit", iteration, max_iterations)`` is called every few iterations.
+    Deterministic for a given seed, device and thread count (torch's, as the caller set it).
     """
     device = device or config.device
     seed = config.seed if seed is None else seed
@@ -83,7 +79,7 @@ def fit_primitives(
     # Seed only the generators this fit draws from, inside a fork that restores them: a library
     # call must leave the caller's RNG streams (CPU and every CUDA device) as it found them.
     cuda_devices = list(range(torch.cuda.device_count())) if points.device.type == "cuda" else []
-    with _threads(config.num_threads), _deterministic(), torch.random.fork_rng(devices=cuda_devices):
+    with _deterministic(), torch.random.fork_rng(devices=cuda_devices):
         torch.random.default_generator.manual_seed(seed)
         if cuda_devices:
             torch.cuda.manual_seed_all(seed)
@@ -137,7 +133,7 @@ def fit_primitives(
             if iteration % 10 == 0:
                 history.append(value)
                 if progress is not None:
-                    progress(iteration, config.max_iterations, value)
+                    progress("fit", iteration, config.max_iterations)
             smooth = value if smooth == float("inf") else 0.95 * smooth + 0.05 * value
             if smooth < best * (1 - config.plateau_tolerance):
                 best, since_best = smooth, 0

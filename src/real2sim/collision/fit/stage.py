@@ -6,6 +6,7 @@ from real2sim.collision.fit.config import FitConfig
 from real2sim.collision.fit.convert import superquadric_parameters, to_collision_geometry
 from real2sim.collision.fit.loop import fit_primitives
 from real2sim.formats.collision import CollisionGeometry
+from real2sim.formats.progress import ProgressFn
 from real2sim.formats.spec import CollisionSpec
 
 
@@ -19,31 +20,23 @@ def fit_collision(
     rep_dir=None,
     device: str = "cpu",
     seed: int = 0,
-    progress: bool = False,
+    progress: ProgressFn | None = None,
 ) -> tuple[CollisionGeometry, dict]:
     """Sample the canonical mesh's SDF, fit ``spec``'s primitives, convert to the asset frame.
 
     ``rep_dir`` receives the mesh pieces of superquadrics (see :func:`to_collision_geometry`).
     Returns the geometry and a report: final_loss, fit_seconds, effective_count,
     requested_count, iterations, device (and the superquadrics' parameters when there are any).
+    ``progress``: the SDF sampling's steps ("sdf: ..."), then the fit's iterations ("fit").
     """
     from real2sim.collision.sdf_sampling import SdfSamplingConfig, sample_sdf
 
     if not spec.is_primitive_fit:
         raise ValueError(f"SPEC {spec.text!r} is a baseline, not a primitive fit")
-    samples = sample_sdf(mesh_canonical, sampling_config or SdfSamplingConfig(), cache_dir=cache_dir)
-    if progress:
-        from rich.progress import Progress
-
-        with Progress(transient=True) as bar:
-            task = bar.add_task(f"fitting {spec.text}", total=fit_config.max_iterations)
-
-            def report(it: int, total: int, loss: float) -> None:
-                bar.update(task, completed=it, description=f"fitting {spec.text} loss {loss:.2e}")
-
-            result = fit_primitives(samples.points, samples.sdf, spec.parts, fit_config, device=device, seed=seed, progress=report)
-    else:
-        result = fit_primitives(samples.points, samples.sdf, spec.parts, fit_config, device=device, seed=seed)
+    samples = sample_sdf(mesh_canonical, sampling_config or SdfSamplingConfig(), cache_dir=cache_dir,
+                         progress=progress)
+    result = fit_primitives(samples.points, samples.sdf, spec.parts, fit_config, device=device, seed=seed,
+                            progress=progress)
     geometry = to_collision_geometry(result, samples.centre_m, samples.scale_m, spec, rep_dir)
     report_dict = {
         "final_loss": result.final_loss,
