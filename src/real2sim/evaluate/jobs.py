@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from real2sim.evaluate.discovery import Asset
+from real2sim.evaluate.placement import StablePoseCache
 from real2sim.evaluate.scene_config import SceneConfig
 from real2sim.evaluate.tasks import RunSpec
 from real2sim.evaluate.scoring import score
@@ -35,6 +36,7 @@ class ReferenceJob:
     cache_path: Path | None = None
     contact: ContactProperties | None = None  # the asset's own material, so the reference is the same object
     sim_timeout_s: float | None = None  # wall-clock limit of the simulation (None: none)
+    stable_poses: StablePoseCache | None = None  # the object's resting poses, found once by the sweep
 
 
 @dataclass(frozen=True)
@@ -75,7 +77,7 @@ def run_reference_job(job: ReferenceJob) -> tuple[str, Any]:
 
         props = read_physical_properties(job.physical_properties_path)
         traj = simulate_reference(job.mesh_path, props, job.run_spec, job.scene, object_contact=job.contact,
-                                  timeout_s=job.sim_timeout_s)
+                                  timeout_s=job.sim_timeout_s, stable_poses=job.stable_poses)
         if job.cache_path is not None:
             save_trajectory(traj, job.cache_path)
         return "ok", traj

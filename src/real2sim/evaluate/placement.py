@@ -9,6 +9,8 @@ reference trajectory's first sample).
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from real2sim.evaluate.scene_config import SceneConfig
@@ -16,7 +18,22 @@ from real2sim.formats.rotations import rot_y, rot_z
 from real2sim.evaluate.tasks import RunSpec, task_named
 
 
-_STABLE_CACHE: dict[bytes, list[tuple[np.ndarray, float]]] = {}
+class StablePoseCache:
+    """The statically stable resting orientations of the objects one caller places, computed once
+    per (vertices, CoM): the hull analysis of a 6k-vertex mesh takes seconds. Its owner decides its
+    lifetime (the sweep keeps one per reference object and sends it with that object's jobs)."""
+
+    def __init__(self) -> None:
+        self._poses: dict[bytes, list[tuple[np.ndarray, float]]] = {}
+
+    def rotations(self, vertices_m: np.ndarray, com_m=None) -> list[tuple[np.ndarray, float]]:
+        """:func:`stable_rotations` of the object, computed on the first call only."""
+        v = np.ascontiguousarray(vertices_m, dtype=float)
+        c = None if com_m is None else np.asarray(com_m, dtype=float).reshape(3)
+        key = hashlib.sha256(v.tobytes() + (b"" if c is None else c.tobytes())).digest()
+        if key not in self._poses:
+            self._poses[key] = stable_rotations(v, c)
+        return self._poses[key]
 
 
 def com_inside_hull(vertices_m: np.ndarray, com_m) -> bool:
@@ -42,28 +59,24 @@ def com_inside_hull(vertices_m: np.ndarray, com_m) -> bool:
 def stable_rotations(vertices_m: np.ndarray, com_m=None) -> list[tuple[np.ndarray, float]]:
     """Statically stable resting orientations of a rigid object on a plane: (R_WO, probability)
     pairs, most probable first (trimesh's quasi-static analysis of the vertices' convex hull
-    about ``com_m``, default the hull's centroid). Cached per (vertices, com): the hull of a
-    6k-vertex mesh takes seconds."""
+    about ``com_m``, default the hull's centroid). The hull of a 6k-vertex mesh takes seconds:
+    a caller placing the same object again keeps a :class:`StablePoseCache`."""
     import trimesh
 
     v = np.ascontiguousarray(vertices_m, dtype=float)
     c = None if com_m is None else np.asarray(com_m, dtype=float).reshape(3)
-    key = v.tobytes() + (b"" if c is None else c.tobytes())
-    if key not in _STABLE_CACHE:
-        hull = trimesh.convex.convex_hull(v)
-        if c is not None and not com_inside_hull(v, c):
-            raise ValueError(f"the centre of mass {np.round(c, 4).tolist()} m is not inside the convex hull of "
-                             "the mesh's vertices; it has no resting pose (an open surface, or a mesh that "
-                             "is not in the asset's frame)")
-        transforms, probs = trimesh.poses.compute_stable_poses(
-            hull, center_mass=hull.center_mass if c is None else c, n_samples=1)
-        _STABLE_CACHE.clear()  # one object at a time: keep memory flat in long sweeps
-        _STABLE_CACHE[key] = [(np.asarray(T)[:3, :3].copy(), float(pr)) for T, pr in zip(transforms, probs)]
-    return _STABLE_CACHE[key]
+    hull = trimesh.convex.convex_hull(v)
+    if c is not None and not com_inside_hull(v, c):
+        raise ValueError(f"the centre of mass {np.round(c, 4).tolist()} m is not inside the convex hull of "
+                         "the mesh's vertices; it has no resting pose (an open surface, or a mesh that "
+                         "is not in the asset's frame)")
+    transforms, probs = trimesh.poses.compute_stable_poses(
+        hull, center_mass=hull.center_mass if c is None else c, n_samples=1)
+    return [(np.asarray(T)[:3, :3].copy(), float(pr)) for T, pr in zip(transforms, probs)]
 
 
 def initial_object_rotation(vertices_m: np.ndarray, run_spec: RunSpec, scene_config: SceneConfig,
-                            com_m=None) -> np.ndarray:
+                            com_m=None, cache: StablePoseCache | None = None) -> np.ndarray:
     """R_WO (3x3) of the object at t = 0: a statically stable resting orientation (so the
     object does not roll away before the task starts), then yaw about world z.
 
@@ -74,9 +87,9 @@ def initial_object_rotation(vertices_m: np.ndarray, run_spec: RunSpec, scene_con
     horizontal projection points along world +x (parallel to the ramp's hinge) before the
     yaw. Upright: the most probable stable pose with asset z within 45 degrees of vertical.
     Falls back to the most probable stable pose, and to the plain axis-aligned pose when
-    the analysis finds none.
+    the analysis finds none. ``cache``: where the stable poses are kept between calls (None: computed).
     """
-    poses = stable_rotations(vertices_m, com_m)
+    poses = (cache or StablePoseCache()).rotations(vertices_m, com_m)
     lay = rot_y(np.pi / 2) if scene_config.object_lying else np.eye(3)
     if not poses:
         return rot_z(run_spec.object_yaw_rad) @ lay @ rot_z(run_spec.object_roll_rad)
@@ -107,14 +120,15 @@ def initial_object_rotation(vertices_m: np.ndarray, run_spec: RunSpec, scene_con
 
 
 def initial_object_pose(vertices_m: np.ndarray, run_spec: RunSpec, scene_config: SceneConfig,
-                        com_m=None):
+                        com_m=None, cache: StablePoseCache | None = None):
     """World pose (pydrake RigidTransform) of the object's asset frame at t = 0.
 
     vertices_m: (n, 3) reference-mesh vertices in the asset frame, m; they set the
     resting orientation (:func:`initial_object_rotation`, about ``com_m``, the object's CoM
     in the asset frame), the height (lowest vertex ``drop_clearance_m`` above the support)
     and, on the ramp, the distance from the hinge (up-slope edge ``ramp_object_gap_m``
-    below it). Push: the asset origin is at ``object_offset_m``.
+    below it). Push: the asset origin is at ``object_offset_m``. ``cache``: see
+    :func:`initial_object_rotation`.
     """
     from pydrake.math import RigidTransform, RotationMatrix
 
@@ -122,6 +136,6 @@ def initial_object_pose(vertices_m: np.ndarray, run_spec: RunSpec, scene_config:
     v = np.asarray(vertices_m, dtype=float)
     if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
         raise ValueError("vertices_m must be a non-empty (n, 3) array")
-    R = initial_object_rotation(v, run_spec, scene_config, com_m)
+    R = initial_object_rotation(v, run_spec, scene_config, com_m, cache)
     w = v @ R.T
     return RigidTransform(RotationMatrix(R), task.object_position(w, run_spec, scene_config))

@@ -38,7 +38,7 @@ import numpy as np
 
 from real2sim.formats.physical import read_physical_properties
 from real2sim.formats.trajectory import Trajectory
-from real2sim.evaluate.placement import initial_object_pose
+from real2sim.evaluate.placement import StablePoseCache, initial_object_pose
 from real2sim.evaluate.scene_config import SceneConfig
 from real2sim.evaluate.tasks import RunSpec
 from real2sim.evaluate.world import Scene, build_scene, reference_object_adder, urdf_object_adder
@@ -277,19 +277,21 @@ def _mesh_vertices(mesh_path: Path) -> np.ndarray:
 
 
 def simulate_reference(reference_mesh_path: Path, physical_properties, run_spec: RunSpec,
-                       scene_config: SceneConfig, object_contact=None, timeout_s: float | None = None) -> Trajectory:
+                       scene_config: SceneConfig, object_contact=None, timeout_s: float | None = None,
+                       stable_poses: StablePoseCache | None = None) -> Trajectory:
     """The ground truth: the mesh at ``reference_mesh_path`` (asset frame, m; usually
     ``ASSETDIR/visual/model.obj``) as a rigid hydroelastic body with ``physical_properties``
     (a real2sim.formats.physical.PhysicalProperties), hydroelastic contact, no resets.
     ``object_contact``: real2sim.formats.contact.ContactProperties for friction/dissipation
     (defaults when None). ``timeout_s``: wall-clock limit of the whole call
-    (:class:`SimulationTimeout` past it); None: none."""
+    (:class:`SimulationTimeout` past it); None: none. ``stable_poses``: the object's resting
+    poses kept by the caller (:class:`~real2sim.evaluate.placement.StablePoseCache`; None: computed)."""
     deadline = _Deadline(timeout_s)
     scene = build_scene(run_spec.task, "hydroelastic",
                         reference_object_adder(reference_mesh_path, physical_properties, object_contact),
                         run_spec, scene_config)
     X_WO = initial_object_pose(_mesh_vertices(reference_mesh_path), run_spec, scene_config,
-                               com_m=physical_properties.com_m)
+                               com_m=physical_properties.com_m, cache=stable_poses)
     label = f"reference {run_spec.task} run {run_spec.run}"
     return _simulate(scene, _initial_state(scene, X_WO), None, scene_config, label, "reference",
                      run_spec.run, deadline)

@@ -57,11 +57,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
+import numpy as np
+
 from real2sim.evaluate.discovery import (Asset, Representation, discover_assets, discover_representations,
                                          place_reference_mesh, read_canonical_transform)
 from real2sim.evaluate.executors import EXECUTORS, _default_jobs, _make_executor, _Retry
 from real2sim.evaluate.inputs import check_inputs
 from real2sim.evaluate.record import check_resume_settings, config_record
+from real2sim.evaluate.placement import StablePoseCache
 from real2sim.evaluate.jobs import CandidateJob, ReferenceJob, _reference_cache_name, _row, run_candidate_job, run_reference_job
 from real2sim.evaluate.scene_config import SceneConfig
 from real2sim.evaluate.tasks import TASKS, make_run_specs
@@ -218,20 +221,7 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
     rows: dict[tuple, dict] = {row_key(r): r for r in table.rows} if table is not None else {}
     if table is not None and table.torn_lines:
         say(f"warning: {describe_torn(table, 'runs.csv')}: simulated again", 0, 0)
-    done = {k for k, r in rows.items() if not r["error"]}
-    specs = {task: make_run_specs(task, config.runs, config.seed) for task in config.tasks}
-    todo: dict[tuple[str, str, int], list[tuple[Representation, str]]] = {}
-    skipped = 0
-    for rep in reps:
-        for task in config.tasks:
-            for spec in specs[task]:
-                for cm in config.contact_models:
-                    key = (rep.object, rep.name, cm, task, int(spec.run))
-                    if key in done:
-                        skipped += 1
-                        continue
-                    todo.setdefault((rep.object, task, int(spec.run)), []).append((rep, cm))
-    spec_by = {(task, int(s.run)): s for task in config.tasks for s in specs[task]}
+    todo, spec_by, skipped = _plan(reps, config, rows)
     n_candidates = sum(len(v) for v in todo.values())
     say(f"{len(reps)} representations of {len(assets)} assets: {n_candidates} simulations to run, {skipped} already done",
         0, 0)
@@ -286,6 +276,27 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
     )
 
 
+def _plan(reps, config: EvaluationConfig, rows: dict[tuple, dict]
+          ) -> tuple[dict[tuple[str, str, int], list[tuple[Representation, str]]], dict, int]:
+    """The simulations still to run, grouped by reference (object, task, run); each run's spec;
+    and how many rows are done already (failed rows are run again)."""
+    done = {k for k, r in rows.items() if not r["error"]}
+    specs = {task: make_run_specs(task, config.runs, config.seed) for task in config.tasks}
+    todo: dict[tuple[str, str, int], list[tuple[Representation, str]]] = {}
+    skipped = 0
+    for rep in reps:
+        for task in config.tasks:
+            for spec in specs[task]:
+                for cm in config.contact_models:
+                    key = (rep.object, rep.name, cm, task, int(spec.run))
+                    if key in done:
+                        skipped += 1
+                        continue
+                    todo.setdefault((rep.object, task, int(spec.run)), []).append((rep, cm))
+    spec_by = {(task, int(s.run)): s for task in config.tasks for s in specs[task]}
+    return todo, spec_by, skipped
+
+
 def _write_animations(partial: Path, rows: list[dict], config: EvaluationConfig, say: ProgressFn) -> None:
     """The animations are a view of the results, not a result: a failure is one warning line."""
     from real2sim.evaluate.animation import ANIMATION_DIRNAME, write_animations
@@ -322,6 +333,21 @@ def _reference_failed(payload: str) -> str:
     return payload if payload.startswith("timeout:") else f"reference simulation failed: {payload}"
 
 
+def _stable_poses(mesh_path: Path, properties: Path) -> StablePoseCache:
+    """The reference object's resting poses, found here once rather than in every reference job.
+    A failure leaves the cache empty: each job then meets it again and records it in its rows."""
+    cache = StablePoseCache()
+    try:
+        from real2sim.formats.mesh_io import load_mesh
+        from real2sim.formats.physical import read_physical_properties
+
+        vertices = np.asarray(load_mesh(Path(mesh_path)).vertices, dtype=float)
+        cache.rotations(vertices, read_physical_properties(properties).com_m)
+    except Exception:  # noqa: BLE001 -- the job reports it, with the reference's name
+        pass
+    return cache
+
+
 def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows, runs_path,
                progress: ProgressFn, target: Path, reference_properties: Path | None = None) -> int:
     """Simulate every reference of ``todo``, then its candidates, as the executor finishes them.
@@ -329,14 +355,20 @@ def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config,
     ``progress`` counts both, references first: ("references and simulations", done, total)."""
     total = len(todo) + sum(len(v) for v in todo.values())
     pending: dict[Any, tuple[str, Any, Any]] = {}  # handle -> (kind "ref" or "cand", row key, job)
+    resting: dict[tuple[Path, Path], StablePoseCache] = {}  # one per reference object, for this sweep
     for (obj, task, run), _ in sorted(todo.items()):
         asset = asset_by_name[obj]
         spec = spec_by[(task, run)]
         properties = reference_properties or asset.physical_properties_path
         cache = partial / "reference_cache" / _reference_cache_name(asset, reference_meshes[obj], spec, config.scene,
                                                                     properties)
+        poses = None
+        if not cache.is_file():  # it will be simulated: its resting poses, found once per object
+            poses = resting.get((reference_meshes[obj], properties))
+            if poses is None:
+                poses = resting[(reference_meshes[obj], properties)] = _stable_poses(reference_meshes[obj], properties)
         job = ReferenceJob(obj, task, run, reference_meshes[obj], properties, spec, config.scene,
-                           cache, asset.contact, config.sim_timeout_s)
+                           cache, asset.contact, config.sim_timeout_s, poses)
         pending[executor.submit(run_reference_job, job)] = ("ref", (obj, task, run), job)
 
     simulated = done = 0
