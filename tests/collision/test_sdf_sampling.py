@@ -10,7 +10,7 @@ import trimesh
 from real2sim.formats.errors import UserInputError
 from real2sim.geometry.inside import signed_distance
 from tests.progress_check import Recorder
-from real2sim.collision.sdf_sampling import SdfSamplingConfig, boundary_edges, default_cache_dir, sample_sdf, unit_sphere_transform
+from real2sim.collision.sdf_sampling import SdfSamplingConfig, default_cache_dir, sample_sdf, unit_sphere_transform
 
 SMALL = SdfSamplingConfig(num_surface_samples=20_000, num_uniform_samples=500, seed=3)
 # Wider noise puts many samples clearly (> 0.05 unit) inside or outside, where signs are checked.
@@ -173,19 +173,6 @@ def test_fast_signs_agree_with_exact_on_holes_and_stray_triangles():
     exact = sample_sdf(messy, SdfSamplingConfig(**cfg, sign_method="exact"), cache_dir=None)
     disagree = np.sign(fast.sdf) != np.sign(exact.sdf)
     assert np.all(np.abs(exact.sdf[disagree]) < 1e-6)
-
-
-def test_boundary_edges_of_closed_holey_and_misoriented_meshes():
-    sphere = trimesh.creation.icosphere(subdivisions=2)
-    assert len(boundary_edges(sphere.faces)) == 0
-    a, b = sphere.face_adjacency[0]
-    holey = np.delete(sphere.faces, [a, b], axis=0)  # two adjacent faces removed: a 4-edge hole
-    assert len(boundary_edges(holey)) == 4
-    flipped = sphere.faces.copy()
-    flipped[0] = flipped[0][::-1]  # one face against its neighbours: its three edges no longer cancel
-    assert len(boundary_edges(flipped)) == 3
-    doubled = np.vstack([sphere.faces, sphere.faces])  # a duplicated closed shell is still closed
-    assert len(boundary_edges(doubled)) == 0
 
 
 def test_cache_hit_returns_identical_arrays(tmp_path):

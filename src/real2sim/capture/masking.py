@@ -32,7 +32,7 @@ from real2sim.formats.dataset import (Dataset, Frame, check_dataset_outputs, loa
                                       write_transforms)
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import current_umask
-from real2sim.formats.progress import ProgressFn
+from real2sim.formats.progress import ProgressFn, null_progress
 
 METHODS = ("provided", "maskrcnn", "background")
 
@@ -231,6 +231,31 @@ def _ground_truth_mask(ds: Dataset, f: Frame) -> Path | None:
     return p if p.is_file() else None
 
 
+def _provided_masks(root: Path, ds: Dataset, progress: ProgressFn) -> MaskResult:
+    """``provided``: check the masks the frames name (or masks/<image stem>.png) and point to them."""
+    w, h = ds.intrinsics.width, ds.intrinsics.height
+    n = len(ds.frames)
+    ious, fractions = [], []
+    new_frames = []
+    for i, f in enumerate(ds.frames):
+        p = _provided_path(ds, f)
+        if not p.is_file():
+            raise UserInputError(f"--method provided: no mask for {f.file_path} (expected {p})")
+        m = load_mask(p)
+        if m.shape != (h, w):
+            raise UserInputError(f"mask {p} is {m.shape[1]}x{m.shape[0]}, the images are {w}x{h}")
+        fractions.append(m.mean())
+        gt = _ground_truth_mask(ds, f)
+        if gt is not None:
+            ious.append(iou(m, load_mask(gt)))
+        new_frames.append(replace(f, mask_path=os.path.relpath(p, ds.root)))
+        progress("masks (provided)", i + 1, n)
+    if any(a.mask_path != b.mask_path for a, b in zip(new_frames, ds.frames)):
+        write_transforms(root / "transforms.json", replace(ds, frames=tuple(new_frames)))
+    return MaskResult("provided", n, "masks", float(np.mean(fractions)),
+                      float(np.mean(ious)) if ious else None, float(np.min(ious)) if ious else None)
+
+
 def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskConfig(),
                   progress: ProgressFn | None = None) -> MaskResult:
     """Make (or check) the object masks of a dataset and point its frames to them.
@@ -247,30 +272,11 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
         raise UserInputError(f"{root} has no transforms.json; masks need one to point to them")
     if method != "provided":  # `provided` writes transforms.json only when a frame gains its mask
         check_dataset_outputs(root, files=("transforms.json",), folders=(f"masks_{method}",), what="mask output")
-    w, h = ds.intrinsics.width, ds.intrinsics.height
+    progress = progress or null_progress
+    if method == "provided":
+        return _provided_masks(root, ds, progress)
     n = len(ds.frames)
     ious, fractions = [], []
-
-    if method == "provided":
-        new_frames = []
-        for i, f in enumerate(ds.frames):
-            p = _provided_path(ds, f)
-            if not p.is_file():
-                raise UserInputError(f"--method provided: no mask for {f.file_path} (expected {p})")
-            m = load_mask(p)
-            if m.shape != (h, w):
-                raise UserInputError(f"mask {p} is {m.shape[1]}x{m.shape[0]}, the images are {w}x{h}")
-            fractions.append(m.mean())
-            gt = _ground_truth_mask(ds, f)
-            if gt is not None:
-                ious.append(iou(m, load_mask(gt)))
-            new_frames.append(replace(f, mask_path=os.path.relpath(p, ds.root)))
-            if progress:
-                progress(f"masks ({method})", i + 1, n)
-        if any(a.mask_path != b.mask_path for a, b in zip(new_frames, ds.frames)):
-            write_transforms(root / "transforms.json", replace(ds, frames=tuple(new_frames)))
-        return MaskResult(method, n, "masks", float(np.mean(fractions)),
-                          float(np.mean(ious)) if ious else None, float(np.min(ious)) if ious else None)
 
     if method == "background":
         missing = [f.file_path for f in ds.frames if not (root / "background" / Path(f.file_path).name).is_file()]
@@ -303,8 +309,7 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
             if gt is not None:
                 ious.append(iou(m, load_mask(gt)))
             new_frames.append(replace(f, mask_path=f"{out_name}/{name}"))
-            if progress:
-                progress(f"masks ({method})", i + 1, n)
+            progress(f"masks ({method})", i + 1, n)
         # Swap the folder in, then the transforms.json pointing to it.
         old = None
         if target.exists():

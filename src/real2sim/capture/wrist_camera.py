@@ -34,8 +34,10 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from real2sim.capture.render_scene import OBJECT_LABEL, TABLE_LABEL, RenderScene  # noqa: F401 (labels: public here)
+from real2sim.capture.textures import (export_textured_obj, has_texture, procedural_texture,  # noqa: F401
+                                       with_procedural_texture)
 from real2sim.formats.dataset import (
-    CV_FROM_GL,
     CameraIntrinsics,
     Dataset,
     Frame,
@@ -44,10 +46,7 @@ from real2sim.formats.dataset import (
 )
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import atomic_output_dir
-from real2sim.formats.progress import ProgressFn
-
-OBJECT_LABEL = 1
-TABLE_LABEL = 2
+from real2sim.formats.progress import ProgressFn, null_progress
 
 
 @dataclass(frozen=True)
@@ -129,75 +128,6 @@ class CaptureResult:
     num_views: int
     render_seconds: float
     total_seconds: float
-
-
-# ----------------------------------------------------------------------------- textures
-
-
-def procedural_texture(size_px: int, seed: int, contrast: float = 1.0) -> np.ndarray:
-    """(size, size, 3) uint8 colourful multi-scale noise with sharp blobs: rich in SIFT features."""
-    from PIL import Image
-
-    rng = np.random.default_rng(seed)
-    img = np.zeros((size_px, size_px, 3))
-    # Band-limited noise at several octaves gives features at many scales.
-    for octave, weight in ((8, 0.5), (32, 0.35), (128, 0.25)):
-        grid = Image.fromarray((255 * rng.random((octave, octave, 3))).astype(np.uint8))
-        img += weight / 255.0 * np.asarray(grid.resize((size_px, size_px), Image.BICUBIC), dtype=float)
-    img = (img - img.min()) / (np.ptp(img) + 1e-9)
-    # Hard-edged discs and bars: corners and blobs for the detector (drawn in local windows).
-    for _ in range(size_px // 6):
-        cx, cy = rng.integers(0, size_px, 2)
-        r = int(rng.integers(size_px // 150 + 2, size_px // 30 + 4))
-        col = rng.random(3)
-        y0, y1, x0, x1 = max(cy - r, 0), min(cy + r + 1, size_px), max(cx - r, 0), min(cx + r + 1, size_px)
-        yy, xx = np.mgrid[y0:y1, x0:x1]
-        if rng.random() < 0.5:
-            sel = (xx - cx) ** 2 + (yy - cy) ** 2 < r * r
-        else:
-            sel = np.abs(yy - cy) < r // 2 + 1
-        img[y0:y1, x0:x1][sel] = col
-    img = 0.5 + contrast * (img - 0.5)
-    return (255 * np.clip(img, 0, 1)).astype(np.uint8)
-
-
-def has_texture(mesh: trimesh.Trimesh) -> bool:
-    vis = mesh.visual
-    return (getattr(vis, "kind", None) == "texture" and getattr(vis, "uv", None) is not None
-            and getattr(getattr(vis, "material", None), "image", None) is not None)
-
-
-def with_procedural_texture(mesh: trimesh.Trimesh, seed: int = 0) -> trimesh.Trimesh:
-    """A copy of ``mesh`` with a cylindrical UV map and a procedural texture (for untextured meshes)."""
-    from PIL import Image
-
-    m = mesh.copy()
-    v = m.vertices
-    c = v.mean(axis=0)
-    z0, z1 = v[:, 2].min(), v[:, 2].max()
-    u = np.arctan2(v[:, 1] - c[1], v[:, 0] - c[0]) / (2 * np.pi) + 0.5
-    w = (v[:, 2] - z0) / max(z1 - z0, 1e-9)
-    image = Image.fromarray(procedural_texture(512, seed))
-    m.visual = trimesh.visual.TextureVisuals(uv=np.c_[u, w], image=image)
-    return m
-
-
-def export_textured_obj(mesh: trimesh.Trimesh, path: Path) -> Path:
-    """Write ``mesh`` as OBJ with normals + MTL + PNG beside it, white diffuse so the texture shows as is."""
-    from real2sim.formats.mesh_io import export_textured_mesh
-
-    path = export_textured_mesh(mesh, Path(path))
-    for mtl in path.parent.glob("*.mtl"):
-        lines = []
-        for line in mtl.read_text().splitlines():
-            key = line.split(" ", 1)[0]
-            if key == "Kd":
-                line = "Kd 1.0 1.0 1.0"
-            elif key in ("Ks", "Ka"):
-                line = f"{key} 0.0 0.0 0.0"
-            lines.append(line)
-        mtl.write_text("\n".join(lines) + "\n")
-    return path
 
 
 # ----------------------------------------------------------------------------- poses
@@ -295,102 +225,6 @@ def perturb_poses(c2w: np.ndarray, noise_mm: float, noise_deg: float, seed: int)
     return out
 
 
-# ----------------------------------------------------------------------------- rendering
-
-
-def _lights():
-    from pydrake.geometry import LightParameter
-    from pydrake.geometry import Rgba
-
-    lights = []
-    # A ring light above the table (as in the paper's rig) + a weak headlight: even, shadow-free light.
-    for k in range(8):
-        a = 2 * np.pi * k / 8
-        lights.append(LightParameter(type="point", frame="world", intensity=0.09,
-                                     position=[0.5 * np.cos(a), 0.5 * np.sin(a), 0.9],
-                                     color=Rgba(1, 1, 1, 1)))
-    # Low fill lights (walls / room light) so that vertical faces are not left dark.
-    for k in range(6):
-        a = 2 * np.pi * (k + 0.5) / 6
-        lights.append(LightParameter(type="point", frame="world", intensity=0.07,
-                                     position=[1.2 * np.cos(a), 1.2 * np.sin(a), 0.3],
-                                     color=Rgba(1, 1, 1, 1)))
-    lights.append(LightParameter(type="directional", frame="camera", intensity=0.3, direction=[0, 0, 1]))
-    return lights
-
-
-class _Scene:
-    """A SceneGraph with the textured table and object, and a VTK renderer."""
-
-    def __init__(self, obj_path: Path, world_from_mesh: np.ndarray, table_texture: Path,
-                 table_size_m: float, cam: CameraIntrinsics):
-        from pydrake.geometry import (
-            Box,
-            ClippingRange,
-            ColorRenderCamera,
-            DepthRange,
-            DepthRenderCamera,
-            GeometryInstance,
-            MakeRenderEngineVtk,
-            Mesh,
-            PerceptionProperties,
-            RenderCameraCore,
-            RenderEngineVtkParams,
-            SceneGraph,
-        )
-        from pydrake.geometry import RenderLabel
-        from pydrake.math import RigidTransform
-        from pydrake.systems.framework import DiagramBuilder
-        from pydrake.systems.sensors import CameraInfo
-
-        builder = DiagramBuilder()
-        self.sg = builder.AddSystem(SceneGraph())
-        params = RenderEngineVtkParams()
-        params.default_clear_color = [0.25, 0.25, 0.27]
-        params.lights = _lights()
-        self.sg.AddRenderer("vtk", MakeRenderEngineVtk(params))
-        self.source = self.sg.RegisterSource("capture")
-
-        table_thickness = 0.04
-        table = GeometryInstance(RigidTransform([0, 0, -table_thickness / 2]),
-                                 Box(table_size_m, table_size_m, table_thickness), "table")
-        props = PerceptionProperties()
-        props.AddProperty("label", "id", RenderLabel(TABLE_LABEL))
-        props.AddProperty("phong", "diffuse_map", str(table_texture))
-        table.set_perception_properties(props)
-        self.table_id = self.sg.RegisterAnchoredGeometry(self.source, table)
-
-        obj = GeometryInstance(RigidTransform(world_from_mesh), Mesh(str(obj_path)), "object")
-        props = PerceptionProperties()
-        props.AddProperty("label", "id", RenderLabel(OBJECT_LABEL))
-        obj.set_perception_properties(props)
-        self.object_id = self.sg.RegisterAnchoredGeometry(self.source, obj)
-
-        self.diagram = builder.Build()
-        self.context = self.diagram.CreateDefaultContext()
-        self.sg_context = self.sg.GetMyContextFromRoot(self.context)
-        info = CameraInfo(cam.width, cam.height, cam.fl_x, cam.fl_y, cam.cx, cam.cy)
-        core = RenderCameraCore("vtk", info, ClippingRange(0.01, 10.0), RigidTransform())
-        self.color_cam = ColorRenderCamera(core, False)
-        self.depth_cam = DepthRenderCamera(core, DepthRange(0.02, 9.0))
-        self._RigidTransform = RigidTransform
-
-    def remove_object(self) -> None:
-        from pydrake.geometry import Role
-
-        self.sg.RemoveRole(self.sg_context, self.source, self.object_id, Role.kPerception)
-
-    def render(self, c2w_gl: np.ndarray, depth: bool = True, label: bool = True):
-        """RGB uint8 (H,W,3), depth float32 metres (inf = none), label int (H,W) for one OpenGL c2w pose."""
-        query = self.sg.get_query_output_port().Eval(self.sg_context)
-        x_wc = self._RigidTransform(c2w_gl @ CV_FROM_GL)  # Drake cameras look along +z, y down
-        world = self.sg.world_frame_id()
-        rgb = query.RenderColorImage(self.color_cam, world, x_wc).data[:, :, :3].copy()
-        d = query.RenderDepthImage(self.depth_cam, world, x_wc).data[:, :, 0].copy() if depth else None
-        lab = query.RenderLabelImage(self.color_cam, world, x_wc).data[:, :, 0].copy() if label else None
-        return rgb, d, lab
-
-
 def _save_png(path: Path, array: np.ndarray) -> None:
     from PIL import Image
 
@@ -441,32 +275,11 @@ def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: Cap
         table_tex = render_dir / "table_texture.png"
         _save_png(table_tex, procedural_texture(2048, config.texture_seed))
 
-        scene = _Scene(render_dir / "object.obj", world_from_mesh, table_tex, config.table_size_m, cam)
+        scene = RenderScene(render_dir / "object.obj", world_from_mesh, table_tex, config.table_size_m, cam)
         n = len(exact)
-        total = n * (2 if config.with_background else 1)
         t_render = time.perf_counter()
-        frames_noisy, frames_exact = [], []
-        for i in range(n):
-            name = _frame_name(i)
-            rgb, depth_m, label = scene.render(exact[i])
-            mask = np.where(label == OBJECT_LABEL, 255, 0).astype(np.uint8)
-            _save_png(tmp / "images" / name, rgb)
-            _save_png(tmp / "masks" / name, mask)
-            shutil.copyfile(tmp / "masks" / name, gt / "masks" / name)
-            depth_mm = np.where(np.isfinite(depth_m), np.round(depth_m * 1000.0), 0)
-            _save_png(gt / "depth" / name, np.clip(depth_mm, 0, 65535).astype(np.uint16))
-            fp, mp = f"images/{name}", f"masks/{name}"
-            frames_noisy.append(Frame(file_path=fp, transform_matrix=noisy[i], mask_path=mp))
-            frames_exact.append(Frame(file_path=fp, transform_matrix=exact[i], mask_path=mp))
-            if progress:
-                progress("rendering", i + 1, total)
-        if config.with_background:
-            scene.remove_object()
-            for i in range(n):
-                rgb, _, _ = scene.render(exact[i], depth=False, label=False)
-                _save_png(tmp / "background" / _frame_name(i), rgb)
-                if progress:
-                    progress("rendering", n + i + 1, total)
+        frames_noisy, frames_exact = _render_views(scene, tmp, exact, noisy, config.with_background,
+                                                   progress or null_progress)
         render_s = time.perf_counter() - t_render
         del scene
         shutil.rmtree(render_dir)
@@ -483,3 +296,33 @@ def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: Cap
         (gt / "capture_config.json").write_text(json.dumps(cfg, indent=2, default=list))
     return CaptureResult(out_dir=Path(out_dir).resolve(), num_views=n, render_seconds=render_s,
                          total_seconds=time.perf_counter() - t_start)
+
+
+def _render_views(scene: RenderScene, tmp: Path, exact: np.ndarray, noisy: np.ndarray, with_background: bool,
+                  progress: ProgressFn) -> tuple[list[Frame], list[Frame]]:
+    """Every view's image, mask and depth (and the empty table's, ``with_background``) into ``tmp``;
+    the frames with the reported (``noisy``) poses and with the ``exact`` ones."""
+    gt = tmp / "ground_truth"
+    n = len(exact)
+    total = n * (2 if with_background else 1)
+    frames_noisy, frames_exact = [], []
+    for i in range(n):
+        name = _frame_name(i)
+        rgb, depth_m, label = scene.render(exact[i])
+        mask = np.where(label == OBJECT_LABEL, 255, 0).astype(np.uint8)
+        _save_png(tmp / "images" / name, rgb)
+        _save_png(tmp / "masks" / name, mask)
+        shutil.copyfile(tmp / "masks" / name, gt / "masks" / name)
+        depth_mm = np.where(np.isfinite(depth_m), np.round(depth_m * 1000.0), 0)
+        _save_png(gt / "depth" / name, np.clip(depth_mm, 0, 65535).astype(np.uint16))
+        fp, mp = f"images/{name}", f"masks/{name}"
+        frames_noisy.append(Frame(file_path=fp, transform_matrix=noisy[i], mask_path=mp))
+        frames_exact.append(Frame(file_path=fp, transform_matrix=exact[i], mask_path=mp))
+        progress("rendering", i + 1, total)
+    if with_background:
+        scene.remove_object()
+        for i in range(n):
+            rgb, _, _ = scene.render(exact[i], depth=False, label=False)
+            _save_png(tmp / "background" / _frame_name(i), rgb)
+            progress("rendering", n + i + 1, total)
+    return frames_noisy, frames_exact

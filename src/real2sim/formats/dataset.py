@@ -300,57 +300,6 @@ def check_dataset_outputs(root: Path | str, files: tuple[str, ...] = (), folders
         check_output_path(path, what=what)
 
 
-def _colmap_intrinsics(camera) -> CameraIntrinsics:
-    p = np.asarray(camera.params, dtype=float)
-    name = camera.model.name if hasattr(camera.model, "name") else str(camera.model)
-    w, h = int(camera.width), int(camera.height)
-    if name == "SIMPLE_PINHOLE":
-        return CameraIntrinsics(w, h, p[0], p[0], p[1], p[2])
-    if name == "PINHOLE":
-        return CameraIntrinsics(w, h, p[0], p[1], p[2], p[3])
-    if name == "SIMPLE_RADIAL":
-        return CameraIntrinsics(w, h, p[0], p[0], p[1], p[2], k1=p[3])
-    if name == "RADIAL":
-        return CameraIntrinsics(w, h, p[0], p[0], p[1], p[2], k1=p[3], k2=p[4])
-    if name == "OPENCV":
-        return CameraIntrinsics(w, h, *p[:8])
-    raise UserInputError(f"COLMAP camera model {name} not supported (use PINHOLE, SIMPLE_RADIAL, RADIAL or OPENCV)")
-
-
-def read_colmap_model(root: Path, model_dir: Path | None = None, images_dir: str = "images") -> Dataset:
-    """Build a Dataset from ``images/`` + a COLMAP model (default ``root/sparse/0``), poses in COLMAP's frame."""
-    root = Path(root)
-    model_dir = Path(model_dir) if model_dir is not None else root / "sparse" / "0"
-    try:
-        import pycolmap
-    except ImportError:
-        raise UserInputError("reading a COLMAP model needs pycolmap (pip install pycolmap)") from None
-    try:
-        rec = pycolmap.Reconstruction(str(model_dir))
-    except Exception as exc:  # pycolmap raises generic errors on bad files
-        raise UserInputError(f"could not read COLMAP model {model_dir}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
-    if rec.num_cameras() != 1:
-        raise UserInputError(f"COLMAP model {model_dir} has {rec.num_cameras()} cameras; one camera is supported")
-    intr = _colmap_intrinsics(next(iter(rec.cameras.values())))
-    frames = []
-    for image_id in sorted(rec.reg_image_ids(), key=lambda i: rec.image(i).name):
-        img = rec.image(image_id)
-        cam_from_world = np.eye(4)
-        cam_from_world[:3, :] = img.cam_from_world().matrix()
-        c2w_gl = np.linalg.inv(cam_from_world) @ CV_FROM_GL
-        fp = f"{images_dir}/{img.name}"
-        if not (root / fp).is_file():
-            raise UserInputError(f"COLMAP model names image {img.name}, but {root / fp} is missing")
-        mp = f"masks/{Path(img.name).stem}.png"
-        frames.append(Frame(file_path=fp, transform_matrix=c2w_gl,
-                            mask_path=mp if (root / mp).is_file() else None))
-    if not frames:
-        raise UserInputError(f"COLMAP model {model_dir} has no registered images")
-    ds = Dataset(root=root, intrinsics=intr, frames=tuple(frames), extra={"source": "colmap"})
-    check_frame_files(ds, str(model_dir))
-    return ds
-
-
 def read_dataset(path: Path | str, check_files: bool = True) -> Dataset:
     """Open a dataset folder (or its transforms.json): nerfstudio transforms.json, else images + sparse/0.
 
@@ -368,6 +317,8 @@ def read_dataset(path: Path | str, check_files: bool = True) -> Dataset:
     if (path / "transforms.json").exists():
         return read_transforms(path / "transforms.json", check_files=check_files)
     if (path / "sparse" / "0").is_dir():
+        from real2sim.formats.colmap_model import read_colmap_model
+
         return read_colmap_model(path)
     raise UserInputError(f"{path} holds neither transforms.json nor a COLMAP model sparse/0")
 
@@ -414,3 +365,12 @@ def read_ground_truth(root: Path | str) -> Dataset | None:
     if not path.is_file():
         return None
     return read_transforms(path, root=Path(root), check_files=False)
+
+
+def __getattr__(name: str):
+    # read_colmap_model lives in formats.colmap_model (it imports this module); still importable from here.
+    if name == "read_colmap_model":
+        from real2sim.formats.colmap_model import read_colmap_model
+
+        return read_colmap_model
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

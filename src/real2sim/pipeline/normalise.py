@@ -54,11 +54,11 @@ from real2sim.formats.dataset import (
     CV_FROM_GL,
     Dataset,
     load_mask,
-    read_colmap_model,
     read_dataset,
     read_ground_truth,
     write_transforms,
 )
+from real2sim.formats.colmap_model import read_colmap_model
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import publish_dir, write_json_atomic
 from real2sim.formats.progress import ProgressFn

@@ -34,8 +34,8 @@ from real2sim.formats.outputs import check_output_dir, make_output_dir, output_l
 from real2sim.formats.progress import ProgressFn, null_progress
 from real2sim.pipeline import manifest as mf
 from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, is_model_frame
-from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME, _asset, _evaluate,
-                                      _evaluate_truth, _masks, _reconstruct, _refine, _robot_frame)
+from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
+                                      _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine, _robot_frame)
 from real2sim.pipeline.truth import build_truth, has_ground_truth
 
 if TYPE_CHECKING:
@@ -285,9 +285,11 @@ def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: 
     return result
 
 
-def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConfig, recon_cfg, asset_cfg,
-                with_truth: bool) -> RunResult:
-    run_dir = asset_dir / mf.RUN_DIRNAME
+def _prepare_dataset(runner: _Runner, dataset: Path, run_dir: Path, config: RunConfig
+                     ) -> tuple[Path, Path, str | None]:
+    """The optional stages before the reconstruction (masks, robot_frame, refine_poses): the dataset
+    the reconstruction reads, the one whose ground_truth/ is in its frame, and the last stage's key.
+    A stage no longer asked for is forgotten, with its folder."""
     manifest, progress = runner.manifest, runner.progress
     used, upstream = dataset, None
     if config.mask_method is not None:
@@ -322,6 +324,14 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
     elif manifest.entry("refine_poses"):
         manifest.forget("refine_poses")
         shutil.rmtree(run_dir / "dataset", ignore_errors=True)
+    return used, truth_root, upstream
+
+
+def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConfig, recon_cfg, asset_cfg,
+                with_truth: bool) -> RunResult:
+    run_dir = asset_dir / mf.RUN_DIRNAME
+    manifest, progress = runner.manifest, runner.progress
+    used, truth_root, upstream = _prepare_dataset(runner, dataset, run_dir, config)
 
     recon_dir = run_dir / "reconstruct"
     upstream = runner.stage(

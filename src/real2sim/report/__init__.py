@@ -9,7 +9,7 @@ from real2sim._lazy import lazy_exports
 _EXPORTS = {
     "build_outputs": "html",
     "write_report": "html",
-    "render_html": "html",
+    "render_html": "page",
     "recommend": "pareto",
     "pareto_front": "pareto",
     "write_pareto_plots": "pareto",

@@ -19,7 +19,7 @@ from real2sim.collision.fit.params import _Layout, _unconstrain, _constrain_all,
 from real2sim.collision.fit.initialization import interior_fill_points, _initial_packed, _packed_from_blobs
 from real2sim.collision.fit.losses import sdf_loss, _regularizers
 from real2sim.collision.fit.union import _closest, _paired_distance, _truncate_estimates, _alive
-from real2sim.formats.progress import ProgressFn
+from real2sim.formats.progress import ProgressFn, null_progress
 
 
 @contextmanager
@@ -91,56 +91,8 @@ def fit_primitives(
         else:
             model = _DirectParams(base.cpu()).to(device)
         optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
-        total_steps = max(1, config.max_iterations)
-
-        def lr_at(it: int) -> float:
-            if config.lr_schedule == "constant":
-                return config.lr
-            f = config.final_lr_fraction
-            return config.lr * (f + (1 - f) * 0.5 * (1 + math.cos(math.pi * it / total_steps)))
-
-        n = len(points)
-        batch = min(config.batch_size, n)
-        history: list[float] = []
-        smooth = best = float("inf")
-        since_best = 0
-        revived = 0
-        cover_counts = torch.zeros(layout.total, dtype=torch.long, device=device)
-        iteration = 0
-        for iteration in range(1, config.max_iterations + 1):
-            for group in optimiser.param_groups:
-                group["lr"] = lr_at(iteration - 1)
-            idx = torch.randint(n, (batch,), generator=gen).to(device)
-            x, s = points[idx], target[idx]
-            raw = model()
-            raws = layout.split(raw)
-            packed = _constrain_all(layout, raws, config)
-            dist, arg = _closest(layout, [p.detach() for p in packed], x)
-            d = _paired_distance(layout, packed, x, arg)
-            if "superquadric" in layout.kinds:
-                d, s = _truncate_estimates(layout, arg, d, s, config.superquadric_truncation)
-            loss = sdf_loss(d, s, config.inside_loss).mean() + _regularizers(layout, raws, config)
-            optimiser.zero_grad(set_to_none=True)
-            loss.backward()
-            optimiser.step()
-
-            value = float(loss.detach())
-            covered = (s < 0) & (dist <= 0)
-            cover_counts += torch.bincount(arg[covered], minlength=layout.total)
-            if config.revive_dead and iteration % config.revive_every == 0 and iteration < 0.7 * config.max_iterations:
-                revived += _revive(model, layout, cover_counts, points, target, config, gen)
-                cover_counts.zero_()
-            if iteration % 10 == 0:
-                history.append(value)
-                if progress is not None:
-                    progress("fit", iteration, config.max_iterations)
-            smooth = value if smooth == float("inf") else 0.95 * smooth + 0.05 * value
-            if smooth < best * (1 - config.plateau_tolerance):
-                best, since_best = smooth, 0
-            else:
-                since_best += 1
-            if iteration >= config.min_iterations and since_best >= config.patience:
-                break
+        iteration, history, revived = _iterate(model, optimiser, layout, points, target, config, gen,
+                                               progress or null_progress)
 
         with torch.no_grad():
             raws = layout.split(model())
@@ -153,17 +105,7 @@ def fit_primitives(
             final_dist, _ = _closest(kept_layout, kept, points)
             final_loss = float(sdf_loss(final_dist[:n_samples], target[:n_samples]).mean())
 
-    kinds: list[str] = []
-    rows: list[tuple[float, ...]] = []
-    for kind, p in zip(kept_layout.kinds, kept):
-        p = p.detach().double().cpu().clone()
-        if HAS_ROTATION[kind]:
-            q = p[:, -4:]
-            q = q / q.norm(dim=1, keepdim=True)
-            p[:, -4:] = torch.where(q[:, :1] < 0, -q, q)  # w >= 0: same rotation, canonical sign
-        for row in p.numpy():
-            kinds.append(kind)
-            rows.append(tuple(float(v) for v in row))
+    kinds, rows = _rows(kept_layout, kept)
     return FitResult(
         kinds=tuple(kinds),
         parameters=tuple(rows),
@@ -177,6 +119,79 @@ def fit_primitives(
         revived=revived,
     )
 
+
+
+def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: _Layout, points: torch.Tensor,
+             target: torch.Tensor, config: FitConfig, gen: torch.Generator, progress: ProgressFn
+             ) -> tuple[int, list[float], int]:
+    """The Adam steps on minibatches, with revival and the early stop: (iterations, history, revived)."""
+    device = points.device
+    total_steps = max(1, config.max_iterations)
+
+    def lr_at(it: int) -> float:
+        if config.lr_schedule == "constant":
+            return config.lr
+        f = config.final_lr_fraction
+        return config.lr * (f + (1 - f) * 0.5 * (1 + math.cos(math.pi * it / total_steps)))
+
+    n = len(points)
+    batch = min(config.batch_size, n)
+    history: list[float] = []
+    smooth = best = float("inf")
+    since_best = 0
+    revived = 0
+    cover_counts = torch.zeros(layout.total, dtype=torch.long, device=device)
+    iteration = 0
+    for iteration in range(1, config.max_iterations + 1):
+        for group in optimiser.param_groups:
+            group["lr"] = lr_at(iteration - 1)
+        idx = torch.randint(n, (batch,), generator=gen).to(device)
+        x, s = points[idx], target[idx]
+        raw = model()
+        raws = layout.split(raw)
+        packed = _constrain_all(layout, raws, config)
+        dist, arg = _closest(layout, [p.detach() for p in packed], x)
+        d = _paired_distance(layout, packed, x, arg)
+        if "superquadric" in layout.kinds:
+            d, s = _truncate_estimates(layout, arg, d, s, config.superquadric_truncation)
+        loss = sdf_loss(d, s, config.inside_loss).mean() + _regularizers(layout, raws, config)
+        optimiser.zero_grad(set_to_none=True)
+        loss.backward()
+        optimiser.step()
+
+        value = float(loss.detach())
+        covered = (s < 0) & (dist <= 0)
+        cover_counts += torch.bincount(arg[covered], minlength=layout.total)
+        if config.revive_dead and iteration % config.revive_every == 0 and iteration < 0.7 * config.max_iterations:
+            revived += _revive(model, layout, cover_counts, points, target, config, gen)
+            cover_counts.zero_()
+        if iteration % 10 == 0:
+            history.append(value)
+            progress("fit", iteration, config.max_iterations)
+        smooth = value if smooth == float("inf") else 0.95 * smooth + 0.05 * value
+        if smooth < best * (1 - config.plateau_tolerance):
+            best, since_best = smooth, 0
+        else:
+            since_best += 1
+        if iteration >= config.min_iterations and since_best >= config.patience:
+            break
+    return iteration, history, revived
+
+
+def _rows(layout: _Layout, packed: list[torch.Tensor]) -> tuple[list[str], list[tuple[float, ...]]]:
+    """Each primitive's kind and parameter row (quaternions normalised, w >= 0)."""
+    kinds: list[str] = []
+    rows: list[tuple[float, ...]] = []
+    for kind, p in zip(layout.kinds, packed):
+        p = p.detach().double().cpu().clone()
+        if HAS_ROTATION[kind]:
+            q = p[:, -4:]
+            q = q / q.norm(dim=1, keepdim=True)
+            p[:, -4:] = torch.where(q[:, :1] < 0, -q, q)  # w >= 0: same rotation, canonical sign
+        for row in p.numpy():
+            kinds.append(kind)
+            rows.append(tuple(float(v) for v in row))
+    return kinds, rows
 
 def _subset(layout: _Layout, packed: list[torch.Tensor], keep: torch.Tensor) -> tuple[_Layout, list[torch.Tensor]]:
     parts, kept = [], []

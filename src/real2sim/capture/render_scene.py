@@ -1,0 +1,106 @@
+"""The capture's scene in Drake: the textured table and object under a ring of lights, rendered
+by the VTK engine (colour, depth along the optical axis, labels)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics
+
+OBJECT_LABEL = 1
+TABLE_LABEL = 2
+
+
+def _lights():
+    from pydrake.geometry import LightParameter
+    from pydrake.geometry import Rgba
+
+    lights = []
+    # A ring light above the table (as in the paper's rig) + a weak headlight: even, shadow-free light.
+    for k in range(8):
+        a = 2 * np.pi * k / 8
+        lights.append(LightParameter(type="point", frame="world", intensity=0.09,
+                                     position=[0.5 * np.cos(a), 0.5 * np.sin(a), 0.9],
+                                     color=Rgba(1, 1, 1, 1)))
+    # Low fill lights (walls / room light) so that vertical faces are not left dark.
+    for k in range(6):
+        a = 2 * np.pi * (k + 0.5) / 6
+        lights.append(LightParameter(type="point", frame="world", intensity=0.07,
+                                     position=[1.2 * np.cos(a), 1.2 * np.sin(a), 0.3],
+                                     color=Rgba(1, 1, 1, 1)))
+    lights.append(LightParameter(type="directional", frame="camera", intensity=0.3, direction=[0, 0, 1]))
+    return lights
+
+
+class RenderScene:
+    """A SceneGraph with the textured table and object, and a VTK renderer."""
+
+    def __init__(self, obj_path: Path, world_from_mesh: np.ndarray, table_texture: Path,
+                 table_size_m: float, cam: CameraIntrinsics):
+        from pydrake.geometry import (
+            Box,
+            ClippingRange,
+            ColorRenderCamera,
+            DepthRange,
+            DepthRenderCamera,
+            GeometryInstance,
+            MakeRenderEngineVtk,
+            Mesh,
+            PerceptionProperties,
+            RenderCameraCore,
+            RenderEngineVtkParams,
+            SceneGraph,
+        )
+        from pydrake.geometry import RenderLabel
+        from pydrake.math import RigidTransform
+        from pydrake.systems.framework import DiagramBuilder
+        from pydrake.systems.sensors import CameraInfo
+
+        builder = DiagramBuilder()
+        self.sg = builder.AddSystem(SceneGraph())
+        params = RenderEngineVtkParams()
+        params.default_clear_color = [0.25, 0.25, 0.27]
+        params.lights = _lights()
+        self.sg.AddRenderer("vtk", MakeRenderEngineVtk(params))
+        self.source = self.sg.RegisterSource("capture")
+
+        table_thickness = 0.04
+        table = GeometryInstance(RigidTransform([0, 0, -table_thickness / 2]),
+                                 Box(table_size_m, table_size_m, table_thickness), "table")
+        props = PerceptionProperties()
+        props.AddProperty("label", "id", RenderLabel(TABLE_LABEL))
+        props.AddProperty("phong", "diffuse_map", str(table_texture))
+        table.set_perception_properties(props)
+        self.table_id = self.sg.RegisterAnchoredGeometry(self.source, table)
+
+        obj = GeometryInstance(RigidTransform(world_from_mesh), Mesh(str(obj_path)), "object")
+        props = PerceptionProperties()
+        props.AddProperty("label", "id", RenderLabel(OBJECT_LABEL))
+        obj.set_perception_properties(props)
+        self.object_id = self.sg.RegisterAnchoredGeometry(self.source, obj)
+
+        self.diagram = builder.Build()
+        self.context = self.diagram.CreateDefaultContext()
+        self.sg_context = self.sg.GetMyContextFromRoot(self.context)
+        info = CameraInfo(cam.width, cam.height, cam.fl_x, cam.fl_y, cam.cx, cam.cy)
+        core = RenderCameraCore("vtk", info, ClippingRange(0.01, 10.0), RigidTransform())
+        self.color_cam = ColorRenderCamera(core, False)
+        self.depth_cam = DepthRenderCamera(core, DepthRange(0.02, 9.0))
+        self._RigidTransform = RigidTransform
+
+    def remove_object(self) -> None:
+        from pydrake.geometry import Role
+
+        self.sg.RemoveRole(self.sg_context, self.source, self.object_id, Role.kPerception)
+
+    def render(self, c2w_gl: np.ndarray, depth: bool = True, label: bool = True):
+        """RGB uint8 (H,W,3), depth float32 metres (inf = none), label int (H,W) for one OpenGL c2w pose."""
+        query = self.sg.get_query_output_port().Eval(self.sg_context)
+        x_wc = self._RigidTransform(c2w_gl @ CV_FROM_GL)  # Drake cameras look along +z, y down
+        world = self.sg.world_frame_id()
+        rgb = query.RenderColorImage(self.color_cam, world, x_wc).data[:, :, :3].copy()
+        d = query.RenderDepthImage(self.depth_cam, world, x_wc).data[:, :, 0].copy() if depth else None
+        lab = query.RenderLabelImage(self.color_cam, world, x_wc).data[:, :, 0].copy() if label else None
+        return rgb, d, lab
