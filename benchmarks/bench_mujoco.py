@@ -45,7 +45,8 @@ def build_bottle_asset(out: Path) -> Path:
     mesh = export_object("bottle", out / "bottle_mesh" / "bottle.obj")
     config = AssetConfig(mass_kg=OBJECTS["bottle"].mass_kg, specs=tuple(parse_spec(s) for s in SPECS),
                          flat_bottom=True, formats=("urdf", "mjcf"))
-    return build_asset(mesh, out / "bottle_asset", config, log=lambda m: print(m, flush=True)).asset_dir
+    return build_asset(mesh, out / "bottle_asset", config,
+                       progress=lambda m, done, total: total or print(m, flush=True)).asset_dir
 
 
 def mujoco_rates(model_xml: Path, pusher_radius_m: float, pusher_speed_m_per_s: float, push_s: float,

@@ -117,7 +117,10 @@ def main() -> int:
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=tuple(args.contact), runs=runs,
                               seed=args.seed, **({"jobs": args.jobs} if args.jobs else {}))
     results_dir = args.work / (f"results_{args.tag}" if args.tag else "results")
-    result = evaluate(asset_dirs, results_dir, config, progress=True)
+    from real2sim.cli.progress import progress_display
+
+    with progress_display() as progress:
+        result = evaluate(asset_dirs, results_dir, config, progress=progress)
     eval_s = time.perf_counter() - start - build_s
 
     paper = read_paper_table()
