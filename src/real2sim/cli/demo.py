@@ -133,12 +133,10 @@ def _capture_line(plan: DemoPlan, cfg) -> str:
 def run(args: argparse.Namespace) -> int:
     import sys
     import time
-
     from dataclasses import replace
 
     from real2sim.capture.wrist_camera import capture
     from real2sim.cli.progress import progress_display
-
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.formats.outputs import atomic_output_dir, check_output_dir
     from real2sim.formats.progress import prefixed

@@ -4,7 +4,8 @@ On a terminal: one rich line, a bar with counts and ETA while steps are counted
 (``total > 0``), a spinner and the message otherwise; messages without a count
 are also kept as log lines above it. Elsewhere (a pipe, a file, CI): plain lines,
 every message without a count, and of counted work its first step, its last,
-and one step every few seconds between.
+and one step every few seconds between; each line is written when the next
+call comes, so work that stops on bad input leaves only the one-line error.
 """
 
 from __future__ import annotations
@@ -21,20 +22,29 @@ PLAIN_INTERVAL_S = 5.0
 
 
 class _Plain:
-    """Plain lines on stderr, counted work throttled."""
+    """Plain lines on stderr, counted work throttled. Each call is written when the next one comes
+    (or the work ends): a stage that fails on bad input leaves only its one-line error."""
 
     def __init__(self, echo: Callable[[str], None]):
         self.echo = echo
         self.last_line = float("-inf")
         self.counting = ""
+        self.pending: tuple[str, int, int] | None = None
 
     def __call__(self, message: str, done: int, total: int) -> None:
+        self.flush(final=False)
+        self.pending = (message, done, total)
+
+    def flush(self, final: bool = True) -> None:
+        if self.pending is None:
+            return
+        (message, done, total), self.pending = self.pending, None
         if total <= 0:
             self.echo(message)
             self.counting = ""
             return
         now = time.monotonic()
-        if message != self.counting or done >= total or now - self.last_line >= PLAIN_INTERVAL_S:
+        if final or message != self.counting or done >= total or now - self.last_line >= PLAIN_INTERVAL_S:
             print(f"{message}: {done}/{total}", file=sys.stderr, flush=True)
             self.last_line, self.counting = now, message
 
@@ -64,7 +74,9 @@ def progress_display(echo: Callable[[str], None] | None = None, *, console=None)
 
     console = console or Console(stderr=True, log_path=False)
     if not console.is_terminal:
-        yield _Plain(echo or (lambda message: print(message, file=sys.stderr, flush=True)))
+        plain = _Plain(echo or (lambda message: print(message, file=sys.stderr, flush=True)))
+        yield plain  # an exception drops the last call's line: the error says what failed
+        plain.flush()
         return
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn,
                                TimeElapsedColumn, TimeRemainingColumn)

@@ -85,9 +85,10 @@ class RunConfig:
 class RunProgress:
     """The whole run through one :class:`~real2sim.formats.progress.ProgressFn`.
 
-    A stage's start and end are messages ("[3/7] reconstruct", "[3/7] reconstruct: done",
-    "... unchanged, skipped"); called as a ProgressFn itself, it passes the running stage's
-    work on with the stage in front ("[3/7] reconstruct - training field ...").
+    A stage's end is a message ("[3/7] reconstruct: done", "... unchanged, skipped"); called as a
+    ProgressFn itself, it passes the running stage's work on with the stage in front
+    ("[3/7] reconstruct - training field ..."). A stage's start is no message of its own: a stage
+    that stops on bad input before any work leaves only its error.
     """
 
     def __init__(self, progress: ProgressFn | None = None):
@@ -97,9 +98,7 @@ class RunProgress:
     def stage(self, name: str, index: int, count: int, status: str) -> None:
         """``status``: "running", "skipped" (unchanged), "done"."""
         self.label = f"[{index}/{count}] {name}"
-        if status == "running":
-            self.progress(self.label, 0, 0)
-        else:
+        if status != "running":
             self.progress(f"{self.label}: {'unchanged, skipped' if status == 'skipped' else 'done'}", 0, 0)
 
     def __call__(self, message: str, done: int, total: int) -> None:

@@ -21,9 +21,9 @@ import torch
 import trimesh
 from scipy.ndimage import binary_fill_holes
 
+from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.hull import VoxelGrid, largest_parts, surface_from_grid
-from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.train import occupancy_ranges
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
