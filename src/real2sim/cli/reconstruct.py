@@ -41,6 +41,9 @@ def register(sub) -> None:
     p.add_argument("--voxels", type=VOXELS, default=None,
                    help="fine-grid voxels along the object's longest side (default from the field settings)")
     p.add_argument("--texture-px", type=TEXTURE_PX, default=1024, help="texture image size, px (default 1024)")
+    p.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
+                   help="field backend: train from the visual hull as it is, without opening the concavities "
+                        "the views disagree about (see docs/reconstruct.md)")
     p.add_argument("--from-mesh", type=existing_file, default=None, metavar="MESH",
                    help="import this mesh exported by nerfstudio instead of reconstructing")
     p.add_argument("--dataparser-transforms", type=existing_file, default=None, metavar="JSON",
@@ -78,6 +81,8 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
             field = replace(field, fine_steps=args.steps, coarse_steps=args.steps // 2)
         if args.voxels is not None:
             field = replace(field, fine_voxels=args.voxels, coarse_voxels=max(args.voxels // 2, 4))
+        if not args.photo_carving:
+            field = replace(field, photo_carving=False)
         config = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
                                    texture_px=args.texture_px)
         config.validate()

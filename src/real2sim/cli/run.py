@@ -62,6 +62,9 @@ def register(sub) -> None:
     g.add_argument("--voxels", type=VOXELS, default=None,
                    help="voxels along the object's longest side (field: fine grid; hull: carving grid, default 192)")
     g.add_argument("--texture-px", type=TEXTURE_PX, default=1024, help="texture image size, px (default 1024)")
+    g.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
+                   help="field backend: train from the visual hull as it is, without opening the concavities "
+                        "the views disagree about (see docs/reconstruct.md)")
     g.add_argument("--max-faces", type=integer(100, 5_000_000), default=None, help="simplify the mesh to this many faces "
                    "(default 40000)")
     add_asset_arguments(p, seed_max=COLMAP_SEED_MAX)  # the seed reaches COLMAP with --refine-poses
@@ -106,6 +109,8 @@ def config_from_args(args: argparse.Namespace):
     field = FieldConfig()
     if args.steps is not None:
         field = replace(field, fine_steps=args.steps, coarse_steps=max(args.steps // 2, 1))
+    if not args.photo_carving:
+        field = replace(field, photo_carving=False)
     recon = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
                               texture_px=args.texture_px)
     if args.voxels is not None:

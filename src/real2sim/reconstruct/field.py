@@ -121,8 +121,11 @@ class VoxelRadianceField(torch.nn.Module):
     def interpolate(self, points_m: torch.Tensor) -> torch.Tensor:
         """(P, 1 + C) trilinear blend of raw density and features at world points (clamped to the grid)."""
         idx, weights = self._corners(points_m)
-        density = (self.density_table[idx] * weights).sum(dim=1)
-        features = (self.feature_table[idx] * weights[:, :, None]).sum(dim=1)
+        # index_select rather than table[idx]: its backward is an index_add, several times faster
+        # on CPU than the accumulating index_put that advanced indexing differentiates into
+        flat = idx.reshape(-1)
+        density = (self.density_table.index_select(0, flat).view(idx.shape) * weights).sum(dim=1)
+        features = (self.feature_table.index_select(0, flat).view(*idx.shape, self.feature_channels) * weights[:, :, None]).sum(dim=1)
         return torch.cat([density[:, None], features], dim=1)
 
     def _density_raw(self, points_m: torch.Tensor) -> torch.Tensor:

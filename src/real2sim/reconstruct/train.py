@@ -14,7 +14,7 @@ is resampled onto a finer grid and trained further.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dataclass_field
 
 import numpy as np
 import torch
@@ -23,6 +23,7 @@ from scipy.ndimage import binary_dilation
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.hull import VoxelGrid, carve
+from real2sim.reconstruct.photo_carving import CarvingConfig, photo_carve
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
 
@@ -38,6 +39,11 @@ class FieldConfig:
     320x240, an earlier build), density rates of 0.1 / 0.02 / 0.005 gave Chamfer
     0.74 / 0.51 / 0.47 mm; ``benchmarks/bench_reconstruct.py`` measures the defaults.
     ``view_dependent=False`` gives a Lambertian field.
+
+    ``photo_carving``: before training, the visual hull is carved where the views disagree
+    about its colour (:mod:`real2sim.reconstruct.photo_carving`), and
+    the field starts empty there. Training cannot open a concavity the hull filled (a
+    mug's cavity) by itself: a lid across it with a painted top renders nearly as well.
     """
 
     coarse_voxels: int = 80
@@ -57,6 +63,8 @@ class FieldConfig:
     view_dependent: bool = True
     mask_dilation_px: int = 3
     background_ray_fraction: float = 0.05
+    photo_carving: bool = True
+    carving: CarvingConfig = dataclass_field(default_factory=CarvingConfig)
 
     def validate(self) -> None:
         from real2sim.formats.errors import UserInputError
@@ -73,6 +81,7 @@ class TrainResult:
     field: VoxelRadianceField
     loss_curve: tuple[tuple[int, float], ...]  # (step, mean MSE over the last reporting window)
     seconds: float
+    carved_voxels: int = 0  # coarse-grid voxels of the visual hull removed by photo-consistent carving
 
 
 @dataclass(frozen=True)
@@ -110,11 +119,35 @@ def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> 
     return binary_dilation(inside, np.ones((3, 3, 3), bool), iterations=config.carve_dilation_voxels)
 
 
-def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> np.ndarray:
+def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig,
+                 progress: ProgressFn | None = None) -> tuple[np.ndarray, int]:
     """Initial density per voxel (``grid.shape``): ``init_density`` inside the visual hull, fading to
-    nearly nothing outside it over about a voxel (a smooth step of the silhouette score)."""
+    nearly nothing outside it over about a voxel (a smooth step of the silhouette score), and
+    nearly nothing where photo-consistent carving removed the hull; and the voxels carved."""
     score = carve(views, grid, config.hull_outlier_fraction)
-    return config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
+    density = config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
+    if not config.photo_carving:
+        return density, 0
+    carved = _photo_carved(views, grid, config, progress)
+    return np.where(carved, 1e-3 * config.init_density, density), int(carved.sum())
+
+
+def _photo_carved(views: PosedViews, grid: VoxelGrid, config: FieldConfig, progress: ProgressFn | None) -> np.ndarray:
+    """Voxels of ``grid`` that photo-consistent carving removes from the visual hull.
+
+    Carving runs on a grid of at least ``config.carving.voxels`` along the longest side: on
+    coarser voxels a true surface's voxel centres lie so far inside it that the views of
+    them disagree (a 24-voxel can lost a quarter of its volume)."""
+    lo, hi = grid.bounds_m
+    fine = grid if max(grid.shape) >= config.carving.voxels else \
+        VoxelGrid.covering(lo, hi, config.carving.voxels, table_z_m=float(lo[2]))
+    hull = carve(views, fine, config.hull_outlier_fraction) >= 0.5
+    carved = hull & ~photo_carve(views, fine, hull, config.carving, progress=progress).solid
+    if fine is grid:
+        return carved
+    nearest = np.round((grid.centres() - fine.origin_m) / fine.voxel_m).astype(int)
+    nearest = np.clip(nearest, 0, np.asarray(fine.shape) - 1)
+    return carved[tuple(nearest.T)].reshape(grid.shape)
 
 
 def occupancy_ranges(field: VoxelRadianceField, origins: torch.Tensor,
@@ -159,25 +192,29 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     stages = [(config.coarse_voxels, config.coarse_steps), (config.fine_voxels, config.fine_steps)]
     stages = [(n, s) for n, s in stages if s > 0]
     total = sum(s for _, s in stages)
-    field, done, curve = None, 0, []
+    field, done, curve, carved_voxels = None, 0, [], 0
     for voxels, steps in stages:
         grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
         occupancy = field_occupancy(views, grid, config)
         if field is None:
+            init_density, carved_voxels = hull_density(views, grid, config, progress)
             field = VoxelRadianceField(grid, occupancy, feature_channels=config.feature_channels,
-                                       init_density=hull_density(views, grid, config), device=device, generator=gen)
+                                       init_density=init_density, device=device, generator=gen)
         else:
             field = field.upsampled(grid, occupancy)
         done = _optimise(field, pool, config, steps, done, total, gen, progress, curve)
-    return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start)
+    return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
+                       carved_voxels=carved_voxels)
 
 
 def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
               gen: torch.Generator, progress: ProgressFn | None, curve: list) -> int:
     """``steps`` Adam steps on ``field``; appends (step, mean loss) to ``curve``; returns the steps done so far."""
     t_in, t_out = occupancy_ranges(field, pool.origins, pool.directions)
+    # fused: one kernel over the whole grid; the per-tensor loop took a quarter of each step
     grid_opt = torch.optim.Adam([{"params": [field.density_table], "lr": config.lr_density, "base": config.lr_density},
-                                 {"params": [field.feature_table], "lr": config.lr_features, "base": config.lr_features}])
+                                 {"params": [field.feature_table], "lr": config.lr_features, "base": config.lr_features}],
+                                fused=True)
     dec_opt = torch.optim.Adam(field.decoder.parameters(), lr=config.lr_decoder)
     window: list[float] = []
     report_every = max(steps // 20, 1)

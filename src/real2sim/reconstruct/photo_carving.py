@@ -1,0 +1,203 @@
+"""Photo-consistent carving: open the concavities that silhouettes cannot see (a mug's cavity).
+
+The visual hull fills every concavity a silhouette cannot reveal: seen from any
+side, a mug's cavity is hidden by its rim. The views that look down into it see
+its floor and inner wall, and those disagree about the colour of any point of
+the lid the hull puts across it: each view sees a different point behind it.
+A point on the real surface looks nearly the same from every view that sees it.
+
+So, as in space carving (Kutulakos and Seitz, 2000), voxels on the surface of
+the current solid are tested against the views that see them (a ray from the
+camera reaches the voxel before the current surface stops it) and removed when
+those views disagree; removing them exposes the voxels behind, which are tested
+in the next round, until no surface voxel is removed. The radiance field then
+starts from the carved solid, because its gradients cannot open a cavity by
+themselves (a filled cavity renders nearly like a lid with a painted top).
+
+The test, per surface voxel: the colours at its projection in the views that
+see it (images blurred over half a voxel's footprint), their per-channel
+median, and each view's distance from it (RGB in [0, 1]); the *spread* is the
+``spread_quantile`` of those distances, and the voxel disagrees when it exceeds
+``max_spread`` and at least ``min_views`` views see it. Three guards keep true
+surfaces, measured on the bundled objects:
+
+* brightness alone differs between views of a shiny or curved surface (the
+  can's lid): a carve *starts* only where the hues disagree too (colour over
+  brightness), and then grows through voxels next to what it removed;
+* texture edges make isolated disagreeing voxels: a voxel goes only when most
+  of the surface voxels around it disagree too;
+* what is carved in the end is kept only in connected parts of at least
+  ``min_component_fraction`` of the hull's volume.
+
+It cannot see a concavity whose inside is one flat colour, and it thins walls
+thinner than about two voxels. World frame, metres; the lowest layer of voxels
+(standing on the table) is never carved.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import binary_dilation, binary_erosion, convolve, gaussian_filter
+
+from real2sim.formats.progress import ProgressFn
+from real2sim.reconstruct.hull import VoxelGrid, surface_from_grid
+from real2sim.reconstruct.views import PosedViews, project
+
+
+@dataclass(frozen=True)
+class CarvingConfig:
+    """Photo-consistent carving settings; see the module docstring."""
+
+    voxels: int = 80  # the carving grid has at least this many voxels along the longest side
+    max_spread: float = 0.15
+    spread_quantile: float = 0.75
+    max_hue_spread: float = 0.15
+    hue_floor: float = 0.3
+    min_views: int = 4
+    neighbour_fraction: float = 0.5
+    blur_voxels: float = 0.5
+    max_rounds: int = 150
+    visibility_tolerance_voxels: float = 1.0
+    min_component_fraction: float = 0.1
+
+
+@dataclass(frozen=True)
+class CarvingResult:
+    """``solid``: bool (``grid.shape``), the carved solid; ``carved_voxels``; ``rounds`` run."""
+
+    solid: np.ndarray
+    carved_voxels: int
+    rounds: int
+
+
+_FACES = np.zeros((3, 3, 3), bool)
+_FACES[1, 1, :] = _FACES[1, :, 1] = _FACES[:, 1, 1] = True
+
+
+def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: CarvingConfig = CarvingConfig(),
+                progress: ProgressFn | None = None) -> CarvingResult:
+    """Carve the photo-inconsistent surface voxels of ``solid`` (bool, ``grid.shape``) round by round."""
+    original, solid = solid, solid.copy()
+    images = _blurred(views.rgb, config.blur_voxels * _voxel_footprint_px(views, grid))
+    floor = np.zeros(solid.shape, bool)
+    floor[:, :, 0] = True
+    candidates = _surface(solid) & ~floor
+    rounds = 0
+    for rounds in range(1, config.max_rounds + 1):
+        if not candidates.any():
+            break
+        idx = np.argwhere(candidates)
+        surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
+        spread, hue_spread, seen = _spread(views, images, grid, idx, surface_mesh, config)
+        # a carve starts only where the views disagree in hue, and grows wherever they disagree
+        # at all: brightness alone differs between views of a shiny or curved true surface
+        bad, hue_bad = np.zeros(solid.shape, bool), np.zeros(solid.shape, bool)
+        inconsistent = (seen >= config.min_views) & (spread > config.max_spread)
+        bad[tuple(idx[inconsistent].T)] = True
+        hue_bad[tuple(idx[inconsistent & (hue_spread > config.max_hue_spread)].T)] = True
+        grows = binary_dilation(original & ~solid, _FACES)
+        carve = bad & (grows | hue_bad) & _mostly_bad_neighbourhood(bad, _surface(solid), config.neighbour_fraction)
+        if progress:
+            progress("photo-consistent carving", rounds, config.max_rounds)
+        if not carve.any():
+            break
+        solid &= ~carve
+        # only voxels near a change can change verdict: newly exposed ones, and those that now see more views
+        near = binary_dilation(carve, np.ones((3, 3, 3), bool), iterations=2)
+        candidates = _surface(solid) & near & ~floor
+    solid |= _small_components(original & ~solid, config.min_component_fraction * original.sum())
+    return CarvingResult(solid=solid, carved_voxels=int((original & ~solid).sum()), rounds=rounds)
+
+
+def _small_components(carved: np.ndarray, min_voxels: float) -> np.ndarray:
+    """The connected parts (26-neighbours) of ``carved`` smaller than ``min_voxels``: put back.
+
+    Shading and highlights that differ between views (a can's shiny lid) make small
+    inconsistent patches that carving deepens into pits; a concavity that changes how
+    an object moves is a large share of its volume.
+    """
+    from scipy.ndimage import label
+
+    labels, count = label(carved, np.ones((3, 3, 3), bool))
+    if count == 0:
+        return np.zeros_like(carved)
+    sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    small = sizes < min_voxels
+    small[0] = False
+    return small[labels]
+
+
+def _voxel_footprint_px(views: PosedViews, grid: VoxelGrid) -> float:
+    """How many pixels one voxel spans in a typical view (median camera distance to the grid's centre)."""
+    centre = grid.origin_m + 0.5 * grid.voxel_m * (np.asarray(grid.shape) - 1)
+    distance = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - centre, axis=1)))
+    return grid.voxel_m * views.intrinsics.fl_x / distance
+
+
+def _blurred(rgb: np.ndarray, sigma_px: float) -> np.ndarray:
+    if sigma_px <= 0:
+        return rgb
+    return gaussian_filter(rgb, sigma=(0, sigma_px, sigma_px, 0)).astype(np.float32)
+
+
+def _surface(solid: np.ndarray) -> np.ndarray:
+    """Voxels of ``solid`` with an empty face neighbour (outside the grid counts as empty)."""
+    return solid & ~binary_erosion(solid, _FACES, border_value=0)
+
+
+def _mostly_bad_neighbourhood(bad: np.ndarray, surface: np.ndarray, fraction: float) -> np.ndarray:
+    """Where at least ``fraction`` of the surface voxels in the 3x3x3 neighbourhood are ``bad``."""
+    cube = np.ones((3, 3, 3), np.float32)
+    bad_count = convolve(bad.astype(np.float32), cube, mode="constant")
+    surface_count = convolve(surface.astype(np.float32), cube, mode="constant")
+    return bad_count >= fraction * np.maximum(surface_count, 1.0)
+
+
+def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndarray, surface_mesh,
+            config: CarvingConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per voxel of ``idx`` (P, 3): the ``spread_quantile`` of its views' colour distances from their
+    median, the same for their hues, and the number of views that see it."""
+    points = grid.origin_m + idx * grid.voxel_m
+    uv, depth = project(views.intrinsics, views.c2w_cv, points)  # (V, P, 2), (V, P)
+    height, width = views.mask.shape[1:]
+    in_image = (depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < width - 1) & (uv[..., 1] >= 0) & \
+               (uv[..., 1] < height - 1)
+    view_of, point_of = np.nonzero(in_image)
+    origins = views.c2w_cv[view_of, :3, 3]
+    offsets = points[point_of] - origins
+    distance = np.linalg.norm(offsets, axis=1)
+    directions = offsets / distance[:, None]
+    hit_at = np.full(len(origins), np.inf)
+    hits, rays, _ = surface_mesh.ray.intersects_location(origins, directions, multiple_hits=False)
+    hit_at[rays] = np.einsum("nd,nd->n", hits - origins[rays], directions[rays])
+    visible = hit_at >= distance - config.visibility_tolerance_voxels * grid.voxel_m
+    view_of, point_of = view_of[visible], point_of[visible]
+    colours = _bilinear(images, view_of, uv[view_of, point_of])
+    # hue: colour over brightness, damped for dark pixels whose ratios are noise
+    hues = 3.0 * colours / (colours.sum(axis=1, keepdims=True) + config.hue_floor)
+    seen = np.bincount(point_of, minlength=len(points))
+    spreads = []
+    for values in (colours, hues):
+        per_point = np.full((len(points), views.count, 3), np.nan, dtype=np.float32)
+        per_point[point_of, view_of] = values
+        spread = np.zeros(len(points))
+        some = seen > 0
+        if some.any():
+            median = np.nanmedian(per_point[some], axis=1)
+            spread[some] = np.nanquantile(np.linalg.norm(per_point[some] - median[:, None], axis=2),
+                                          config.spread_quantile, axis=1)
+        spreads.append(spread)
+    return spreads[0], spreads[1], seen
+
+
+def _bilinear(images: np.ndarray, view_of: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Colours (N, 3) of images[view_of] at continuous pixel positions ``uv`` (N, 2) (pixel centres at +0.5)."""
+    u, v = uv[:, 0] - 0.5, uv[:, 1] - 0.5
+    h, w = images.shape[1:3]
+    u0 = np.clip(np.floor(u).astype(int), 0, w - 2)
+    v0 = np.clip(np.floor(v).astype(int), 0, h - 2)
+    fu, fv = np.clip(u - u0, 0, 1)[:, None], np.clip(v - v0, 0, 1)[:, None]
+    return ((1 - fu) * (1 - fv) * images[view_of, v0, u0] + fu * (1 - fv) * images[view_of, v0, u0 + 1]
+            + (1 - fu) * fv * images[view_of, v0 + 1, u0] + fu * fv * images[view_of, v0 + 1, u0 + 1])
