@@ -10,8 +10,8 @@ from tests.reconstruct.conftest import H, W
 
 VOXELS = 48  # longest side of the carving grid: 2.6 mm voxels on the mug
 # 100 views, not the can's 60: carving needs the high views that look into the cup. Measured at
-# 160x120 and 48 voxels: 58 % of the filled cavity left solid, 2 % of the true solid's voxels
-# carved; at 320x240 and 80 voxels (the benchmark's coarse grid) 8 % left.
+# 160x120 and 48 voxels: 63 % of the filled cavity left solid, none of the true solid carved (the
+# handle and the rim included); at 320x240 and 80 voxels, 53 % left.
 MUG_VIEWS = 100
 
 
@@ -58,7 +58,7 @@ def test_carving_opens_the_mug_cavity_and_keeps_its_walls(mug_capture):
     left = np.count_nonzero(result.solid & concave) / np.count_nonzero(hull & concave)
     assert left < 0.75, f"{left:.2f} of the filled cavity is still solid"
     wall_lost = np.count_nonzero(hull & inside & ~result.solid) / np.count_nonzero(hull & inside)
-    assert wall_lost < 0.1, f"{wall_lost:.2f} of the true solid was carved"
+    assert wall_lost < 0.02, f"{wall_lost:.2f} of the true solid was carved"
     assert result.carved_voxels == np.count_nonzero(hull & ~result.solid)
     assert not (result.solid & ~hull).any()  # carving only removes
 

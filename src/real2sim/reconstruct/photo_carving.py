@@ -23,14 +23,18 @@ surfaces, measured on the bundled objects:
 
 * brightness alone differs between views of a shiny or curved surface (the
   can's lid): a carve *starts* only where the hues disagree too (colour over
-  brightness), and then grows through voxels next to what it removed;
+  brightness), and then grows through voxels next to what it removed, but not
+  into a wall: a voxel that some views reach through the carved space and others
+  from outside has two true faces whose colours differ (without this guard the
+  carve ate through the mug's wall into its handle and rim);
 * texture edges make isolated disagreeing voxels: a voxel goes only when most
   of the surface voxels around it disagree too;
 * what is carved in the end is kept only in connected parts of at least
   ``min_component_fraction`` of the hull's volume.
 
-It cannot see a concavity whose inside is one flat colour, and it thins walls
-thinner than about two voxels. World frame, metres; the lowest layer of voxels
+It stops early where the views inside a concavity agree (a deep cup's floor and
+lower wall seen only from steep views): on the bundled mug about half of the
+filled cavity opens. It cannot see a concavity whose inside is one flat colour. World frame, metres; the lowest layer of voxels
 (standing on the table) is never carved.
 """
 
@@ -54,6 +58,7 @@ class CarvingConfig:
     max_spread: float = 0.15
     spread_quantile: float = 0.75
     max_hue_spread: float = 0.15
+    hue_quantile: float = 0.75
     hue_floor: float = 0.3
     min_views: int = 4
     neighbour_fraction: float = 0.5
@@ -90,7 +95,8 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
             break
         idx = np.argwhere(candidates)
         surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
-        spread, hue_spread, seen = _spread(views, images, grid, idx, surface_mesh, config)
+        spread, hue_spread, seen, two_sided = _spread(views, images, grid, idx, surface_mesh, original & ~solid,
+                                                      config)
         # a carve starts only where the views disagree in hue, and grows wherever they disagree
         # at all: brightness alone differs between views of a shiny or curved true surface
         bad, hue_bad = np.zeros(solid.shape, bool), np.zeros(solid.shape, bool)
@@ -98,6 +104,7 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
         bad[tuple(idx[inconsistent].T)] = True
         hue_bad[tuple(idx[inconsistent & (hue_spread > config.max_hue_spread)].T)] = True
         grows = binary_dilation(original & ~solid, _FACES)
+        grows[tuple(idx[two_sided].T)] = False
         carve = bad & (grows | hue_bad) & _mostly_bad_neighbourhood(bad, _surface(solid), config.neighbour_fraction)
         if progress:
             progress("photo-consistent carving", rounds, config.max_rounds)
@@ -156,9 +163,10 @@ def _mostly_bad_neighbourhood(bad: np.ndarray, surface: np.ndarray, fraction: fl
 
 
 def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndarray, surface_mesh,
-            config: CarvingConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            carved: np.ndarray, config: CarvingConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per voxel of ``idx`` (P, 3): the ``spread_quantile`` of its views' colour distances from their
-    median, the same for their hues, and the number of views that see it."""
+    median, the same for their hues, the number of views that see it, and whether it is a wall:
+    at least ``min_views`` views reach it through what was carved and as many from outside."""
     points = grid.origin_m + idx * grid.voxel_m
     uv, depth = project(views.intrinsics, views.c2w_cv, points)  # (V, P, 2), (V, P)
     height, width = views.mask.shape[1:]
@@ -174,12 +182,19 @@ def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndar
     hit_at[rays] = np.einsum("nd,nd->n", hits - origins[rays], directions[rays])
     visible = hit_at >= distance - config.visibility_tolerance_voxels * grid.voxel_m
     view_of, point_of = view_of[visible], point_of[visible]
+    # a view reaches the voxel through carved space when the ray is in it just before the voxel
+    before = points[point_of] - 1.5 * grid.voxel_m * directions[visible]
+    cell = np.clip(np.round((before - grid.origin_m) / grid.voxel_m).astype(int), 0, np.asarray(grid.shape) - 1)
+    through = carved[tuple(cell.T)]
+    through_count = np.bincount(point_of, weights=through, minlength=len(points))
+    outside_count = np.bincount(point_of, weights=~through, minlength=len(points))
+    two_sided = (through_count >= config.min_views) & (outside_count >= config.min_views)
     colours = _bilinear(images, view_of, uv[view_of, point_of])
     # hue: colour over brightness, damped for dark pixels whose ratios are noise
     hues = 3.0 * colours / (colours.sum(axis=1, keepdims=True) + config.hue_floor)
     seen = np.bincount(point_of, minlength=len(points))
     spreads = []
-    for values in (colours, hues):
+    for values, quantile in ((colours, config.spread_quantile), (hues, config.hue_quantile)):
         per_point = np.full((len(points), views.count, 3), np.nan, dtype=np.float32)
         per_point[point_of, view_of] = values
         spread = np.zeros(len(points))
@@ -187,9 +202,9 @@ def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndar
         if some.any():
             median = np.nanmedian(per_point[some], axis=1)
             spread[some] = np.nanquantile(np.linalg.norm(per_point[some] - median[:, None], axis=2),
-                                          config.spread_quantile, axis=1)
+                                          quantile, axis=1)
         spreads.append(spread)
-    return spreads[0], spreads[1], seen
+    return spreads[0], spreads[1], seen, two_sided
 
 
 def _bilinear(images: np.ndarray, view_of: np.ndarray, uv: np.ndarray) -> np.ndarray:
