@@ -2,14 +2,8 @@
 
 from __future__ import annotations
 
-from real2sim.formats.progress import fraction, null_progress, prefixed
+from real2sim.formats.progress import null_progress, prefixed
 from tests.progress_check import Recorder
-
-
-def test_fraction_is_clipped_and_none_without_a_count():
-    assert fraction(3, 4) == 0.75
-    assert fraction(5, 4) == 1.0 and fraction(-1, 4) == 0.0
-    assert fraction(0, 0) is None
 
 
 def test_prefixed_names_the_sub_stage_and_keeps_the_counts():

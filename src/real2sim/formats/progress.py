@@ -21,13 +21,6 @@ def null_progress(message: str, done: int, total: int) -> None:
     """Reports nowhere: the default of every stage."""
 
 
-def fraction(done: int, total: int) -> float | None:
-    """``done / total`` clipped to [0, 1]; None for a message without a count (``total`` 0)."""
-    if total <= 0:
-        return None
-    return min(max(done / total, 0.0), 1.0)
-
-
 def prefixed(progress: ProgressFn | None, prefix: str) -> ProgressFn:
     """``progress`` with ``"<prefix>: "`` in front of every message (a sub-stage inside a stage)."""
     report = progress or null_progress
@@ -38,4 +31,4 @@ def prefixed(progress: ProgressFn | None, prefix: str) -> ProgressFn:
     return inner
 
 
-__all__ = ["ProgressFn", "fraction", "null_progress", "prefixed"]
+__all__ = ["ProgressFn", "null_progress", "prefixed"]
