@@ -128,23 +128,23 @@ def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig,
     density = config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
     if not config.photo_carving:
         return density, 0
-    carved = _photo_carved(views, grid, config, progress)
+    carved = _photo_carved(views, grid, score >= 0.5, config, progress)
     return np.where(carved, 1e-3 * config.init_density, density), int(carved.sum())
 
 
-def _photo_carved(views: PosedViews, grid: VoxelGrid, config: FieldConfig, progress: ProgressFn | None) -> np.ndarray:
-    """Voxels of ``grid`` that photo-consistent carving removes from the visual hull.
+def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: FieldConfig,
+                  progress: ProgressFn | None) -> np.ndarray:
+    """Voxels of ``grid`` that photo-consistent carving removes from the visual hull (``hull`` on ``grid``).
 
     Carving runs on a grid of at least ``config.carving.voxels`` along the longest side: on
     coarser voxels a true surface's voxel centres lie so far inside it that the views of
     them disagree (a 24-voxel can lost a quarter of its volume)."""
+    if max(grid.shape) >= config.carving.voxels:
+        return hull & ~photo_carve(views, grid, hull, config.carving, progress=progress).solid
     lo, hi = grid.bounds_m
-    fine = grid if max(grid.shape) >= config.carving.voxels else \
-        VoxelGrid.covering(lo, hi, config.carving.voxels, table_z_m=float(lo[2]))
-    hull = carve(views, fine, config.hull_outlier_fraction) >= 0.5
-    carved = hull & ~photo_carve(views, fine, hull, config.carving, progress=progress).solid
-    if fine is grid:
-        return carved
+    fine = VoxelGrid.covering(lo, hi, config.carving.voxels, table_z_m=float(lo[2]))
+    fine_hull = carve(views, fine, config.hull_outlier_fraction) >= 0.5
+    carved = fine_hull & ~photo_carve(views, fine, fine_hull, config.carving, progress=progress).solid
     nearest = np.round((grid.centres() - fine.origin_m) / fine.voxel_m).astype(int)
     nearest = np.clip(nearest, 0, np.asarray(fine.shape) - 1)
     return carved[tuple(nearest.T)].reshape(grid.shape)
