@@ -186,3 +186,19 @@ def test_upsampled_field_renders_the_same():
     b = _render(finer, origin, direction)
     assert float(b.opacity[0]) == pytest.approx(float(a.opacity[0]), rel=1e-4)
     np.testing.assert_allclose(b.rgb.detach().numpy(), a.rgb.detach().numpy(), atol=1e-4)
+
+
+def test_a_step_and_voxel_budget_halves_for_the_coarse_grid():
+    """``reconstruct`` and ``run`` both build their field settings from --steps and --voxels this way."""
+    from real2sim.formats.errors import UserInputError
+    from real2sim.reconstruct.train import FieldConfig
+
+    base = FieldConfig()
+    assert base.with_budget() == base
+    config = base.with_budget(steps=21, voxels=64)
+    assert (config.fine_steps, config.coarse_steps, config.fine_voxels, config.coarse_voxels) == (21, 10, 64, 32)
+    one = base.with_budget(steps=1, voxels=6)
+    assert (one.coarse_steps, one.coarse_voxels) == (0, 4)  # one step skips the coarse grid, which stays valid
+    one.validate()
+    with pytest.raises(UserInputError):
+        base.with_budget(voxels=3).validate()

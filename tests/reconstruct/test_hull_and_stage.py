@@ -269,3 +269,24 @@ def test_largest_parts_keeps_an_open_surface_over_a_closed_speck():
     assert len(kept.faces) == len(sheet.faces)
     closed = trimesh.util.concatenate([trimesh.creation.icosphere(radius=0.05), speck])
     assert len(largest_parts(closed).faces) == len(trimesh.creation.icosphere(radius=0.05).faces)
+
+
+def test_truth_comparison_splits_the_chamfer_where_silhouettes_cannot_judge():
+    """A cup reconstructed with its cavity filled: the whole error is in the concave part; the
+    cup's outside (on its convex hull) is exact. A convex object has no concave part."""
+    from real2sim.reconstruct.truth import compare_to_truth
+
+    outer = trimesh.creation.cylinder(radius=0.04, height=0.09, sections=64)
+    cavity = trimesh.creation.cylinder(radius=0.036, height=0.09, sections=64)
+    cavity.apply_translation([0, 0, 0.006])
+    cup = trimesh.boolean.difference([outer, cavity], engine="manifold")
+    filled = outer
+    report = compare_to_truth(filled, cup, surface_samples=20_000, volume_samples=50_000)
+    assert report["chamfer_hull_mm"] < 0.2
+    assert report["chamfer_concave_mm"] > 5.0  # the lid is centimetres from the cavity's floor
+    assert report["concave_recovered"] < 0.05
+    parts = [report["chamfer_hull_mm"], report["chamfer_concave_mm"]]
+    assert min(parts) < report["chamfer_mm"] < max(parts)
+    box = trimesh.creation.box(extents=[0.05, 0.04, 0.03])
+    exact = compare_to_truth(box, box, surface_samples=5_000, volume_samples=20_000)
+    assert exact["chamfer_concave_mm"] is None and exact["chamfer_hull_mm"] < 1e-6

@@ -76,13 +76,7 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
     if args.from_mesh is not None:
         result = import_external(args.dataset, args.from_mesh, args.dataparser_transforms)
     else:
-        field = FieldConfig()
-        if args.steps is not None:
-            field = replace(field, fine_steps=args.steps, coarse_steps=args.steps // 2)
-        if args.voxels is not None:
-            field = replace(field, fine_voxels=args.voxels, coarse_voxels=max(args.voxels // 2, 4))
-        if not args.photo_carving:
-            field = replace(field, photo_carving=False)
+        field = replace(FieldConfig().with_budget(args.steps, args.voxels), photo_carving=args.photo_carving)
         config = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
                                    texture_px=args.texture_px)
         config.validate()

@@ -106,18 +106,13 @@ def config_from_args(args: argparse.Namespace):
     args.flat_bottom, args.support_height = True, 0.0
     asset = asset_config(args)
     resolve_device(args.device)
-    field = FieldConfig()
-    if args.steps is not None:
-        field = replace(field, fine_steps=args.steps, coarse_steps=max(args.steps // 2, 1))
-    if not args.photo_carving:
-        field = replace(field, photo_carving=False)
+    # --voxels is the field's grid for the field, the carving grid for the hull
+    field_voxels = args.voxels if args.backend == "field" else None
+    field = replace(FieldConfig().with_budget(args.steps, field_voxels), photo_carving=args.photo_carving)
     recon = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
                               texture_px=args.texture_px)
-    if args.voxels is not None:
-        if args.backend == "field":
-            recon = replace(recon, field=replace(field, fine_voxels=args.voxels, coarse_voxels=max(args.voxels // 2, 4)))
-        else:
-            recon = replace(recon, hull_voxels=args.voxels)
+    if args.voxels is not None and args.backend != "field":
+        recon = replace(recon, hull_voxels=args.voxels)
     if args.max_faces is not None:
         recon = replace(recon, max_faces=args.max_faces)
     recon.validate()

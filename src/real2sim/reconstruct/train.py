@@ -14,7 +14,7 @@ is resampled onto a finer grid and trained further.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field as dataclass_field
+from dataclasses import dataclass, field as dataclass_field, replace
 
 import numpy as np
 import torch
@@ -65,6 +65,17 @@ class FieldConfig:
     background_ray_fraction: float = 0.05
     photo_carving: bool = True
     carving: CarvingConfig = dataclass_field(default_factory=CarvingConfig)
+
+    def with_budget(self, steps: int | None = None, voxels: int | None = None) -> "FieldConfig":
+        """These settings with ``steps`` fine-grid training steps (the coarse grid gets half, so 1 step
+        skips it) and ``voxels`` along the longest side of the fine grid (the coarse grid gets half);
+        None keeps a setting."""
+        config = self
+        if steps is not None:
+            config = replace(config, fine_steps=steps, coarse_steps=steps // 2)
+        if voxels is not None:
+            config = replace(config, fine_voxels=voxels, coarse_voxels=max(voxels // 2, 4))
+        return config
 
     def validate(self) -> None:
         from real2sim.formats.errors import UserInputError

@@ -13,6 +13,12 @@
 * ``concave_recovered``: of the points inside the true mesh's convex hull but
   outside the true mesh (a mug's cavity and the hole of its handle), the share
   the reconstruction also leaves empty; 1 = every concavity is present.
+* ``chamfer_concave_mm`` / ``chamfer_hull_mm``: the Chamfer distance split by where
+  the samples lie. *Concave*: true surface points more than ``tau`` inside the true
+  convex hull's surface (a cavity's wall and floor, a handle's inner side), and
+  reconstructed points more than ``tau`` inside that hull; *hull*: the rest, which a
+  silhouette can see. Each is the mean of its two directions' mean distances; None
+  when a part has no samples (a convex object has no concave part).
 """
 
 from __future__ import annotations
@@ -66,7 +72,12 @@ def compare_to_truth(mesh: trimesh.Trimesh, truth: trimesh.Trimesh, *, tau_m: fl
     # long sliver triangles (a can's fan caps, any convex hull) make winding numbers slow
     in_rec, in_gt = inside_mask(mesh, pts), inside_mask(compact_triangles(truth), pts)
     union = np.count_nonzero(in_rec | in_gt)
-    concave = inside_mask(compact_triangles(truth.convex_hull), pts) & ~in_gt
+    hull = compact_triangles(truth.convex_hull)
+    concave = inside_mask(hull, pts) & ~in_gt
+    # the true surface deeper than tau inside its hull is where silhouettes cannot judge it; a
+    # reconstructed point off the true surface within the hull (a lid across a cavity) is in that space
+    gt_deep = surface_distance_m(gt_pts, hull) > tau_m
+    rec_deep = (rec_to_gt > tau_m) & (inside_mask(hull, rec_pts) | (surface_distance_m(rec_pts, hull) <= tau_m))
     return {
         "chamfer_mm": float(500.0 * (rec_to_gt.mean() + gt_to_rec.mean())),
         "chamfer_rec_to_true_mm": float(1000.0 * rec_to_gt.mean()),
@@ -77,7 +88,15 @@ def compare_to_truth(mesh: trimesh.Trimesh, truth: trimesh.Trimesh, *, tau_m: fl
         "iou": float(np.count_nonzero(in_rec & in_gt) / union) if union else 0.0,
         "concave_recovered": float(np.mean(~in_rec[concave])) if concave.any() else None,
         "concave_volume_fraction": float(concave.sum() / max(in_gt.sum(), 1)),
+        "chamfer_concave_mm": _part_chamfer_mm(rec_to_gt[rec_deep], gt_to_rec[gt_deep]),
+        "chamfer_hull_mm": _part_chamfer_mm(rec_to_gt[~rec_deep], gt_to_rec[~gt_deep]),
     }
+
+
+def _part_chamfer_mm(rec_to_gt_m: np.ndarray, gt_to_rec_m: np.ndarray) -> float | None:
+    if len(rec_to_gt_m) == 0 or len(gt_to_rec_m) == 0:
+        return None
+    return float(500.0 * (rec_to_gt_m.mean() + gt_to_rec_m.mean()))
 
 
 def psnr(prediction: np.ndarray, target: np.ndarray, region: np.ndarray) -> float:
