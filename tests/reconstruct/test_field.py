@@ -202,3 +202,18 @@ def test_a_step_and_voxel_budget_halves_for_the_coarse_grid():
     one.validate()
     with pytest.raises(UserInputError):
         base.with_budget(voxels=3).validate()
+
+
+def test_deep_photo_carved_space_is_left_out_at_every_resolution():
+    """What carving opened, farther than the margin from what it kept, is not part of the field."""
+    from real2sim.reconstruct.train import _deep_carved
+
+    coarse = VoxelGrid.covering(np.zeros(3), np.full(3, 0.16), 16, 0.0)  # 1 cm voxels
+    fine = VoxelGrid.covering(np.zeros(3), np.full(3, 0.16), 32, 0.0)
+    carved = np.zeros(coarse.shape, bool)
+    carved[3:13, 3:13, 3:13] = True  # a 10 cm cube
+    deep = _deep_carved(carved, coarse, coarse, 2)
+    assert deep.sum() == 6 ** 3 and deep[5:11, 5:11, 5:11].all()  # two voxels of margin kept on every side
+    assert _deep_carved(carved, coarse, fine, 2).sum() == 8 * 6 ** 3  # the same 6 cm cube on the fine grid
+    assert _deep_carved(carved, coarse, coarse, 0).sum() == carved.sum()
+    assert not _deep_carved(carved, coarse, coarse, -1).any()  # a negative margin: the field keeps it all

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field as dataclass_field, replace
 
 import numpy as np
 import torch
-from scipy.ndimage import binary_dilation
+from scipy.ndimage import binary_dilation, binary_erosion
 
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.field import VoxelRadianceField
@@ -44,6 +44,9 @@ class FieldConfig:
     about its colour (:mod:`real2sim.reconstruct.photo_carving`), and
     the field starts empty there. Training cannot open a concavity the hull filled (a
     mug's cavity) by itself: a lid across it with a painted top renders nearly as well.
+    The field may fill carved space again only within ``carved_margin_voxels`` (of the
+    coarse grid) of what carving kept; deeper carved space is not part of the field, so
+    rays into an opened cavity skip it (a negative margin keeps all of it in the field).
     """
 
     coarse_voxels: int = 80
@@ -64,6 +67,7 @@ class FieldConfig:
     mask_dilation_px: int = 3
     background_ray_fraction: float = 0.05
     photo_carving: bool = True
+    carved_margin_voxels: int = 2
     carving: CarvingConfig = dataclass_field(default_factory=CarvingConfig)
 
     def with_budget(self, steps: int | None = None, voxels: int | None = None) -> "FieldConfig":
@@ -131,16 +135,16 @@ def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> 
 
 
 def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig,
-                 progress: ProgressFn | None = None) -> tuple[np.ndarray, int]:
+                 progress: ProgressFn | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Initial density per voxel (``grid.shape``): ``init_density`` inside the visual hull, fading to
     nearly nothing outside it over about a voxel (a smooth step of the silhouette score), and
-    nearly nothing where photo-consistent carving removed the hull; and the voxels carved."""
+    nearly nothing where photo-consistent carving removed the hull; and the voxels carved (bool)."""
     score = carve(views, grid, config.hull_outlier_fraction)
     density = config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
     if not config.photo_carving:
-        return density, 0
+        return density, np.zeros(grid.shape, bool)
     carved = _photo_carved(views, grid, score >= 0.5, config, progress)
-    return np.where(carved, 1e-3 * config.init_density, density), int(carved.sum())
+    return np.where(carved, 1e-3 * config.init_density, density), carved
 
 
 def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: FieldConfig,
@@ -156,9 +160,24 @@ def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: 
     fine = VoxelGrid.covering(lo, hi, config.carving.voxels, table_z_m=float(lo[2]))
     fine_hull = carve(views, fine, config.hull_outlier_fraction) >= 0.5
     carved = fine_hull & ~photo_carve(views, fine, fine_hull, config.carving, progress=progress).solid
-    nearest = np.round((grid.centres() - fine.origin_m) / fine.voxel_m).astype(int)
-    nearest = np.clip(nearest, 0, np.asarray(fine.shape) - 1)
-    return carved[tuple(nearest.T)].reshape(grid.shape)
+    return _resampled(carved, fine, grid)
+
+
+def _resampled(mask: np.ndarray, source: VoxelGrid, target: VoxelGrid) -> np.ndarray:
+    """``mask`` (bool, ``source.shape``) at the centres of ``target``'s voxels (nearest voxel)."""
+    nearest = np.round((target.centres() - source.origin_m) / source.voxel_m).astype(int)
+    nearest = np.clip(nearest, 0, np.asarray(source.shape) - 1)
+    return mask[tuple(nearest.T)].reshape(target.shape)
+
+
+def _deep_carved(carved: np.ndarray, source: VoxelGrid, target: VoxelGrid, margin_voxels: int) -> np.ndarray:
+    """Photo-carved space (``carved`` on ``source``) farther than ``margin_voxels`` of ``source`` from
+    anything carving kept, on ``target``: left out of the field's occupancy, so that rays skip
+    it (a mug's opened cavity cost every ray into it a gradient sample per half voxel)."""
+    if margin_voxels < 0 or not carved.any():
+        return np.zeros(target.shape, bool)
+    deep = binary_erosion(carved, np.ones((3, 3, 3), bool), iterations=margin_voxels) if margin_voxels else carved
+    return _resampled(deep, source, target)
 
 
 def occupancy_ranges(field: VoxelRadianceField, origins: torch.Tensor,
@@ -203,19 +222,22 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     stages = [(config.coarse_voxels, config.coarse_steps), (config.fine_voxels, config.fine_steps)]
     stages = [(n, s) for n, s in stages if s > 0]
     total = sum(s for _, s in stages)
-    field, done, curve, carved_voxels = None, 0, [], 0
+    field, done, curve, carved, first_grid = None, 0, [], None, None
     for voxels, steps in stages:
         grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
         occupancy = field_occupancy(views, grid, config)
         if field is None:
-            init_density, carved_voxels = hull_density(views, grid, config, progress)
+            init_density, carved = hull_density(views, grid, config, progress)
+            first_grid = grid
+        occupancy &= ~_deep_carved(carved, first_grid, grid, config.carved_margin_voxels)
+        if field is None:
             field = VoxelRadianceField(grid, occupancy, feature_channels=config.feature_channels,
                                        init_density=init_density, device=device, generator=gen)
         else:
             field = field.upsampled(grid, occupancy)
         done = _optimise(field, pool, config, steps, done, total, gen, progress, curve)
     return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
-                       carved_voxels=carved_voxels)
+                       carved_voxels=int(carved.sum()))
 
 
 def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
