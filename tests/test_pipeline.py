@@ -15,6 +15,7 @@ import math
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from real2sim.cli import main
@@ -271,6 +272,14 @@ def test_evaluate_after_the_asset_runs_only_the_evaluation(first_run, can_ds, tm
     truth_config = json.loads((out / "results_truth" / "config.json").read_text())
     assert truth_config["reference"]["file"] == "true_mesh_world.obj"
     assert truth_config["reference_properties"]["file"] == "true_physical_properties.json"
+    # truth.json judges the asset's mass properties against the very ones the true reference simulated
+    from real2sim.formats.physical import read_physical_properties
+
+    reference = read_physical_properties(out / ".run" / "truth" / "true_physical_properties.json")
+    judged = json.loads((out / "truth.json").read_text())["physical_properties"]
+    assert judged["true_com_m"] == pytest.approx(list(reference.com_m), abs=1e-12)
+    assert judged["true_inertia_eigenvalues_kg_m2"] == pytest.approx(np.linalg.eigvalsh(reference.inertia).tolist(),
+                                                                     rel=1e-9)
     dynamics = json.loads((out / "truth.json").read_text())["dynamics"]
     (mesh_row,) = dynamics["reconstruction_vs_truth"]
     assert mesh_row["contact_model"] == "point"

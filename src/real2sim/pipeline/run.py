@@ -386,8 +386,17 @@ def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, config: 
     refine_entry = manifest.entry("refine_poses") if config.refine is not None else None
     refinement = refine_entry.get("result", {}) if refine_entry else None
     frame_entry = manifest.entry("robot_frame") if config.robot_frame() is not None else None
+    true_properties = None
+    if config.evaluation is not None:
+        # the truth evaluation, redone whenever the asset changes, wrote the same mass properties
+        from real2sim.formats.physical import read_physical_properties
+        from real2sim.pipeline.truth_dynamics import TRUE_PROPERTIES_NAME
+
+        written = asset_dir / mf.RUN_DIRNAME / "truth" / TRUE_PROPERTIES_NAME
+        true_properties = read_physical_properties(written) if written.is_file() else None
     record = build_truth(dataset, used, asset_dir, report, refinement=refinement, seed=seed,
-                         robot_frame=frame_entry.get("result") if frame_entry else None)
+                         robot_frame=frame_entry.get("result") if frame_entry else None,
+                         true_properties=true_properties)
     results, results_truth = asset_dir / RESULTS_DIRNAME, asset_dir / TRUTH_RESULTS_DIRNAME
     if config.evaluation is not None and (results_truth / "summary.csv").is_file():
         from real2sim.pipeline.truth_dynamics import dynamics_record

@@ -105,16 +105,19 @@ def physical_errors(est: PhysicalProperties, true: PhysicalProperties) -> dict:
 
 
 def build_truth(dataset: Path, used_dataset: Path, asset_dir: Path, reconstruct_report: dict, *,
-                refinement: dict | None, seed: int, robot_frame: dict | None = None) -> dict:
+                refinement: dict | None, seed: int, robot_frame: dict | None = None,
+                true_properties: PhysicalProperties | None = None) -> dict:
     """The truth.json record (see the module docstring). ``used_dataset``: the refined copy, or ``dataset``;
     ``refinement``: the refine stage's RefineResult as JSON, None when the run did not refine;
-    ``robot_frame``: the robot_frame stage's result (a COLMAP capture), None otherwise."""
+    ``robot_frame``: the robot_frame stage's result (a COLMAP capture), None otherwise;
+    ``true_properties``: the true mesh's mass properties when already computed for this asset (the
+    truth evaluation's reference), else computed here the same way."""
     from real2sim.asset.inertia import estimate_physical_properties
 
     asset_dir = Path(asset_dir)
     est = read_physical_properties(asset_dir / "physical_properties.json")
     true_mesh, lowest_z = true_mesh_in_asset_frame(dataset, asset_dir)
-    true_props = estimate_physical_properties(true_mesh, est.mass_kg, seed=seed)
+    true_props = true_properties or estimate_physical_properties(true_mesh, est.mass_kg, seed=seed)
     before = pose_error_summary(dataset, dataset)
     refined = bool(refinement and refinement.get("refined"))
     poses = {"before_refinement": before,
