@@ -13,6 +13,7 @@ true object). Reported, from ASSETDIR/.run/run.json and ASSETDIR/truth.json:
     python benchmarks/bench_run.py                 # bottle and can, full settings
     python benchmarks/bench_run.py --quick         # 60 noise-free views, visual hull, 1 run
     python benchmarks/bench_run.py --objects can
+    python benchmarks/bench_run.py --objects can --runs 4 --tag can_runs4   # less noise, own section
 
 Writes docs/benchmarks/run.md (machine and date included), after each object.
 """
@@ -35,7 +36,7 @@ TARGET_INERTIA_REL = 0.05
 TARGET_COM_MM = 2.0
 
 
-def run_object(name: str, work: Path, quick: bool) -> tuple[dict, dict, float]:
+def run_object(name: str, work: Path, quick: bool, runs: int | None = None) -> tuple[dict, dict, float]:
     """(run.json, truth.json, wall seconds) of one object's capture + run."""
     from real2sim.capture.wrist_camera import capture
     from real2sim.cli.demo import FULL, QUICK, capture_config, run_config
@@ -44,6 +45,8 @@ def run_object(name: str, work: Path, quick: bool) -> tuple[dict, dict, float]:
     from real2sim.pipeline.run import run_pipeline
 
     plan = QUICK if quick else FULL
+    if runs is not None:
+        plan = replace(plan, runs=runs)
     config = run_config(plan)
     config = replace(config, asset=replace(config.asset, mass_kg=OBJECTS[name].mass_kg),
                      evaluation=EvaluationConfig(tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs))
@@ -72,11 +75,15 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--objects", default="bottle,can")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
+    parser.add_argument("--runs", type=int, default=None,
+                        help="seeded runs per task and contact model (default: the demo's); more runs, less noise")
+    parser.add_argument("--tag", default="", help="write docs/benchmarks/run_TAG.md instead of run.md")
     args = parser.parse_args()
+    runs = args.runs if args.runs is not None else _plan(args.quick).runs
     stage_rows, target_rows, dynamics_rows = [], [], []
     with tempfile.TemporaryDirectory(prefix="bench_run-") as tmp:
         for name in args.objects.split(","):
-            manifest, truth, wall = run_object(name, Path(tmp), args.quick)
+            manifest, truth, wall = run_object(name, Path(tmp), args.quick, runs)
             for stage, entry in manifest["stages"].items():
                 stage_rows.append([name, stage, entry["wall_seconds"], entry.get("peak_memory_mb", float("nan"))])
             stage_rows.append([name, "(capture + run, wall)", wall, float("nan")])
@@ -97,11 +104,11 @@ def main() -> int:
                                       *(("n/a" if row[k] is None else row[k])
                                         for k in ("ocae_vs_reconstruction_m", "ocae_vs_truth_m", "ate_vs_truth_m"))])
             body = ((args.note + "\n\n" if args.note else "")
-                    + ("Quick settings (60 noise-free views at 160x120, visual hull, one run per task).\n\n"
+                    + (f"Quick settings (60 noise-free views at 160x120, visual hull, {runs} run(s) per task).\n\n"
                        if args.quick else
                        "The demo's settings: 100 views at 320x240 px with 5 mm / 1 deg robot-pose noise, COLMAP "
                        "refinement, radiance field, the demo's representations (+ the reconstruction itself as "
-                       f"`mesh`), push and ramp x point and hydroelastic, {_plan(args.quick).runs} run(s) each; "
+                       f"`mesh`), push and ramp x point and hydroelastic, {runs} run(s) each; "
                        "evaluated against the reconstruction (the paper's protocol) and against the true object.\n\n")
                     + "Targets (issue #12): CoM within 2 mm, inertia eigenvalues within 5 %, and the best primitive "
                     "representation's OCAE against the truth within 1.5x of its OCAE against the reconstruction.\n\n"
@@ -113,7 +120,9 @@ def main() -> int:
                     + "\n\nEvery representation, OCAE (m) against the reconstruction and against the truth:\n\n"
                     + markdown_table(["object", "representation", "contact", "OCAE vs reconstruction",
                                       "OCAE vs truth", "ATE vs truth"], dynamics_rows))
-            print(write_section("run", "`real2sim run` against the truth (bench_run.py)", body,
+            print(write_section("run" + (f"_{args.tag}" if args.tag else ""),
+                                "`real2sim run` against the truth (bench_run.py" + (f", {args.tag})" if args.tag else ")"),
+                                body,
                                 "python benchmarks/bench_run.py " + " ".join(sys.argv[1:])))
     return 0
 
