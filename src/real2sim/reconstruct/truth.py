@@ -16,8 +16,9 @@
 * ``chamfer_concave_mm`` / ``chamfer_hull_mm``: the Chamfer distance split by where
   the samples lie. *Concave*: true surface points more than ``tau`` inside the true
   convex hull's surface (a cavity's wall and floor, a handle's inner side), and
-  reconstructed points more than ``tau`` inside that hull; *hull*: the rest, which a
-  silhouette can see. Each is the mean of its two directions' mean distances; None
+  reconstructed points more than ``tau`` off the true surface but within that hull
+  (a lid across a cavity, a wall made too thick); *hull*: the rest, the part a
+  silhouette can judge. Each is the mean of its two directions' mean distances; None
   when a part has no samples (a convex object has no concave part).
 """
 
