@@ -143,8 +143,6 @@ def _intervals(num_steps: int, interval: int | None) -> list[tuple[int, int]]:
 
 def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: SceneConfig,
               label: str, representation: str, run: int, deadline: _Deadline | None = None) -> Trajectory:
-    from pydrake.common.eigen_geometry import Quaternion
-    from pydrake.math import RotationMatrix
     from pydrake.systems.analysis import Simulator
 
     _check_object_instance(scene)
@@ -162,27 +160,10 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     deadline = deadline or _Deadline(None)
     deadline.check(label, 0.0)  # building the scene may already have used the time
 
-    # 1. Timed run: bare AdvanceTo between resets (in chunks, for the wall-clock limit).
-    simulator = Simulator(scene.diagram)
-    ctx = simulator.get_mutable_context()
-    pctx = plant.GetMyMutableContextFromRoot(ctx)
-    _set_state(scene, pctx, initial, label, 0.0)
-    simulator.Initialize()
-    sim_time_s = 0.0
-    for a, b in spans:
-        if a > 0:
-            _set_state(scene, pctx, _state_at(reference, a), label, a * dt)
-        step = a
-        while step < b:  # in chunks, looking at the clock in between
-            step = min(step + CHUNK_STEPS, b)
-            t0 = time.perf_counter()
-            _advance(simulator, step, dt, label)
-            sim_time_s += time.perf_counter() - t0
-            deadline.check(label, step * dt)
-        _check_finite(scene, pctx, label, b * dt)
-    timed_final_q = plant.GetPositions(pctx).copy()
+    # 1. The timed rollout; 2. the same rollout again, instrumented.
+    sim_time_s, timed_final_q = _timed_run(scene, initial, reference, spans, dt, label, deadline)
 
-    # 2. Instrumented run: one AdvanceTo per step, logging state and contacts.
+    # one AdvanceTo per step, logging state and contacts
     simulator = Simulator(scene.diagram)
     ctx = simulator.get_mutable_context()
     pctx = plant.GetMyMutableContextFromRoot(ctx)
@@ -195,9 +176,6 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     av = np.empty((n + 1, na))
     contacts_w: list[np.ndarray] = []
     forces_w: list[np.ndarray] = []
-    obj_index = scene.object_body.index()
-    obj_geoms = scene.object_geometry_ids
-    port = plant.get_contact_results_output_port()
     reset_set = set(int(r) for r in reset_steps)
 
     def log(i: int) -> None:
@@ -207,29 +185,9 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
         av[i] = plant.GetVelocities(pctx, scene.actuated_instance)
 
     def log_contacts() -> None:
-        results = port.Eval(pctx)
-        pts, forces = [], []
-        for k in range(results.num_point_pair_contacts()):
-            info = results.point_pair_contact_info(k)
-            # contact_force() acts on body B; the object feels minus that when it is body A.
-            if info.bodyB_index() == obj_index:
-                pts.append(info.contact_point())
-                forces.append(info.contact_force())
-            elif info.bodyA_index() == obj_index:
-                pts.append(info.contact_point())
-                forces.append(-info.contact_force())
-        for k in range(results.num_hydroelastic_contacts()):
-            info = results.hydroelastic_contact_info(k)
-            surface = info.contact_surface()
-            # F_Ac_W acts on the body of geometry M at the centroid; N's body feels minus it.
-            if surface.id_M() in obj_geoms:
-                pts.append(surface.centroid())
-                forces.append(info.F_Ac_W().translational())
-            elif surface.id_N() in obj_geoms:
-                pts.append(surface.centroid())
-                forces.append(-info.F_Ac_W().translational())
-        contacts_w.append(np.asarray(pts, dtype=float).reshape(-1, 3))
-        forces_w.append(np.asarray(forces, dtype=float).reshape(-1, 3))
+        pts, forces = _object_contacts(scene, pctx)
+        contacts_w.append(pts)
+        forces_w.append(forces)
 
     log(0)
     log_contacts()
@@ -252,15 +210,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
                       f"{np.abs(plant.GetPositions(pctx) - timed_final_q).max():.3g}); "
                       "sim_time_s timed a different rollout", RuntimeWarning, stacklevel=3)
 
-    contacts_o, forces_o = [], []
-    for i, (pw, fw) in enumerate(zip(contacts_w, forces_w)):
-        if len(pw) == 0:
-            contacts_o.append(np.zeros((0, 3)))
-            forces_o.append(np.zeros((0, 3)))
-            continue
-        R = RotationMatrix(Quaternion(oq[i, :4] / np.linalg.norm(oq[i, :4]))).matrix()
-        contacts_o.append((pw - oq[i, 4:]) @ R)
-        forces_o.append(fw @ R)
+    contacts_o, forces_o = _in_object_frame(contacts_w, forces_w, oq)
     return Trajectory(times_s=np.arange(n + 1) * dt, object_position_m=oq[:, 4:].copy(),
                       object_quaternion_wxyz=oq[:, :4].copy(), object_spatial_velocity=ov,
                       actuated_positions=aq, actuated_velocities=av,
@@ -268,6 +218,79 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
                       sim_duration_s=n * dt, instrumented_time_s=instrumented_time_s,
                       reset_steps=reset_steps, task=scene.task, contact_model=scene.contact_model,
                       representation=representation, run=run)
+
+
+def _timed_run(scene: Scene, initial: _State, reference: Trajectory | None, spans, dt: float, label: str,
+               deadline: _Deadline) -> tuple[float, np.ndarray]:
+    """The rollout that is timed: bare AdvanceTo between resets, in chunks so that the wall-clock
+    limit is looked at in between. (wall seconds spent advancing, final plant positions)."""
+    from pydrake.systems.analysis import Simulator
+
+    plant = scene.plant
+    simulator = Simulator(scene.diagram)
+    pctx = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    _set_state(scene, pctx, initial, label, 0.0)
+    simulator.Initialize()
+    sim_time_s = 0.0
+    for a, b in spans:
+        if a > 0:
+            _set_state(scene, pctx, _state_at(reference, a), label, a * dt)
+        step = a
+        while step < b:
+            step = min(step + CHUNK_STEPS, b)
+            t0 = time.perf_counter()
+            _advance(simulator, step, dt, label)
+            sim_time_s += time.perf_counter() - t0
+            deadline.check(label, step * dt)
+        _check_finite(scene, pctx, label, b * dt)
+    return sim_time_s, plant.GetPositions(pctx).copy()
+
+
+def _object_contacts(scene: Scene, pctx) -> tuple[np.ndarray, np.ndarray]:
+    """The object's contact points (K, 3) and the forces it feels there (K, 3), world frame, now:
+    point contacts and hydroelastic contact surfaces (at their centroids)."""
+    results = scene.plant.get_contact_results_output_port().Eval(pctx)
+    obj_index, obj_geoms = scene.object_body.index(), scene.object_geometry_ids
+    pts, forces = [], []
+    for k in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(k)
+        # contact_force() acts on body B; the object feels minus that when it is body A.
+        if info.bodyB_index() == obj_index:
+            pts.append(info.contact_point())
+            forces.append(info.contact_force())
+        elif info.bodyA_index() == obj_index:
+            pts.append(info.contact_point())
+            forces.append(-info.contact_force())
+    for k in range(results.num_hydroelastic_contacts()):
+        info = results.hydroelastic_contact_info(k)
+        surface = info.contact_surface()
+        # F_Ac_W acts on the body of geometry M at the centroid; N's body feels minus it.
+        if surface.id_M() in obj_geoms:
+            pts.append(surface.centroid())
+            forces.append(info.F_Ac_W().translational())
+        elif surface.id_N() in obj_geoms:
+            pts.append(surface.centroid())
+            forces.append(-info.F_Ac_W().translational())
+    return np.asarray(pts, dtype=float).reshape(-1, 3), np.asarray(forces, dtype=float).reshape(-1, 3)
+
+
+def _in_object_frame(contacts_w: list[np.ndarray], forces_w: list[np.ndarray],
+                     object_q: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per step, contact points and forces from the world frame into the object's body frame
+    (``object_q``: (N, 7) quaternion wxyz then position, per step)."""
+    from pydrake.common.eigen_geometry import Quaternion
+    from pydrake.math import RotationMatrix
+
+    contacts_o, forces_o = [], []
+    for i, (pw, fw) in enumerate(zip(contacts_w, forces_w)):
+        if len(pw) == 0:
+            contacts_o.append(np.zeros((0, 3)))
+            forces_o.append(np.zeros((0, 3)))
+            continue
+        R = RotationMatrix(Quaternion(object_q[i, :4] / np.linalg.norm(object_q[i, :4]))).matrix()
+        contacts_o.append((pw - object_q[i, 4:]) @ R)
+        forces_o.append(fw @ R)
+    return contacts_o, forces_o
 
 
 def _mesh_vertices(mesh_path: Path) -> np.ndarray:
