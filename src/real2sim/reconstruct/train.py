@@ -222,14 +222,13 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     stages = [(config.coarse_voxels, config.coarse_steps), (config.fine_voxels, config.fine_steps)]
     stages = [(n, s) for n, s in stages if s > 0]
     total = sum(s for _, s in stages)
-    field, done, curve, carved, first_grid = None, 0, [], None, None
+    first_grid = VoxelGrid.covering(lo, hi, stages[0][0], table_z_m)
+    init_density, carved = hull_density(views, first_grid, config, progress)
+    field, done, curve = None, 0, []
     for voxels, steps in stages:
         grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
-        occupancy = field_occupancy(views, grid, config)
-        if field is None:
-            init_density, carved = hull_density(views, grid, config, progress)
-            first_grid = grid
-        occupancy &= ~_deep_carved(carved, first_grid, grid, config.carved_margin_voxels)
+        occupancy = field_occupancy(views, grid, config) & ~_deep_carved(carved, first_grid, grid,
+                                                                           config.carved_margin_voxels)
         if field is None:
             field = VoxelRadianceField(grid, occupancy, feature_channels=config.feature_channels,
                                        init_density=init_density, device=device, generator=gen)
