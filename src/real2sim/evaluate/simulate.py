@@ -143,8 +143,6 @@ def _intervals(num_steps: int, interval: int | None) -> list[tuple[int, int]]:
 
 def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: SceneConfig,
               label: str, representation: str, run: int, deadline: _Deadline | None = None) -> Trajectory:
-    from pydrake.systems.analysis import Simulator
-
     _check_object_instance(scene)
     plant = scene.plant
     dt = cfg.time_step_s
@@ -164,11 +162,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     sim_time_s, timed_final_q = _timed_run(scene, initial, reference, spans, dt, label, deadline)
 
     # one AdvanceTo per step, logging state and contacts
-    simulator = Simulator(scene.diagram)
-    ctx = simulator.get_mutable_context()
-    pctx = plant.GetMyMutableContextFromRoot(ctx)
-    _set_state(scene, pctx, initial, label, 0.0)
-    simulator.Initialize()
+    simulator, pctx = _started(scene, initial, label)
     na = plant.num_positions(scene.actuated_instance)
     oq = np.empty((n + 1, 7))
     ov = np.empty((n + 1, 6))
@@ -177,6 +171,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     contacts_w: list[np.ndarray] = []
     forces_w: list[np.ndarray] = []
     reset_set = set(int(r) for r in reset_steps)
+    read_contacts = _contact_reader(scene)
 
     def log(i: int) -> None:
         oq[i] = plant.GetPositions(pctx, scene.object_instance)
@@ -185,7 +180,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
         av[i] = plant.GetVelocities(pctx, scene.actuated_instance)
 
     def log_contacts() -> None:
-        pts, forces = _object_contacts(scene, pctx)
+        pts, forces = read_contacts(pctx)
         contacts_w.append(pts)
         forces_w.append(forces)
 
@@ -224,13 +219,7 @@ def _timed_run(scene: Scene, initial: _State, reference: Trajectory | None, span
                deadline: _Deadline) -> tuple[float, np.ndarray]:
     """The rollout that is timed: bare AdvanceTo between resets, in chunks so that the wall-clock
     limit is looked at in between. (wall seconds spent advancing, final plant positions)."""
-    from pydrake.systems.analysis import Simulator
-
-    plant = scene.plant
-    simulator = Simulator(scene.diagram)
-    pctx = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
-    _set_state(scene, pctx, initial, label, 0.0)
-    simulator.Initialize()
+    simulator, pctx = _started(scene, initial, label)
     sim_time_s = 0.0
     for a, b in spans:
         if a > 0:
@@ -243,35 +232,52 @@ def _timed_run(scene: Scene, initial: _State, reference: Trajectory | None, span
             sim_time_s += time.perf_counter() - t0
             deadline.check(label, step * dt)
         _check_finite(scene, pctx, label, b * dt)
-    return sim_time_s, plant.GetPositions(pctx).copy()
+    return sim_time_s, scene.plant.GetPositions(pctx).copy()
 
 
-def _object_contacts(scene: Scene, pctx) -> tuple[np.ndarray, np.ndarray]:
-    """The object's contact points (K, 3) and the forces it feels there (K, 3), world frame, now:
-    point contacts and hydroelastic contact surfaces (at their centroids)."""
-    results = scene.plant.get_contact_results_output_port().Eval(pctx)
+def _started(scene: Scene, initial: _State, label: str):
+    """(a Simulator of the scene's diagram, initialised at ``initial``, and the plant's context in it)."""
+    from pydrake.systems.analysis import Simulator
+
+    simulator = Simulator(scene.diagram)
+    pctx = scene.plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    _set_state(scene, pctx, initial, label, 0.0)
+    simulator.Initialize()
+    return simulator, pctx
+
+
+def _contact_reader(scene: Scene):
+    """A function of the plant's context: the object's contact points (K, 3) and the forces it feels
+    there (K, 3), world frame, from point contacts and hydroelastic contact surfaces (at their
+    centroids). The port and the object's ids are looked up once: it is called every step."""
+    port = scene.plant.get_contact_results_output_port()
     obj_index, obj_geoms = scene.object_body.index(), scene.object_geometry_ids
-    pts, forces = [], []
-    for k in range(results.num_point_pair_contacts()):
-        info = results.point_pair_contact_info(k)
-        # contact_force() acts on body B; the object feels minus that when it is body A.
-        if info.bodyB_index() == obj_index:
-            pts.append(info.contact_point())
-            forces.append(info.contact_force())
-        elif info.bodyA_index() == obj_index:
-            pts.append(info.contact_point())
-            forces.append(-info.contact_force())
-    for k in range(results.num_hydroelastic_contacts()):
-        info = results.hydroelastic_contact_info(k)
-        surface = info.contact_surface()
-        # F_Ac_W acts on the body of geometry M at the centroid; N's body feels minus it.
-        if surface.id_M() in obj_geoms:
-            pts.append(surface.centroid())
-            forces.append(info.F_Ac_W().translational())
-        elif surface.id_N() in obj_geoms:
-            pts.append(surface.centroid())
-            forces.append(-info.F_Ac_W().translational())
-    return np.asarray(pts, dtype=float).reshape(-1, 3), np.asarray(forces, dtype=float).reshape(-1, 3)
+
+    def read(pctx) -> tuple[np.ndarray, np.ndarray]:
+        results = port.Eval(pctx)
+        pts, forces = [], []
+        for k in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(k)
+            # contact_force() acts on body B; the object feels minus that when it is body A.
+            if info.bodyB_index() == obj_index:
+                pts.append(info.contact_point())
+                forces.append(info.contact_force())
+            elif info.bodyA_index() == obj_index:
+                pts.append(info.contact_point())
+                forces.append(-info.contact_force())
+        for k in range(results.num_hydroelastic_contacts()):
+            info = results.hydroelastic_contact_info(k)
+            surface = info.contact_surface()
+            # F_Ac_W acts on the body of geometry M at the centroid; N's body feels minus it.
+            if surface.id_M() in obj_geoms:
+                pts.append(surface.centroid())
+                forces.append(info.F_Ac_W().translational())
+            elif surface.id_N() in obj_geoms:
+                pts.append(surface.centroid())
+                forces.append(-info.F_Ac_W().translational())
+        return np.asarray(pts, dtype=float).reshape(-1, 3), np.asarray(forces, dtype=float).reshape(-1, 3)
+
+    return read
 
 
 def _in_object_frame(contacts_w: list[np.ndarray], forces_w: list[np.ndarray],
