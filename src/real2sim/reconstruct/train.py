@@ -176,6 +176,7 @@ def _deep_carved(carved: np.ndarray, source: VoxelGrid, target: VoxelGrid, margi
     it (a mug's opened cavity cost every ray into it a gradient sample per half voxel)."""
     if margin_voxels < 0 or not carved.any():
         return np.zeros(target.shape, bool)
+    # scipy erodes until nothing changes when iterations is 0, so a zero margin is handled here
     deep = binary_erosion(carved, np.ones((3, 3, 3), bool), iterations=margin_voxels) if margin_voxels else carved
     return _resampled(deep, source, target)
 
