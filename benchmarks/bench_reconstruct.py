@@ -11,6 +11,10 @@ and of the textured mesh, wall and CPU seconds, and peak memory.
     python benchmarks/bench_reconstruct.py                  # bottle, can, mug: 100 views, 320x240
     python benchmarks/bench_reconstruct.py --objects bottle --tsdf bottle
     python benchmarks/bench_reconstruct.py --quick          # 40 views at 160x120, short training
+    python benchmarks/bench_reconstruct.py --datasets DIR --device cuda --tag cuda
+        # DIR/bottle, DIR/can, ...: datasets already captured and refined (written by an earlier
+        # capture + refine-poses); only reconstruction runs, so a machine without Drake or COLMAP
+        # (a GPU box) can measure it
 
 Writes docs/benchmarks/reconstruct.md via benchmarks/common.py.
 """
@@ -61,6 +65,48 @@ def _split(truth: dict) -> str:
     return f"{hull:.3g} / {'-' if concave is None else f'{concave:.3g}'}" if hull is not None else "-"
 
 
+def _captured_and_refined(name: str, ds: Path, args) -> list:
+    """Capture the bundled object into ``ds``, refine its poses; the pose-refinement table's row."""
+    import warnings
+
+    from real2sim.capture.pose_refinement import RefineConfig, refine_poses
+    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.geometry.objects import make_textured_object
+
+    capture(make_textured_object(name), ds, CaptureConfig(views=args.views, width=args.width,
+                                                          height=args.height, seed=args.seed))
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = refine_poses(ds, RefineConfig(seed=args.seed))
+    return [name, f"{ref.num_refined_frames}/{ref.num_frames}", ref.rot_error_before_deg,
+            ref.rot_error_after_deg, ref.trans_error_before_mm, ref.trans_error_after_mm,
+            time.perf_counter() - t0]
+
+
+def _refinement_row(name: str, ds: Path) -> list:
+    """The pose-refinement row of a dataset refined earlier, read from its refine_report.json."""
+    import json
+
+    if not (ds / "ground_truth").is_dir():
+        raise SystemExit(f"bench_reconstruct: {ds} has no ground_truth/ to judge against")
+    report_path = ds / "refine_report.json"
+    if not report_path.is_file():
+        return [name, "not refined", "-", "-", "-", "-", "-"]
+    ref = json.loads(report_path.read_text())
+    return [name, f"{ref['num_refined_frames']}/{ref['num_frames']}", ref["rot_error_before_deg"],
+            ref["rot_error_after_deg"], ref["trans_error_before_mm"], ref["trans_error_after_mm"],
+            f"{ref['seconds']:.4g} (earlier)"]
+
+
+def _dataset_size(ds: Path) -> tuple[int, int, int]:
+    """(views, width px, height px) of a dataset, for the section's description."""
+    import json
+
+    meta = json.loads((ds / "transforms.json").read_text())
+    return len(meta["frames"]), int(meta["w"]), int(meta["h"])
+
+
 def _write(args, argv, rows: list, pose_rows: list) -> None:
     """Write (or rewrite) the section with the rows so far: a stopped run keeps what it measured."""
     load = os.getloadavg()[0]
@@ -100,6 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tsdf", default="", metavar="OBJECTS",
                     help="comma-separated objects on which the field's surface is also extracted by TSDF fusion")
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--datasets", type=Path, default=None, metavar="DIR",
+                    help="reconstruct DIR/<object> (captured, refined, with ground_truth/) instead of capturing")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     ap.add_argument("--seed", type=int, default=0)
@@ -108,11 +156,6 @@ def main(argv: list[str] | None = None) -> int:
 
     from dataclasses import replace
 
-    import warnings
-
-    from real2sim.capture.pose_refinement import RefineConfig, refine_poses
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
-    from real2sim.geometry.objects import make_textured_object
     from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
     from real2sim.reconstruct.train import FieldConfig
 
@@ -125,16 +168,13 @@ def main(argv: list[str] | None = None) -> int:
     rows, pose_rows = [], []
     with tempfile.TemporaryDirectory(prefix="bench-reconstruct-") as tmp:
         for name in args.objects.split(","):
-            ds = Path(tmp) / name
-            capture(make_textured_object(name), ds, CaptureConfig(views=args.views, width=args.width,
-                                                                  height=args.height, seed=args.seed))
-            t0 = time.perf_counter()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                ref = refine_poses(ds, RefineConfig(seed=args.seed))
-            pose_rows.append([name, f"{ref.num_refined_frames}/{ref.num_frames}", ref.rot_error_before_deg,
-                              ref.rot_error_after_deg, ref.trans_error_before_mm, ref.trans_error_after_mm,
-                              time.perf_counter() - t0])
+            if args.datasets is None:
+                ds = Path(tmp) / name
+                pose_rows.append(_captured_and_refined(name, ds, args))
+            else:
+                ds = args.datasets / name
+                pose_rows.append(_refinement_row(name, ds))
+                args.views, args.width, args.height = _dataset_size(ds)
             for label, cfg in variants:
                 print(f"{name}: {label}", flush=True)
                 cpu0, wall0 = _cpu_s(), time.perf_counter()

@@ -40,7 +40,16 @@ def machine_description() -> str:
             versions.append(f"{dist} {version(dist)}")
         except PackageNotFoundError:
             pass
-    return f"{cpu}, {cores} cores, {mem_gib:.0f} GiB, {platform.system()} {platform.release()}, Python {platform.python_version()}, " + ", ".join(versions)
+    gpu = ""
+    try:
+        import torch
+
+        if torch.cuda.is_available():
+            gpu = f", GPU {torch.cuda.get_device_name(0)}"
+    except ImportError:
+        pass
+    return (f"{cpu}, {cores} cores, {mem_gib:.0f} GiB{gpu}, {platform.system()} {platform.release()}, "
+            f"Python {platform.python_version()}, " + ", ".join(versions))
 
 
 def today() -> str:
