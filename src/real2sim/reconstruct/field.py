@@ -184,9 +184,17 @@ class VoxelRadianceField(torch.nn.Module):
                         depth_m=zeros.index_add(0, ray_of, weights * t))
 
     def _front_samples(self, origins, directions, t_near, t_far, offset, step_m: float, step_voxels: float,
-                       chunk: int = 32) -> tuple[torch.Tensor, torch.Tensor]:
-        """(ray, sample position) of the occupied samples in front of each ray's opaque point, sorted by ray."""
+                       chunk: int | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(ray, sample position) of the occupied samples in front of each ray's opaque point, sorted by ray.
+
+        The rays are walked ``chunk`` samples at a time; the samples kept do not depend on it.
+        """
         device = origins.device
+        if chunk is None:
+            # A CPU pays for every sample, so short chunks stop sooner at opaque points (fine can
+            # grid, 100 steps: 19 s at 32, 23 s at 64). A GPU pays per chunk, for the kernel launches
+            # and the host sync of each pass (H100, same steps: 3.2 s at 32, 0.8 s at 256).
+            chunk = 32 if device.type == "cpu" else 256
         per_ray = torch.ceil((t_far - t_near) / step_m).long().clamp_min(0)
         optical = torch.zeros(len(origins), device=device, dtype=torch.float64)
         alive = torch.nonzero(per_ray > 0)[:, 0]

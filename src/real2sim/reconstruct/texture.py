@@ -25,13 +25,38 @@ from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.views import PosedViews, pixel_rays, project
 
 
-def unwrap(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """xatlas atlas: vertices (V', 3), faces (F, 3) and per-vertex UVs (V', 2) in [0, 1]."""
+def unwrap(mesh: trimesh.Trimesh, faces_per_piece: int = 5000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """xatlas atlas: vertices (V', 3), faces (F, 3) and per-vertex UVs (V', 2) in [0, 1].
+
+    The mesh is cut into slabs of about ``faces_per_piece`` faces along its longest side and
+    the slabs are charted as separate meshes of one atlas: xatlas charts each mesh on its own
+    thread, and its charting cost grows faster than the face count. A 40k-face can: 14 s
+    as one mesh, 7 s as four, on 2 cores. The cuts only add chart seams, which the atlas
+    has everywhere anyway (about 1200 charts on that can). The number of slabs depends on
+    the mesh alone, so the atlas does not change with the machine.
+    """
     import xatlas
 
-    vmapping, faces, uvs = xatlas.parametrize(np.asarray(mesh.vertices, dtype=np.float32),
-                                              np.asarray(mesh.faces, dtype=np.uint32))
-    return np.asarray(mesh.vertices)[vmapping], faces.astype(np.int64), uvs.astype(np.float64)
+    vertices = np.asarray(mesh.vertices)
+    faces = np.asarray(mesh.faces)
+    pieces = max(1, int(np.ceil(len(faces) / faces_per_piece)))
+    axis = int(np.argmax(np.ptp(vertices, axis=0)))
+    order = np.argsort(vertices[faces].mean(axis=1)[:, axis], kind="stable")
+    atlas = xatlas.Atlas()
+    piece_vertices = []
+    for part in np.array_split(order, pieces):
+        used, local = np.unique(faces[part], return_inverse=True)
+        atlas.add_mesh(vertices[used].astype(np.float32), local.reshape(-1, 3).astype(np.uint32))
+        piece_vertices.append(used)
+    atlas.generate()
+    out_vertices, out_faces, out_uvs, offset = [], [], [], 0
+    for i, used in enumerate(piece_vertices):
+        vmapping, piece_faces, uvs = atlas[i]
+        out_vertices.append(vertices[used[vmapping]])
+        out_faces.append(piece_faces.astype(np.int64) + offset)
+        out_uvs.append(uvs.astype(np.float64))
+        offset += len(vmapping)
+    return np.concatenate(out_vertices), np.concatenate(out_faces), np.concatenate(out_uvs)
 
 
 def texel_faces(faces: np.ndarray, uvs: np.ndarray, size_px: int) -> np.ndarray:

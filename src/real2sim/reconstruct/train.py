@@ -249,7 +249,7 @@ def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, ste
                                  {"params": [field.feature_table], "lr": config.lr_features, "base": config.lr_features}],
                                 fused=True)
     dec_opt = torch.optim.Adam(field.decoder.parameters(), lr=config.lr_decoder)
-    window: list[float] = []
+    window: list[torch.Tensor] = []  # losses on the device, read once per reporting window (a GPU sync)
     report_every = max(steps // 20, 1)
     device = field.device
     for step in range(steps):
@@ -271,10 +271,10 @@ def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, ste
         loss.backward()
         grid_opt.step()
         dec_opt.step()
-        window.append(loss.item())
+        window.append(loss.detach())
         done += 1
         if step % report_every == report_every - 1 or step == steps - 1:
-            curve.append((done, float(np.mean(window))))
+            curve.append((done, float(torch.stack(window).mean())))
             window = []
         if progress:
             progress(f"training field ({field.grid.shape[0]}x{field.grid.shape[1]}x{field.grid.shape[2]})", done, total)
