@@ -201,10 +201,23 @@ def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndar
         some = seen > 0
         if some.any():
             median = np.nanmedian(per_point[some], axis=1)
-            spread[some] = np.nanquantile(np.linalg.norm(per_point[some] - median[:, None], axis=2),
-                                          quantile, axis=1)
+            spread[some] = _row_nanquantile(np.linalg.norm(per_point[some] - median[:, None], axis=2), quantile)
         spreads.append(spread)
     return spreads[0], spreads[1], seen, two_sided
+
+
+def _row_nanquantile(values: np.ndarray, quantile: float) -> np.ndarray:
+    """``np.nanquantile(values, quantile, axis=1)`` (linear interpolation) for rows (P, V) with at
+    least one number each. numpy's own runs a Python function per row when there are NaNs: 10 s
+    of a 21 s mug carving."""
+    ordered = np.sort(values, axis=1)  # NaNs last
+    count = (~np.isnan(values)).sum(axis=1)
+    position = quantile * (count - 1)
+    below = np.floor(position).astype(np.int64)
+    above = np.minimum(below + 1, count - 1)
+    low = np.take_along_axis(ordered, below[:, None], axis=1)[:, 0]
+    high = np.take_along_axis(ordered, above[:, None], axis=1)[:, 0]
+    return low + (high - low) * (position - below)
 
 
 def _bilinear(images: np.ndarray, view_of: np.ndarray, uv: np.ndarray) -> np.ndarray:
