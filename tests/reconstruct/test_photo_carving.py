@@ -75,3 +75,18 @@ def test_small_carved_pockets_are_put_back(mug_capture):
 
     grid, hull, result = _hull_and_carving(mug_capture, CarvingConfig(min_component_fraction=0.99))
     assert result.carved_voxels == 0
+
+
+@pytest.mark.parametrize("quantile", [0.0, 0.3, 0.5, 0.8, 1.0])
+def test_row_quantile_matches_numpys_nanquantile(quantile):
+    """The colour-spread quantile over each voxel's views (NaN where a view does not see it)."""
+    from real2sim.reconstruct.photo_carving import _row_nanquantile
+
+    rng = np.random.default_rng(0)
+    spreads = rng.random((400, 90)).astype(np.float32)
+    spreads[rng.random(spreads.shape) < 0.7] = np.nan
+    spreads[:, 5] = rng.random(400)  # every voxel seen at least once
+    spreads[3, 6:] = np.nan
+    spreads[3, :5] = np.nan  # a voxel seen once
+    np.testing.assert_allclose(_row_nanquantile(spreads, quantile), np.nanquantile(spreads, quantile, axis=1),
+                               atol=1e-6)
