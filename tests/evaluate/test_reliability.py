@@ -430,11 +430,18 @@ def test_signals_end_the_workers_and_a_second_sweep_is_locked_out(tmp_path):
         assert len(children) >= 2, children  # the pool's workers (and the resource tracker)
         if sig == signal.SIGINT:
             # 3. While this sweep holds the output (frozen, so it surely does), a second one is refused.
-            proc.send_signal(signal.SIGSTOP)
+            # Its workers are frozen too: left running on a loaded machine, they once finished the
+            # whole sweep while the second one started, and the SIGINT below came after a clean exit.
+            frozen = [proc.pid, *children]
+            for pid in frozen:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGSTOP)
             try:
                 second = subprocess.run(cmd, capture_output=True, text=True, timeout=90, env=env)
             finally:
-                proc.send_signal(signal.SIGCONT)
+                for pid in reversed(frozen):
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(pid, signal.SIGCONT)
             assert second.returncode == 2, second.stderr
             lines = second.stderr.strip().splitlines()
             assert len(lines) == 1 and "another real2sim process is writing" in lines[0], lines

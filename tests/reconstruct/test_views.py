@@ -205,3 +205,41 @@ def test_load_views_arrays(can_capture):
     sub = views.subset(np.array([3, 7]))
     assert sub.count == 2 and sub.names == (views.names[3], views.names[7])
     np.testing.assert_array_equal(sub.rgb[1], views.rgb[7])
+
+
+def test_large_images_are_reduced_with_their_camera(can_capture, tmp_path):
+    """A capture stored at 3x its size (each pixel repeated 3x3, the camera scaled) loads back as the
+    original at ``max_side_px`` = the original's width: the same pixels, masks and camera."""
+    from PIL import Image
+
+    from tests.reconstruct.conftest import copy_dataset, edit_transforms
+
+    big = copy_dataset(can_capture, tmp_path / "big")
+    for folder in ("images", "masks"):
+        for path in sorted((big / folder).iterdir()):
+            with Image.open(path) as im:
+                im.resize((3 * im.width, 3 * im.height), Image.NEAREST).save(path)
+
+    def tripled(data):
+        for key in ("fl_x", "fl_y", "cx", "cy", "w", "h"):
+            data[key] = 3 * data[key]
+        return data
+
+    edit_transforms(big, tripled)
+    original = load_views(can_capture)
+    reduced = load_views(big, max_side_px=W)
+    assert load_views(big).rgb.shape[1:3] == (3 * H, 3 * W)  # None: as captured
+    assert reduced.intrinsics.width == W and reduced.intrinsics.height == H
+    for name in ("fl_x", "fl_y", "cx", "cy"):
+        assert getattr(reduced.intrinsics, name) == pytest.approx(getattr(original.intrinsics, name), rel=1e-12)
+    np.testing.assert_allclose(reduced.rgb, original.rgb, atol=1e-5)
+    np.testing.assert_array_equal(reduced.mask, original.mask)
+
+
+def test_working_size_keeps_the_aspect_ratio():
+    from real2sim.reconstruct.views import working_size
+
+    phone = CameraIntrinsics(4032, 3024, 3000.0, 3000.0, 2016.0, 1512.0)
+    assert working_size(phone, 640) == (640, 480)
+    assert working_size(phone, None) == (4032, 3024)
+    assert working_size(PINHOLE, 640) == (160, 120)  # never enlarged

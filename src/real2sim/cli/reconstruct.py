@@ -12,6 +12,7 @@ from real2sim.cli.options import device, existing_file, integer, seed
 STEPS = integer(1, 100_000)
 VOXELS = integer(16, 512)
 TEXTURE_PX = integer(64, 8192)
+IMAGE_PX = integer(16, 16384)
 
 
 def register(sub) -> None:
@@ -41,6 +42,9 @@ def register(sub) -> None:
     p.add_argument("--voxels", type=VOXELS, default=None,
                    help="fine-grid voxels along the object's longest side (default from the field settings)")
     p.add_argument("--texture-px", type=TEXTURE_PX, default=1024, help="texture image size, px (default 1024)")
+    p.add_argument("--max-image-px", type=IMAGE_PX, default=640,
+                   help="work on images reduced to this many px on their longer side (default 640; larger "
+                        "photos cost memory and time the field's grid cannot use)")
     p.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
                    help="field backend: train from the visual hull as it is, without opening the concavities "
                         "the views disagree about (see docs/reconstruct.md)")
@@ -78,7 +82,7 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
     else:
         field = replace(FieldConfig().with_budget(args.steps, args.voxels), photo_carving=args.photo_carving)
         config = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
-                                   texture_px=args.texture_px)
+                                   texture_px=args.texture_px, max_image_side_px=args.max_image_px)
         config.validate()
         from real2sim.cli.progress import progress_display
 

@@ -9,7 +9,7 @@ from pathlib import Path
 from real2sim.cli import options
 from real2sim.cli.asset import add_asset_arguments
 from real2sim.cli.options import COLMAP_SEED_MAX, existing_file, integer, jobs, nonnegative, positive
-from real2sim.cli.reconstruct import STEPS, TEXTURE_PX, VOXELS
+from real2sim.cli.reconstruct import IMAGE_PX, STEPS, TEXTURE_PX, VOXELS
 
 #: Evaluation: runs per task, scale of the tasks' durations.
 RUNS = integer(1, 1000)
@@ -62,6 +62,8 @@ def register(sub) -> None:
     g.add_argument("--voxels", type=VOXELS, default=None,
                    help="voxels along the object's longest side (field: fine grid; hull: carving grid, default 192)")
     g.add_argument("--texture-px", type=TEXTURE_PX, default=1024, help="texture image size, px (default 1024)")
+    g.add_argument("--max-image-px", type=IMAGE_PX, default=640,
+                   help="reconstruct from images reduced to this many px on their longer side (default 640)")
     g.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
                    help="field backend: train from the visual hull as it is, without opening the concavities "
                         "the views disagree about (see docs/reconstruct.md)")
@@ -110,7 +112,7 @@ def config_from_args(args: argparse.Namespace):
     field_voxels = args.voxels if args.backend == "field" else None
     field = replace(FieldConfig().with_budget(args.steps, field_voxels), photo_carving=args.photo_carving)
     recon = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
-                              texture_px=args.texture_px)
+                              texture_px=args.texture_px, max_image_side_px=args.max_image_px)
     if args.voxels is not None and args.backend != "field":
         recon = replace(recon, hull_voxels=args.voxels)
     if args.max_faces is not None:

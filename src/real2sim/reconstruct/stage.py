@@ -48,6 +48,8 @@ class ReconstructConfig:
     held_out_every: int = 10
     table_z_m: float = 0.0
     min_part_volume_fraction: float = 0.05
+    # images are reduced to this many px on their longer side (None: as captured); see load_views
+    max_image_side_px: int | None = 640
 
     def validate(self) -> None:
         if self.backend not in BACKENDS:
@@ -56,6 +58,8 @@ class ReconstructConfig:
             raise UserInputError(f"unknown extraction {self.extraction!r} (choose from {', '.join(EXTRACTIONS)})")
         if not 16 <= self.hull_voxels <= 1024 or not 64 <= self.texture_px <= 8192:
             raise UserInputError("hull voxels must be in 16..1024 and texture size in 64..8192 px")
+        if self.max_image_side_px is not None and self.max_image_side_px < 16:
+            raise UserInputError(f"images must keep at least 16 px on their longer side (got {self.max_image_side_px})")
         self.field.validate()
 
 
@@ -106,7 +110,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     clock = _StageClock()
     report: dict = {"backend": config.backend, "device": device, "seed": seed}
     with clock.stage("load"):
-        views = load_views(dataset)
+        views = load_views(dataset, max_side_px=config.max_image_side_px)
         train_idx, held_idx = held_out_split(views.count, config.held_out_every)
         train, held = views.subset(train_idx), views.subset(held_idx)
         truth = load_truth(dataset)

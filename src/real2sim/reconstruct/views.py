@@ -44,15 +44,44 @@ class PosedViews:
                           tuple(self.names[i] for i in index))
 
 
-def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True) -> PosedViews:
+def working_size(k: CameraIntrinsics, max_side_px: int | None) -> tuple[int, int]:
+    """(width, height) px of images no longer than ``max_side_px`` on their longer side, the
+    aspect ratio kept; the camera's own size when it fits or ``max_side_px`` is None."""
+    longest = max(k.width, k.height)
+    if max_side_px is None or longest <= max_side_px:
+        return k.width, k.height
+    scale = max_side_px / longest
+    return max(1, round(k.width * scale)), max(1, round(k.height * scale))
+
+
+def _area_resized(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``image`` (H, W) or (H, W, 3), float32, averaged over each new pixel's footprint (PIL's box
+    filter maps pixel edges to edges, as ``CameraIntrinsics.scaled`` maps the camera)."""
+    from PIL import Image
+
+    if image.shape[1] == size[0] and image.shape[0] == size[1]:
+        return image
+    channels = [image] if image.ndim == 2 else [image[..., c] for c in range(image.shape[2])]
+    out = [np.asarray(Image.fromarray(np.ascontiguousarray(c, dtype=np.float32), mode="F").resize(size, Image.BOX))
+           for c in channels]
+    return out[0] if image.ndim == 2 else np.stack(out, axis=-1)
+
+
+def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True,
+               max_side_px: int | None = None) -> PosedViews:
     """Read every image and mask of a dataset; UserInputError (one line) for anything unusable.
 
     Checks: at least 8 frames, masks present for every frame when ``need_masks``,
     every image readable and of the intrinsics' size, masks of the same size, and
     cameras that look at a common region (:func:`common_look_at_point`).
+
+    Images longer than ``max_side_px`` are reduced (area average; masks become soft at their
+    edges) and the camera with them, one image at a time: a phone capture of 200 photos at
+    4032x3024 would need 29 GB as float images, and the field's grid cannot use the detail.
     """
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
-    k = ds.intrinsics
+    full = ds.intrinsics
+    k = full.scaled(*working_size(full, max_side_px)) if max_side_px is not None else full
     if len(ds.frames) < MIN_VIEWS:
         raise UserInputError(f"{ds.root}: {len(ds.frames)} views; reconstruction needs at least {MIN_VIEWS}")
     missing = [f.file_path for f in ds.frames if f.mask_path is None]
@@ -62,18 +91,19 @@ def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True) -> Pos
             "run `real2sim mask DATASET --method ...` first")
     rgb = np.empty((len(ds.frames), k.height, k.width, 3), dtype=np.float32)
     mask = np.ones((len(ds.frames), k.height, k.width), dtype=np.float32)
+    size = (k.width, k.height)
     for i, frame in enumerate(ds.frames):
         image = load_image_rgb(_inside(ds.root, frame.file_path))
-        if image.shape[:2] != (k.height, k.width):
+        if image.shape[:2] != (full.height, full.width):
             raise UserInputError(f"{frame.file_path}: image is {image.shape[1]}x{image.shape[0]} px but the "
-                                 f"dataset's camera is {k.width}x{k.height}; all images must have one size")
-        rgb[i] = image / np.float32(255.0)
+                                 f"dataset's camera is {full.width}x{full.height}; all images must have one size")
+        rgb[i] = _area_resized(image.astype(np.float32) / np.float32(255.0), size)
         if frame.mask_path is not None:
             m = load_mask(_inside(ds.root, frame.mask_path))
-            if m.shape != (k.height, k.width):
+            if m.shape != (full.height, full.width):
                 raise UserInputError(f"{frame.mask_path}: mask is {m.shape[1]}x{m.shape[0]} px, image is "
-                                     f"{k.width}x{k.height}")
-            mask[i] = m
+                                     f"{full.width}x{full.height}")
+            mask[i] = _area_resized(m.astype(np.float32), size)
     if need_masks and not np.any(mask.reshape(len(mask), -1).max(axis=1) > 0):
         raise UserInputError(f"{ds.root}: every mask is empty")
     views = PosedViews(rgb, mask, ds.poses_c2w_cv(), k, tuple(f.file_path for f in ds.frames))
