@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -83,4 +84,41 @@ def make_colmap_capture(src: Path, dst: Path, model_from_world: Similarity, *, s
         rec.add_point3D(xyz, pycolmap.Track())
     (dst / "sparse" / "0").mkdir(parents=True)
     rec.write(str(dst / "sparse" / "0"))
+    return dst
+
+
+#: nerfstudio's ``applied_transform`` (documented in ``ns-process-data``'s transforms.json): COLMAP's
+#: axes turned so that its -y (usually up in a photo) becomes +z; a proper rotation.
+NERFSTUDIO_APPLIED = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0]])
+
+
+def make_nerfstudio_capture(src: Path, dst: Path, model_from_world: Similarity, *, seed: int = 0,
+                            point_cloud: bool = True) -> Path:
+    """``dst`` laid out as ``ns-process-data`` leaves a COLMAP-posed capture: ``transforms.json`` in
+    the COLMAP model's frame turned by ``applied_transform`` (OpenGL camera-to-world poses, one
+    camera, ``mask_path`` per frame), ``colmap/sparse/0``, and with ``point_cloud`` the sparse points
+    in that frame as an ASCII ``sparse_pc.ply`` that ``ply_file_path`` names. ``ground_truth/`` with
+    ``model_from_world.json`` relating it to the transforms.json frame."""
+    import trimesh
+
+    from real2sim.formats.dataset import Dataset, write_transforms
+    from real2sim.pipeline.normalise import read_sparse_points
+
+    make_colmap_capture(src, dst, model_from_world, seed=seed)
+    model = read_dataset(dst)
+    points, _ = read_sparse_points(model)
+    (dst / "colmap").mkdir()
+    shutil.move(dst / "sparse", dst / "colmap" / "sparse")
+    applied = Similarity(1.0, NERFSTUDIO_APPLIED[:, :3], NERFSTUDIO_APPLIED[:, 3])
+    frames = tuple(
+        replace(frame, file_path=f"images/{Path(frame.file_path).name}", mask_path=f"masks/{Path(frame.file_path).stem}.png",
+                transform_matrix=pose, extra={"colmap_im_id": i + 1})
+        for i, (frame, pose) in enumerate(zip(model.frames, transform_poses(applied, model.poses_c2w_gl()))))
+    extra = {"applied_transform": NERFSTUDIO_APPLIED.tolist()}
+    if point_cloud:
+        trimesh.PointCloud(applied.apply(points)).export(dst / "sparse_pc.ply", encoding="ascii")
+        extra["ply_file_path"] = "sparse_pc.ply"
+    write_transforms(dst / "transforms.json", Dataset(dst, model.intrinsics, frames, extra))
+    (dst / "ground_truth" / "model_from_world.json").write_text(
+        json.dumps({"model_from_world": (applied @ model_from_world).matrix().tolist()}))
     return dst

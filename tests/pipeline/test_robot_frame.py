@@ -5,7 +5,9 @@ small simulated capture of the can (60 views at 120x90 px, no pose noise: with f
 can's visual hull does not close, tests/reconstruct/conftest.py) moved into a random similarity
 frame as a COLMAP model (tests/pipeline/colmap_capture.py: sparse points from the exact depth maps,
 0.5 mm noise, 10 % outliers). The asset from the moved capture (--object-height-m = the can's true
-height, 0.1 m) is compared with the asset from the original, robot-frame capture.
+height, 0.1 m) is compared with the asset from the original, robot-frame capture; so is the asset
+from the same capture laid out as nerfstudio's ``ns-process-data`` writes it (transforms.json in the
+COLMAP frame turned by ``applied_transform``, sparse_pc.ply, colmap/sparse/0).
 
 Tolerances asserted (measured on this capture, seed 5, scale 4.07, in brackets: --object-height-m /
 --scale at the exact scale): mass exact; CoM in the asset frame within 1 mm (0.012 / 0.016 mm);
@@ -30,7 +32,7 @@ import pytest
 
 from real2sim.formats.errors import UserInputError
 from real2sim.pipeline import robot_frame as rf
-from tests.pipeline.colmap_capture import make_colmap_capture, random_similarity
+from tests.pipeline.colmap_capture import make_colmap_capture, make_nerfstudio_capture, random_similarity
 
 FAST = ["--backend", "hull", "--voxels", "64", "--max-faces", "4000", "--texture-px", "256",
         "--collision", "mesh", "--mass", "0.35"]
@@ -199,8 +201,10 @@ def captures(tmp_path_factory) -> dict[str, Path]:
     make_colmap_capture(root / "can", root / "moved", sim, seed=5)
     make_colmap_capture(root / "can", root / "moved_no_truth", sim, seed=5, ground_truth=False)
     make_colmap_capture(root / "can", root / "few_points", sim, seed=5, max_points=12, ground_truth=False)
+    make_nerfstudio_capture(root / "can", root / "nerfstudio", sim, seed=5)
     return {"root": root, "truth": root / "can", "robot": root / "robot", "moved": root / "moved",
-            "moved_no_truth": root / "moved_no_truth", "few_points": root / "few_points", "scale": sim.scale}
+            "moved_no_truth": root / "moved_no_truth", "few_points": root / "few_points",
+            "nerfstudio": root / "nerfstudio", "scale": sim.scale, "similarity": sim}
 
 
 @pytest.fixture(scope="module")
@@ -211,7 +215,9 @@ def assets(captures, tmp_path_factory) -> dict[str, Path]:
     runs = {"robot": [captures["robot"]],
             "height": [captures["moved"], "--object-height-m", CAN_HEIGHT_M],
             # the exact scale, and the masks stage on a COLMAP dataset (it writes a model-frame transforms.json)
-            "scale": [captures["moved_no_truth"], "--scale", repr(1.0 / captures["scale"]), "--mask", "provided"]}
+            "scale": [captures["moved_no_truth"], "--scale", repr(1.0 / captures["scale"]), "--mask", "provided"],
+            # ns-process-data's layout: transforms.json in COLMAP's frame turned by applied_transform
+            "nerfstudio": [captures["nerfstudio"], "--object-height-m", CAN_HEIGHT_M]}
     for name, (dataset, *extra) in runs.items():
         assert main(["run", str(dataset), "--out", str(out / name), *map(str, extra), *FAST]) == 0, name
     return {name: out / name for name in runs}
@@ -228,7 +234,7 @@ def _asset_summary(asset_dir: Path) -> dict:
             "volume": mesh.volume}
 
 
-@pytest.mark.parametrize("run", ["height", "scale"])
+@pytest.mark.parametrize("run", ["height", "scale", "nerfstudio"])
 def test_moved_capture_gives_the_same_asset(assets, run):
     ref, got = _asset_summary(assets["robot"]), _asset_summary(assets[run])
     assert got["mass"] == ref["mass"] == 0.35
@@ -237,7 +243,7 @@ def test_moved_capture_gives_the_same_asset(assets, run):
     assert np.all(np.abs(got["extents"] / ref["extents"] - 1) < 0.02), (got["extents"], ref["extents"])
     assert abs(got["volume"] / ref["volume"] - 1) < 0.03
     stages = list(json.loads((assets[run] / ".run" / "run.json").read_text())["stages"])
-    assert stages == (["robot_frame", "reconstruct", "asset", "truth"] if run == "height"
+    assert stages == (["robot_frame", "reconstruct", "asset", "truth"] if run != "scale"
                       else ["masks", "robot_frame", "reconstruct", "asset"])
 
 
@@ -268,8 +274,9 @@ def test_normalised_poses_match_the_robot_poses_up_to_yaw_and_xy(assets, capture
     assert record["robot_from_model"]["scale"] == pytest.approx(1 / captures["scale"], rel=0.01)
 
 
-def test_truth_of_a_moved_capture_is_aligned_by_the_known_similarity(assets):
-    truth = json.loads((assets["height"] / "truth.json").read_text())
+@pytest.mark.parametrize("run", ["height", "nerfstudio"])
+def test_truth_of_a_moved_capture_is_aligned_by_the_known_similarity(assets, run):
+    truth = json.loads((assets[run] / "truth.json").read_text())
     phys, rec = truth["physical_properties"], truth["reconstruction"]
     assert rec["chamfer_mm"] < 2.0 and rec["iou"] > 0.9  # the true can placed in the normalised frame
     assert phys["com_error_mm"] < 3.0 and phys["inertia_eigenvalue_max_rel_error"] < 0.1
@@ -302,6 +309,55 @@ def test_bad_colmap_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
         assert not out.exists(), label
     code, _, err = run_cli(capsys, moved, "--out", tmp_path / "x", *FAST)
     assert "--scale" in err and "--object-height-m" in err
+
+
+def test_nerfstudio_capture_reads_its_point_cloud_or_else_its_colmap_model(captures, assets, tmp_path):
+    """ns-process-data's sparse_pc.ply is in the transforms.json frame; without it, colmap/sparse/0 moved by
+    applied_transform gives the same points. The normalised copy no longer claims a model frame."""
+    from real2sim.formats.dataset import is_model_frame, read_dataset
+    from real2sim.pipeline.normalise import read_sparse_points
+
+    with_cloud = read_dataset(captures["nerfstudio"])
+    without = read_dataset(make_nerfstudio_capture(captures["truth"], tmp_path / "no_cloud", captures["similarity"],
+                                                   seed=5, point_cloud=False))
+    assert is_model_frame(with_cloud) and is_model_frame(without)
+    (cloud, cloud_from), (model, model_from) = read_sparse_points(with_cloud), read_sparse_points(without)
+    assert cloud_from == "sparse_pc.ply" and model_from.startswith("colmap/sparse/0")
+    np.testing.assert_allclose(cloud, model, atol=1e-5 * np.abs(model).max())
+    normalised = read_dataset(assets["nerfstudio"] / ".run" / "robot_frame")
+    assert not is_model_frame(normalised) and "applied_transform" not in normalised.extra
+    record = json.loads((assets["nerfstudio"] / ".run" / "robot_frame" / "robot_frame.json").read_text())
+    assert record["sparse_points"]["from"] == "sparse_pc.ply"
+
+
+def test_bad_nerfstudio_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
+    """Without a scale; a point cloud named outside the folder; no sparse points at all; and `reconstruct`,
+    which needs a metric frame with the table at z = 0."""
+    from real2sim.cli import main
+
+    def edited(name: str, edit) -> Path:
+        copy = tmp_path / name
+        shutil.copytree(captures["nerfstudio"], copy, ignore=shutil.ignore_patterns("ground_truth"))
+        data = json.loads((copy / "transforms.json").read_text())
+        edit(copy, data)
+        (copy / "transforms.json").write_text(json.dumps(data))
+        return copy
+
+    outside = edited("outside", lambda root, d: d.update(ply_file_path="../elsewhere.ply"))
+    bare = edited("bare", lambda root, d: (shutil.rmtree(root / "colmap"), (root / "sparse_pc.ply").unlink()))
+    cases = {"no scale": ([captures["nerfstudio"]], "nerfstudio-processed capture"),
+             "cloud outside": ([outside, "--object-height-m", "0.1"], "outside the dataset folder"),
+             "no points": ([bare, "--object-height-m", "0.1"], "no sparse points")}
+    for label, (args, words) in cases.items():
+        out = tmp_path / label.replace(" ", "_")
+        code, _, err = run_cli(capsys, *args, "--out", out, *FAST)
+        assert code == 2, (label, err)
+        assert len(err.strip().splitlines()) == 1 and words in err, (label, err)
+        assert not out.exists(), label
+    out = tmp_path / "mesh"
+    assert main(["reconstruct", str(captures["nerfstudio"]), "--out", str(out), "--backend", "hull"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--object-height-m" in err and not out.exists(), err
 
 
 def test_normalise_reports_progress(captures, tmp_path):

@@ -37,10 +37,11 @@ def register(sub) -> None:
     )
     p.add_argument("dataset", type=Path, help="dataset folder (transforms.json, images/, masks/)")
     p.add_argument("--object-height-m", type=positive(10.0), default=None, metavar="H", help="a COLMAP dataset "
-                   "(images/ + sparse/0, no transforms.json): the object's height above the table, metres; sets the "
+                   "(images/ + sparse/0, no transforms.json) or an ns-process-data folder (transforms.json with "
+                   "applied_transform, sparse_pc.ply): the object's height above the table, metres; sets the "
                    "scale (the table plane is found in the sparse points)")
     p.add_argument("--scale", type=positive(1e6), default=None, metavar="S",
-                   help="COLMAP dataset: metres per model unit, instead of --object-height-m")
+                   help="COLMAP or ns-process-data dataset: metres per model unit, instead of --object-height-m")
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR",
                    help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
     p.add_argument("--overwrite", action="store_true", help="discard ASSETDIR (and its cached stages) first")

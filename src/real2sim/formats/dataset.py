@@ -21,6 +21,9 @@ A real capture may come as ``images/`` + ``transforms.json`` (any tool that
 writes nerfstudio's format), or as ``images/`` + a COLMAP model in
 ``sparse/0`` (cameras/images .bin or .txt); :func:`read_dataset` converts the
 latter on the fly (its poses are then in COLMAP's arbitrary frame and scale).
+nerfstudio's ``ns-process-data`` output is a ``transforms.json`` in such a frame
+too (COLMAP's, axes swapped): it carries ``applied_transform`` and the SfM points
+in ``ply_file_path`` (:func:`is_model_frame`).
 """
 
 from __future__ import annotations
@@ -73,6 +76,12 @@ def realsense_d435_intrinsics(width: int = 640, height: int = 480) -> CameraIntr
     fl = 615.0 * width / 640.0
     return CameraIntrinsics(width=width, height=height, fl_x=fl, fl_y=615.0 * height / 480.0,
                             cx=width / 2.0, cy=height / 2.0)
+
+
+#: transforms.json keys that say its poses are in an SfM model's frame (arbitrary scale, no table at
+#: z = 0): ``source``/``model_frame`` from :func:`read_dataset` of a COLMAP model and the masks
+#: stage's copy of one; ``applied_transform``/``ply_file_path`` from nerfstudio's ``ns-process-data``.
+MODEL_FRAME_KEYS = ("source", "model_frame", "applied_transform", "ply_file_path")
 
 
 @dataclass(frozen=True)
@@ -164,6 +173,19 @@ def dataset_to_json(ds: Dataset) -> dict:
         frames.append(entry)
     out["frames"] = frames
     return out
+
+
+def is_model_frame(ds: "Dataset") -> bool:
+    """True when ``ds``'s poses are in an SfM model's frame and scale (a COLMAP model, or a
+    nerfstudio-processed capture), not metres in a frame with the table top at z = 0."""
+    return ds.extra.get("source") == "colmap" or any(k in ds.extra for k in MODEL_FRAME_KEYS[1:])
+
+
+def describe_model_frame(ds: "Dataset") -> str:
+    """What kind of model-frame dataset ``ds`` is, for messages."""
+    if ds.extra.get("source") == "colmap" or "model_frame" in ds.extra:
+        return "a COLMAP model"
+    return "a nerfstudio-processed capture (transforms.json with applied_transform: COLMAP's frame and scale)"
 
 
 def write_json_atomic(path: Path, data: Any, default: Any = None) -> None:

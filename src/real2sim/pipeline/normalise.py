@@ -2,7 +2,11 @@
 
 Input: a dataset folder with ``images/``, masks for every frame, and a COLMAP model in
 ``sparse/0`` (cameras, images, points3D), or the masks stage's copy of one (which adds a
-``transforms.json`` holding the model's poses, still in the model frame). Output:
+``transforms.json`` holding the model's poses, still in the model frame), or what nerfstudio's
+``ns-process-data`` writes: a ``transforms.json`` in COLMAP's frame with axes swapped
+(``applied_transform``), its sparse points in ``ply_file_path`` (``sparse_pc.ply``, in the same
+frame) and the model in ``colmap/sparse/0`` (used, moved by ``applied_transform``, when the
+point cloud is missing). Output:
 ``ASSETDIR/.run/robot_frame/``, a dataset in the robot frame -- z up, the table top at
 z = 0, the object's footprint centred at x = y = 0, metres -- with ``transforms.json``
 (OpenGL camera-to-world), the frames' images and masks, and ``robot_frame.json`` (the
@@ -52,7 +56,11 @@ import numpy as np
 
 from real2sim.formats.dataset import (
     CV_FROM_GL,
+    MODEL_FRAME_KEYS,
     Dataset,
+    check_inside,
+    describe_model_frame,
+    is_model_frame,
     load_mask,
     read_dataset,
     read_ground_truth,
@@ -63,11 +71,10 @@ from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import publish_dir, write_json_atomic
 from real2sim.formats.progress import ProgressFn
 from real2sim.pipeline import robot_frame as rf
+from real2sim.pipeline.manifest import tree_files
 
 MODEL_FROM_WORLD = "model_from_world.json"  # in ground_truth/: how a simulated capture was moved into the model frame
 RECORD_NAME = "robot_frame.json"
-# transforms.json keys that mark a dataset's frame: read_colmap_model's, and the masks stage's copy of a model.
-_FRAME_KEYS = ("source", "model_frame")
 
 
 @dataclass(frozen=True)
@@ -95,21 +102,18 @@ class NormaliseConfig:
             raise UserInputError(f"--object-height-m / --scale must be a finite number > 0 (got {given[0]})")
 
 
-def is_model_frame(dataset: Dataset) -> bool:
-    """True for a COLMAP model read as a dataset, or the masks stage's transforms.json copy of one."""
-    return dataset.extra.get("source") == "colmap" or "model_frame" in dataset.extra
-
-
 def check_frame_options(ds: Dataset, scale_given: bool) -> None:
-    """UserInputError (one line) unless a COLMAP dataset comes with --object-height-m or --scale
-    (``scale_given``), and a transforms.json dataset (metric, table at z = 0) with neither."""
+    """UserInputError (one line) unless a model-frame dataset (:func:`is_model_frame`: a COLMAP model,
+    a nerfstudio-processed capture) comes with --object-height-m or --scale (``scale_given``), and a
+    metric transforms.json dataset (table at z = 0) with neither."""
     if is_model_frame(ds) and not scale_given:
-        raise UserInputError(f"{ds.root} is a COLMAP model (no transforms.json): its poses have no metric scale; "
-                             "pass --object-height-m H (the object's height above the table, m) or --scale S "
-                             "(metres per model unit)")
+        raise UserInputError(f"{ds.root} is {describe_model_frame(ds)}: its poses have no metric scale and no "
+                             "table frame; pass --object-height-m H (the object's height above the table, m) "
+                             "or --scale S (metres per model unit)")
     if scale_given and not is_model_frame(ds):
-        raise UserInputError(f"{ds.root} has a transforms.json (poses in metres, table at z = 0): --object-height-m "
-                             "and --scale are for a COLMAP model dataset (images + sparse/0, no transforms.json)")
+        raise UserInputError(f"{ds.root} has a transforms.json in metres with the table at z = 0: --object-height-m "
+                             "and --scale are for a COLMAP model dataset (images + sparse/0) or an ns-process-data "
+                             "folder (transforms.json with applied_transform)")
 
 
 def write_model_transforms(root: Path) -> None:
@@ -120,17 +124,75 @@ def write_model_transforms(root: Path) -> None:
                      replace(ds, extra={"model_frame": "COLMAP sparse/0: arbitrary frame and scale, not metres"}))
 
 
-def read_sparse_points(root: Path) -> np.ndarray:
-    """(P, 3) points3D of ``root/sparse/0`` in the model frame."""
+def _colmap_points(model: Path) -> np.ndarray:
+    """(P, 3) points3D of the COLMAP model folder ``model``, in its frame."""
     import pycolmap
 
-    model = Path(root) / "sparse" / "0"
     try:
         rec = pycolmap.Reconstruction(str(model))
     except Exception as exc:  # pycolmap raises generic errors on bad files
         raise UserInputError(f"could not read COLMAP model {model}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
-    points = np.array([p.xyz for p in rec.points3D.values()], dtype=float).reshape(-1, 3)
-    return points[np.all(np.isfinite(points), axis=1)]
+    return np.array([p.xyz for p in rec.points3D.values()], dtype=float).reshape(-1, 3)
+
+
+def _applied_transform(ds: Dataset) -> np.ndarray:
+    """nerfstudio's ``applied_transform`` (3x4 or 4x4, model -> transforms.json frame) as a 3x4 array."""
+    try:
+        matrix = np.asarray(ds.extra["applied_transform"], dtype=float)
+        if matrix.shape not in ((3, 4), (4, 4)) or not np.all(np.isfinite(matrix)):
+            raise ValueError(f"shape {matrix.shape}")
+    except (ValueError, TypeError) as exc:
+        raise UserInputError(f"{ds.root / 'transforms.json'}: applied_transform is not a 3x4 matrix ({exc})") from None
+    return matrix[:3]
+
+
+def _point_cloud_file(ds: Dataset) -> str | None:
+    """The point cloud a nerfstudio-processed transforms.json names (relative path), when it exists."""
+    rel = ds.extra.get("ply_file_path")
+    if not isinstance(rel, str):
+        return None
+    check_inside(Path(ds.root), rel, "transforms.json ply_file_path")
+    return rel if (Path(ds.root) / rel).is_file() else None
+
+
+def sparse_point_files(ds: Dataset) -> list[str]:
+    """The files :func:`read_sparse_points` may read, relative to ``ds.root`` (for the run's input hashes)."""
+    root, files = Path(ds.root), []
+    for model in ("sparse/0", "colmap/sparse/0"):
+        if (root / model).is_dir():
+            files += [f"{model}/{rel}" for rel in tree_files(root / model)]
+    cloud = _point_cloud_file(ds)
+    return files + ([cloud] if cloud is not None else [])
+
+
+def read_sparse_points(ds: Dataset) -> tuple[np.ndarray, str]:
+    """(P, 3) sparse SfM points in ``ds``'s frame, and where they came from (a path relative to ``ds.root``).
+
+    A COLMAP dataset (or the masks stage's copy of one): ``sparse/0``. A nerfstudio-processed
+    capture: the point cloud ``ply_file_path`` names (nerfstudio writes it in the transforms.json
+    frame), else ``colmap/sparse/0`` moved by ``applied_transform``."""
+    root = Path(ds.root)
+    if ds.extra.get("source") == "colmap" or "model_frame" in ds.extra:
+        points, source = _colmap_points(root / "sparse" / "0"), "sparse/0"
+    elif _point_cloud_file(ds) is not None:
+        import trimesh
+
+        rel = _point_cloud_file(ds)
+        try:
+            cloud = trimesh.load(root / rel)
+            points = np.asarray(cloud.vertices, dtype=float).reshape(-1, 3)
+        except Exception as exc:  # noqa: BLE001 -- trimesh raises many kinds on a bad file
+            raise UserInputError(f"cannot read the sparse point cloud {root / rel}: "
+                                 f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+        source = rel
+    elif (root / "colmap" / "sparse" / "0").is_dir() and "applied_transform" in ds.extra:
+        applied = _applied_transform(ds)
+        points = _colmap_points(root / "colmap" / "sparse" / "0") @ applied[:, :3].T + applied[:, 3]
+        source = "colmap/sparse/0 (moved by applied_transform)"
+    else:
+        raise UserInputError(f"{root}: no sparse points to find the table in: expected the point cloud that "
+                             "transforms.json's ply_file_path names, or a COLMAP model in colmap/sparse/0")
+    return points[np.all(np.isfinite(points), axis=1)], source
 
 
 def _masks(ds: Dataset) -> np.ndarray:
@@ -237,7 +299,9 @@ def normalise(source: Path, target: Path, config: NormaliseConfig, *, seed: int 
     ds = read_dataset(source)
     if progress:
         progress("table plane, object height", 0, 0)
-    robot_from_model, record = find_robot_frame(ds, read_sparse_points(source), _masks(ds), config, seed)
+    points, points_from = read_sparse_points(ds)
+    robot_from_model, record = find_robot_frame(ds, points, _masks(ds), config, seed)
+    record["sparse_points"]["from"] = points_from
     truth, robot_from_world = model_from_world(source), None
     if truth is not None:  # model_from_world.json lives in ground_truth/
         robot_from_world = robot_from_model @ truth
@@ -255,8 +319,8 @@ def normalise(source: Path, target: Path, config: NormaliseConfig, *, seed: int 
                 shutil.copy2(source / rel, tmp / rel)
         moved = rf.transform_poses(robot_from_model, ds.poses_c2w_gl())
         frames = tuple(replace(f, transform_matrix=m) for f, m in zip(ds.frames, moved))
-        extra = {k: v for k, v in ds.extra.items() if k not in _FRAME_KEYS}
-        extra["robot_frame"] = f"normalised from a COLMAP model by real2sim run: see {RECORD_NAME}"
+        extra = {k: v for k, v in ds.extra.items() if k not in MODEL_FRAME_KEYS}
+        extra["robot_frame"] = f"normalised from {describe_model_frame(ds)} by real2sim run: see {RECORD_NAME}"
         write_transforms(tmp / "transforms.json", Dataset(tmp, ds.intrinsics, frames, extra))
         if robot_from_world is not None:
             _copy_ground_truth(source, tmp, robot_from_world)

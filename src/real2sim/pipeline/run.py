@@ -28,12 +28,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
-from real2sim.formats.dataset import read_dataset
+from real2sim.formats.dataset import is_model_frame, read_dataset
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import check_output_dir, make_output_dir, output_lock
 from real2sim.formats.progress import ProgressFn, null_progress
 from real2sim.pipeline import manifest as mf
-from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, is_model_frame
+from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, sparse_point_files
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
                                       _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine, _robot_frame)
 from real2sim.pipeline.truth import build_truth, has_ground_truth
@@ -127,8 +127,8 @@ def _dataset_files(root: Path) -> list[str]:
     """What the stages read from a dataset: transforms.json, the frames' images and masks, ground_truth/."""
     ds = read_dataset(root, check_files=False)
     files = ["transforms.json"]
-    if (root / "sparse" / "0").is_dir():  # a COLMAP model: its poses and sparse points
-        files += [f"sparse/0/{rel}" for rel in mf.tree_files(root / "sparse" / "0")]
+    if is_model_frame(ds):  # its poses' frame and the sparse points the table is found in
+        files += sparse_point_files(ds)
     for frame in ds.frames:
         files.append(frame.file_path)
         if frame.mask_path:

@@ -13,7 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.dataset import CameraIntrinsics, Dataset, load_image_rgb, load_mask, read_dataset
+from real2sim.formats.dataset import (
+    CameraIntrinsics,
+    Dataset,
+    describe_model_frame,
+    is_model_frame,
+    load_image_rgb,
+    load_mask,
+    read_dataset,
+)
 from real2sim.formats.errors import UserInputError
 
 MIN_VIEWS = 8
@@ -71,7 +79,7 @@ def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True,
                max_side_px: int | None = None) -> PosedViews:
     """Read every image and mask of a dataset; UserInputError (one line) for anything unusable.
 
-    Checks: at least 8 frames, masks present for every frame when ``need_masks``,
+    Checks: poses in a metric frame (not a COLMAP model's, :func:`is_model_frame`), at least 8 frames, masks present for every frame when ``need_masks``,
     every image readable and of the intrinsics' size, masks of the same size, and
     cameras that look at a common region (:func:`common_look_at_point`).
 
@@ -82,6 +90,9 @@ def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True,
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
     full = ds.intrinsics
     k = full.scaled(*working_size(full, max_side_px)) if max_side_px is not None else full
+    if is_model_frame(ds):
+        raise UserInputError(f"{ds.root} is {describe_model_frame(ds)}: reconstruction needs poses in metres with "
+                             "the table top at z = 0; `real2sim run DATASET --object-height-m H` finds both first")
     if len(ds.frames) < MIN_VIEWS:
         raise UserInputError(f"{ds.root}: {len(ds.frames)} views; reconstruction needs at least {MIN_VIEWS}")
     missing = [f.file_path for f in ds.frames if f.mask_path is None]
