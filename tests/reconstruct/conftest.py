@@ -86,3 +86,22 @@ def edit_transforms(root: Path, edit) -> Path:
     path = root / "transforms.json"
     path.write_text(json.dumps(edit(json.loads(path.read_text())), indent=2))
     return root
+
+
+def raised_dataset(src: Path, dst: Path, dz_m: float) -> Path:
+    """A copy of a capture with the world frame moved down by ``dz_m`` (everything, table included,
+    ``dz_m`` higher): camera poses, true poses and the true object's pose; the table top at z = ``dz_m``."""
+    copy_dataset(src, dst, ground_truth=True)
+
+    def raise_frames(data):
+        for frame in data["frames"]:
+            frame["transform_matrix"][2][3] += dz_m
+        return data
+
+    edit_transforms(dst, raise_frames)
+    edit_transforms(dst / "ground_truth", raise_frames)
+    pose_path = dst / "ground_truth" / "object_pose.json"
+    pose = json.loads(pose_path.read_text())
+    pose["world_from_mesh"][2][3] += dz_m
+    pose_path.write_text(json.dumps(pose))
+    return dst

@@ -6,13 +6,17 @@ import argparse
 from pathlib import Path
 
 from real2sim.cli import options
-from real2sim.cli.options import device, existing_file, integer, seed
+from real2sim.cli.options import device, existing_file, integer, number, seed
 
 #: Training steps, grid voxels along the object's longest side, texture image side (px).
 STEPS = integer(1, 100_000)
 VOXELS = integer(16, 512)
 TEXTURE_PX = integer(64, 8192)
 IMAGE_PX = integer(16, 16384)
+#: Table-top height in the dataset's frame, m.
+TABLE_Z_M = number(-100.0, 100.0)
+TABLE_Z_HELP = ("height of the table top in the dataset's frame, +z up, metres (default 0; a robot capture "
+                "whose base is not on the table sets it)")
 
 
 def register(sub) -> None:
@@ -45,6 +49,7 @@ def register(sub) -> None:
     p.add_argument("--max-image-px", type=IMAGE_PX, default=640,
                    help="work on images reduced to this many px on their longer side (default 640; larger "
                         "photos cost memory and time the field's grid cannot use)")
+    p.add_argument("--table-z", type=TABLE_Z_M, default=0.0, metavar="M", help=TABLE_Z_HELP)
     p.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
                    help="field backend: train from the visual hull as it is, without opening the concavities "
                         "the views disagree about (see docs/reconstruct.md)")
@@ -78,11 +83,13 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
     if (args.from_mesh is None) != (args.dataparser_transforms is None):
         raise UserInputError("--from-mesh and --dataparser-transforms go together")
     if args.from_mesh is not None:
-        result = import_external(args.dataset, args.from_mesh, args.dataparser_transforms)
+        result = import_external(args.dataset, args.from_mesh, args.dataparser_transforms,
+                                 config=ReconstructConfig(table_z_m=args.table_z))
     else:
         field = replace(FieldConfig().with_budget(args.steps, args.voxels), photo_carving=args.photo_carving)
         config = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
-                                   texture_px=args.texture_px, max_image_side_px=args.max_image_px)
+                                   texture_px=args.texture_px, max_image_side_px=args.max_image_px,
+                                   table_z_m=args.table_z)
         config.validate()
         from real2sim.cli.progress import progress_display
 

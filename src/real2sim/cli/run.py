@@ -9,7 +9,7 @@ from pathlib import Path
 from real2sim.cli import options
 from real2sim.cli.asset import add_asset_arguments
 from real2sim.cli.options import COLMAP_SEED_MAX, existing_file, integer, jobs, nonnegative, positive
-from real2sim.cli.reconstruct import IMAGE_PX, STEPS, TEXTURE_PX, VOXELS
+from real2sim.cli.reconstruct import IMAGE_PX, STEPS, TABLE_Z_HELP, TABLE_Z_M, TEXTURE_PX, VOXELS
 
 #: Evaluation: runs per task, scale of the tasks' durations.
 RUNS = integer(1, 1000)
@@ -65,6 +65,8 @@ def register(sub) -> None:
     g.add_argument("--texture-px", type=TEXTURE_PX, default=1024, help="texture image size, px (default 1024)")
     g.add_argument("--max-image-px", type=IMAGE_PX, default=640,
                    help="reconstruct from images reduced to this many px on their longer side (default 640)")
+    g.add_argument("--table-z", type=TABLE_Z_M, default=0.0, metavar="M",
+                   help=TABLE_Z_HELP + "; the flat bottom is closed there")
     g.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
                    help="field backend: train from the visual hull as it is, without opening the concavities "
                         "the views disagree about (see docs/reconstruct.md)")
@@ -106,6 +108,9 @@ def config_from_args(args: argparse.Namespace):
         NormaliseConfig(object_height_m=args.object_height_m, scale=args.scale).validate()
     # Every image and mask, and the frame options against the dataset's kind, before any display.
     check_dataset(args.dataset, masks_needed=args.mask is None, scale_given=scale_given)
+    if scale_given and args.table_z != 0.0:
+        raise UserInputError("--table-z is for a dataset in metres; a COLMAP capture's table is found in its "
+                             "sparse points and put at z = 0")
     args.flat_bottom, args.support_height = True, 0.0
     asset = asset_config(args)
     resolve_device(args.device)
@@ -113,7 +118,8 @@ def config_from_args(args: argparse.Namespace):
     field_voxels = args.voxels if args.backend == "field" else None
     field = replace(FieldConfig().with_budget(args.steps, field_voxels), photo_carving=args.photo_carving)
     recon = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
-                              texture_px=args.texture_px, max_image_side_px=args.max_image_px)
+                              texture_px=args.texture_px, max_image_side_px=args.max_image_px,
+                              table_z_m=args.table_z)
     if args.voxels is not None and args.backend != "field":
         recon = replace(recon, hull_voxels=args.voxels)
     if args.max_faces is not None:

@@ -247,6 +247,9 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
         robot_frame.validate()
     recon_cfg = config.reconstruct or ReconstructConfig()
     recon_cfg.validate()
+    if robot_frame is not None and recon_cfg.table_z_m != 0.0:
+        raise UserInputError("a table height is for a dataset in metres; a COLMAP capture's table is found in its "
+                             "sparse points and put at z = 0")
     asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m)
     # A run resumes in place, so an existing ASSETDIR passes the "exists" rule; every other rule of
     # the output helper (inputs, working folder, foreign folders) holds even for a resume.
