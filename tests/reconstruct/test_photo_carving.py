@@ -68,6 +68,47 @@ def test_carving_leaves_the_can_alone(can_capture):
     assert result.carved_voxels <= 0.01 * np.count_nonzero(hull)
 
 
+def test_carving_on_poses_a_few_mm_off_is_undone_by_the_silhouettes(can_capture, tmp_path):
+    """The can with 5 mm / 1 degree RMS pose noise (unrefined robot poses): every textured surface then
+    disagrees between views, and carving alone ate 83 % of the hull from the top down (21338 of 25791
+    voxels); the rays through the masks put it all back (measured: 0 carved, 20315 restored)."""
+    from scipy.spatial.transform import Rotation
+
+    from tests.reconstruct.conftest import copy_dataset, edit_transforms
+
+    rng = np.random.default_rng(0)
+
+    def noisy(data):
+        for frame in data["frames"]:
+            pose = np.array(frame["transform_matrix"])
+            pose[:3, :3] = Rotation.from_rotvec(rng.normal(0, np.radians(1.0) / np.sqrt(3), 3)).as_matrix() @ pose[:3, :3]
+            pose[:3, 3] += rng.normal(0, 0.005 / np.sqrt(3), 3)
+            frame["transform_matrix"] = pose.tolist()
+        return data
+
+    dataset = edit_transforms(copy_dataset(can_capture, tmp_path / "noisy"), noisy)
+    grid, hull, result = _hull_and_carving(dataset)
+    assert result.restored_voxels > 0.5 * np.count_nonzero(hull)  # carving went deep; the masks said no
+    assert result.carved_voxels <= 0.01 * np.count_nonzero(hull)
+
+
+def test_emptied_rays_put_back_a_removed_top(can_capture):
+    """Remove the can's upper half by hand: the side views' rays through it meet nothing any more, so
+    nearly all of it is put back; removing nothing puts nothing back."""
+    from real2sim.reconstruct.photo_carving import _emptied_rays
+    from real2sim.reconstruct.views import load_views
+
+    grid, hull, _ = _hull_and_carving(can_capture)
+    views = load_views(can_capture)
+    solid = hull.copy()
+    solid[:, :, grid.shape[2] // 2:] = False
+    removed = hull & ~solid
+    restored = _emptied_rays(views, grid, hull, solid)
+    assert not (restored & ~removed).any()
+    assert np.count_nonzero(restored) > 0.9 * np.count_nonzero(removed)
+    assert not _emptied_rays(views, grid, hull, hull).any()
+
+
 def test_small_carved_pockets_are_put_back(mug_capture):
     """Carved parts smaller than ``min_component_fraction`` of the hull are filled again: at 0.99 even the
     cavity (less than half the hull's voxels) is."""

@@ -158,7 +158,7 @@ class VoxelRadianceField(torch.nn.Module):
         device = origins.device
         rays = len(origins)
         step_m = step_voxels * self.grid.voxel_m
-        t_near, t_far = _ray_box(origins, directions, self._lo, self._hi)
+        t_near, t_far = ray_box(origins, directions, self._lo, self._hi)
         if t_range_m is not None:
             t_near = torch.maximum(t_near, t_range_m[0])
             t_far = torch.maximum(torch.minimum(t_far, t_range_m[1]), t_near)
@@ -269,7 +269,7 @@ def _softplus_inverse(y):
     return np.log(np.expm1(y))
 
 
-def _ray_box(origins: torch.Tensor, directions: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor):
+def ray_box(origins: torch.Tensor, directions: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor):
     """Entry and exit distances (R,) of rays through the box [lo, hi]; exit <= entry when they miss."""
     inv = 1.0 / torch.where(directions.abs() < 1e-12, torch.full_like(directions, 1e-12), directions)
     t0, t1 = (lo - origins) * inv, (hi - origins) * inv

@@ -30,7 +30,13 @@ surfaces, measured on the bundled objects:
 * texture edges make isolated disagreeing voxels: a voxel goes only when most
   of the surface voxels around it disagree too;
 * what is carved in the end is kept only in connected parts of at least
-  ``min_component_fraction`` of the hull's volume.
+  ``min_component_fraction`` of the hull's volume;
+* the silhouettes have the last word: a ray through a mask pixel that met the hull
+  must still meet the carved solid (something is on it), so the carved voxels along
+  every ray the carving emptied are put back. Where the views disagree for another
+  reason than a concavity -- poses a few millimetres off, which make every textured
+  surface disagree -- carving would otherwise eat the object from the top down (a
+  35 mm box on an unrefined 5 mm / 1 degree capture kept 2.5 mm of it).
 
 It stops early where the views inside a concavity agree (a deep cup's floor and
 lower wall seen only from steep views): on the bundled mug about half of the
@@ -70,11 +76,13 @@ class CarvingConfig:
 
 @dataclass(frozen=True)
 class CarvingResult:
-    """``solid``: bool (``grid.shape``), the carved solid; ``carved_voxels``; ``rounds`` run."""
+    """``solid``: bool (``grid.shape``), the carved solid; ``carved_voxels``; ``rounds`` run;
+    ``restored_voxels``: carved voxels put back because the masks' rays needed them."""
 
     solid: np.ndarray
     carved_voxels: int
     rounds: int
+    restored_voxels: int = 0
 
 
 _FACES = np.zeros((3, 3, 3), bool)
@@ -114,8 +122,50 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
         # only voxels near a change can change verdict: newly exposed ones, and those that now see more views
         near = binary_dilation(carve, np.ones((3, 3, 3), bool), iterations=2)
         candidates = _surface(solid) & near & ~floor
+    restored = _emptied_rays(views, grid, original, solid)
+    solid |= restored
     solid |= _small_components(original & ~solid, config.min_component_fraction * original.sum())
-    return CarvingResult(solid=solid, carved_voxels=int((original & ~solid).sum()), rounds=rounds)
+    return CarvingResult(solid=solid, carved_voxels=int((original & ~solid).sum()), rounds=rounds,
+                         restored_voxels=int(restored.sum()))
+
+
+def _emptied_rays(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
+                  rays_per_chunk: int = 4096) -> np.ndarray:
+    """The carved voxels (``original & ~solid``) on rays through mask pixels that meet ``original``
+    but no longer meet ``solid``: the silhouette says something is on each such ray.
+
+    One ray per mask pixel, at most one per voxel footprint (a finer stride only repeats rays),
+    sampled every half voxel inside the grid's box."""
+    import torch
+
+    from real2sim.reconstruct.field import ray_box
+    from real2sim.reconstruct.views import pixel_rays
+
+    restore = np.zeros(original.shape, bool)
+    carved = original & ~solid
+    if not carved.any():
+        return restore
+    shape = np.asarray(grid.shape)
+    lo = grid.origin_m - 0.5 * grid.voxel_m
+    stride = max(1, int(_voxel_footprint_px(views, grid)))
+    steps = np.arange(int(np.ceil(np.linalg.norm(shape) * 2)) + 1) * (0.5 * grid.voxel_m)
+    for i in range(views.count):
+        v_px, u_px = np.nonzero(views.mask[i, ::stride, ::stride] >= 0.5)
+        origins, directions = pixel_rays(views.intrinsics, views.c2w_cv[i], u_px * stride + 0.5, v_px * stride + 0.5)
+        for start in range(0, len(origins), rays_per_chunk):
+            o, d = origins[start:start + rays_per_chunk], directions[start:start + rays_per_chunk]
+            near, far = (t.numpy() for t in ray_box(torch.from_numpy(o), torch.from_numpy(d), torch.from_numpy(lo),
+                                                    torch.from_numpy(lo + shape * grid.voxel_m)))
+            t = near[:, None] + steps[None, :]
+            cells = np.floor((o[:, None] + t[..., None] * d[:, None] - lo) / grid.voxel_m).astype(np.int64)
+            inside = (t <= far[:, None]) & np.all((cells >= 0) & (cells < shape), axis=-1)
+            cells = np.clip(cells, 0, shape - 1)
+            index = tuple(np.moveaxis(cells, -1, 0))
+            emptied = (original[index] & inside).any(axis=1) & ~(solid[index] & inside).any(axis=1)
+            if emptied.any():
+                on_ray = carved[index][emptied] & inside[emptied]
+                restore[tuple(cells[emptied][on_ray].T)] = True
+    return restore
 
 
 def _small_components(carved: np.ndarray, min_voxels: float) -> np.ndarray:

@@ -97,6 +97,8 @@ class TrainResult:
     loss_curve: tuple[tuple[int, float], ...]  # (step, mean MSE over the last reporting window)
     seconds: float
     carved_voxels: int = 0  # coarse-grid voxels of the visual hull removed by photo-consistent carving
+    # carving-grid voxels the carving removed and the masks' rays put back (poses off, see photo_carving)
+    restored_voxels: int = 0
 
 
 @dataclass(frozen=True)
@@ -135,32 +137,35 @@ def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> 
 
 
 def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig,
-                 progress: ProgressFn | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 progress: ProgressFn | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Initial density per voxel (``grid.shape``): ``init_density`` inside the visual hull, fading to
     nearly nothing outside it over about a voxel (a smooth step of the silhouette score), and
-    nearly nothing where photo-consistent carving removed the hull; and the voxels carved (bool)."""
+    nearly nothing where photo-consistent carving removed the hull; the voxels carved (bool); and
+    the carving-grid voxels the masks' rays put back (:class:`CarvingResult`)."""
     score = carve(views, grid, config.hull_outlier_fraction)
     density = config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
     if not config.photo_carving:
-        return density, np.zeros(grid.shape, bool)
-    carved = _photo_carved(views, grid, score >= 0.5, config, progress)
-    return np.where(carved, 1e-3 * config.init_density, density), carved
+        return density, np.zeros(grid.shape, bool), 0
+    carved, restored = _photo_carved(views, grid, score >= 0.5, config, progress)
+    return np.where(carved, 1e-3 * config.init_density, density), carved, restored
 
 
 def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: FieldConfig,
-                  progress: ProgressFn | None) -> np.ndarray:
-    """Voxels of ``grid`` that photo-consistent carving removes from the visual hull (``hull`` on ``grid``).
+                  progress: ProgressFn | None) -> tuple[np.ndarray, int]:
+    """Voxels of ``grid`` that photo-consistent carving removes from the visual hull (``hull`` on ``grid``),
+    and the count of carving-grid voxels it put back for the masks.
 
     Carving runs on a grid of at least ``config.carving.voxels`` along the longest side: on
     coarser voxels a true surface's voxel centres lie so far inside it that the views of
     them disagree (a 24-voxel can lost a quarter of its volume)."""
     if max(grid.shape) >= config.carving.voxels:
-        return hull & ~photo_carve(views, grid, hull, config.carving, progress=progress).solid
+        result = photo_carve(views, grid, hull, config.carving, progress=progress)
+        return hull & ~result.solid, result.restored_voxels
     lo, hi = grid.bounds_m
     fine = VoxelGrid.covering(lo, hi, config.carving.voxels, table_z_m=float(lo[2]))
     fine_hull = carve(views, fine, config.hull_outlier_fraction) >= 0.5
-    carved = fine_hull & ~photo_carve(views, fine, fine_hull, config.carving, progress=progress).solid
-    return _resampled(carved, fine, grid)
+    result = photo_carve(views, fine, fine_hull, config.carving, progress=progress)
+    return _resampled(fine_hull & ~result.solid, fine, grid), result.restored_voxels
 
 
 def _resampled(mask: np.ndarray, source: VoxelGrid, target: VoxelGrid) -> np.ndarray:
@@ -224,7 +229,7 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     stages = [(n, s) for n, s in stages if s > 0]
     total = sum(s for _, s in stages)
     first_grid = VoxelGrid.covering(lo, hi, stages[0][0], table_z_m)
-    init_density, carved = hull_density(views, first_grid, config, progress)
+    init_density, carved, restored = hull_density(views, first_grid, config, progress)
     field, done, curve = None, 0, []
     for voxels, steps in stages:
         grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
@@ -237,7 +242,7 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
             field = field.upsampled(grid, occupancy)
         done = _optimise(field, pool, config, steps, done, total, gen, progress, curve)
     return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
-                       carved_voxels=int(carved.sum()))
+                       carved_voxels=int(carved.sum()), restored_voxels=restored)
 
 
 def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
