@@ -17,7 +17,7 @@ DURATION_SCALE = positive(100.0)
 
 # The reconstruction's table plane is z = 0 of the dataset's world frame: run always closes
 # the bottom there, so these two `asset` flags are hidden (and ignored).
-_FORCED_ASSET_FLAGS = ("flat_bottom", "support_height")
+_FORCED_ASSET_FLAGS = ("flat_bottom", "support_height", "keep_up")
 
 
 def register(sub) -> None:
@@ -73,6 +73,9 @@ def register(sub) -> None:
     g.add_argument("--max-faces", type=integer(100, 5_000_000), default=None, help="simplify the mesh to this many faces "
                    "(default 40000)")
     add_asset_arguments(p, seed_max=COLMAP_SEED_MAX)  # the seed reaches COLMAP with --refine-poses
+    p.add_argument("--pca-up", action="store_true",
+                   help="make the longest principal axis the asset's +z, as the paper does, instead of the table's "
+                   "normal (default: the object stands in the asset as it stood on the table)")
     for action in p._actions:  # argparse has no public way to hide an inherited flag
         if action.dest in _FORCED_ASSET_FLAGS:
             action.help = argparse.SUPPRESS
@@ -147,7 +150,7 @@ def config_from_args(args: argparse.Namespace):
         evaluation = evaluation_config(args)
     return RunConfig(asset=asset, reconstruct=recon, mask_method=args.mask, mask=mask, refine=refine,
                      evaluation=evaluation, device=args.device, seed=args.seed,
-                     object_height_m=args.object_height_m, scale=args.scale)
+                     object_height_m=args.object_height_m, scale=args.scale, pca_up=args.pca_up)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -54,7 +54,10 @@ class RunConfig:
     """Everything `run` needs besides the dataset and ASSETDIR.
 
     asset: the asset stage's settings (mass, SPECs, ...); ``flat_bottom`` is forced on
-    at support height 0 (the reconstruction's table plane). reconstruct: None -> the
+    at the reconstruction's table plane, and ``keep_up`` unless ``pca_up``: the table's
+    normal is the asset's +z, so the object stands in the asset as it stood when captured,
+    on the bottom closed at the table (the paper's PCA rule, ``pca_up``, stands a box on
+    its end and lays a mug on its side). reconstruct: None -> the
     stage's defaults. mask_method: None -> the dataset's own masks (every frame must
     have one); else masks are made with :func:`real2sim.capture.compute_masks` (``mask``
     its settings, None -> defaults) on a copy. refine: None -> no pose refinement.
@@ -74,6 +77,7 @@ class RunConfig:
     seed: int = 0
     object_height_m: float | None = None
     scale: float | None = None
+    pca_up: bool = False
 
     def robot_frame(self) -> NormaliseConfig | None:
         """The robot_frame stage's settings; None when neither object_height_m nor scale is given."""
@@ -250,7 +254,7 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     if robot_frame is not None and recon_cfg.table_z_m != 0.0:
         raise UserInputError("a table height is for a dataset in metres; a COLMAP capture's table is found in its "
                              "sparse points and put at z = 0")
-    asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m)
+    asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m, keep_up=not config.pca_up)
     # A run resumes in place, so an existing ASSETDIR passes the "exists" rule; every other rule of
     # the output helper (inputs, working folder, foreign folders) holds even for a resume.
     asset_dir = check_output_dir(asset_dir, overwrite=True, inputs=[dataset], what="ASSETDIR")
