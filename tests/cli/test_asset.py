@@ -150,3 +150,35 @@ def test_rewrite_models_changes_contact_without_refitting(tmp_path, can_obj, cap
     _check_asset_folder(out, ["mesh"], 0.35)
     # The evaluation's reference reads the material from asset_config.json: it must follow.
     assert json.loads((out / "asset_config.json").read_text())["contact"]["mu_dynamic"] == 0.8
+
+
+def test_mesh_in_millimetres(tmp_path, can_obj, capsys):
+    """A scan saved in millimetres is refused with a hint (70 m would be no robot's object); with
+    --mesh-units mm, `asset` builds the same asset as from the mesh in metres, and `capture` sees the
+    object at its true size."""
+    import trimesh
+
+    mesh = trimesh.load(can_obj, force="mesh")
+    mesh.apply_scale(1000.0)
+    mm = tmp_path / "can_mm.stl"
+    mesh.export(mm)
+    code, _, err = run_cli(capsys, "asset", mm, "--mass", "0.35", "--out", tmp_path / "refused", "--collision", "mesh")
+    assert_one_line_error(code, err)
+    assert "--mesh-units mm" in err and not (tmp_path / "refused").exists()
+    props = {}
+    for name, path, units in (("m", can_obj, "m"), ("mm", mm, "mm")):
+        code, _, err = run_cli(capsys, "asset", path, "--mass", "0.35", "--out", tmp_path / name, "--collision", "mesh",
+                               "--mesh-units", units)
+        assert code == 0, err
+        props[name] = json.loads((tmp_path / name / "physical_properties.json").read_text())
+    assert json.loads((tmp_path / "mm" / "asset_config.json").read_text())["mesh_units"] == "mm"
+    np.testing.assert_allclose(np.linalg.eigvalsh(props["mm"]["inertia_kg_m2"]),
+                               np.linalg.eigvalsh(props["m"]["inertia_kg_m2"]), rtol=0.01)
+    code, _, err = run_cli(capsys, "capture", mm, "--out", tmp_path / "ds", "--views", "8", "--width", "32",
+                           "--height", "24")
+    assert_one_line_error(code, err)
+    code, _, err = run_cli(capsys, "capture", mm, "--out", tmp_path / "ds", "--views", "8", "--width", "32",
+                           "--height", "24", "--mesh-units", "mm")
+    assert code == 0, err
+    truth = trimesh.load(tmp_path / "ds" / "ground_truth" / "mesh.obj", force="mesh")
+    np.testing.assert_allclose(np.sort(truth.extents), np.sort(mesh.extents / 1000.0), rtol=1e-4)

@@ -26,7 +26,7 @@ from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
 from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.errors import UserInputError
-from real2sim.formats.mesh_io import export_textured_mesh, load_mesh, validate_mesh
+from real2sim.formats.mesh_io import MAX_EXTENT_M, check_object_size, export_textured_mesh, load_mesh, validate_mesh  # noqa: F401
 from real2sim.formats.outputs import atomic_output_dir
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
 from real2sim.formats.progress import ProgressFn, null_progress, prefixed
@@ -34,9 +34,6 @@ from real2sim.formats.spec import CollisionSpec
 
 VISUAL_RELPATH = "visual/model.obj"
 
-#: Largest object (bounding-box side), m: real2sim models objects a robot handles; a bigger
-#: mesh is almost always in other units (millimetres read as metres).
-MAX_EXTENT_M = 10.0
 #: Largest object per resolution hint: Drake meshes compliant curved primitives with edges about
 #: the hint long. Measured (Drake 1.51, compliant sphere): 100 hints across took 0.4 GB and 7 s
 #: to mesh, 300 hints 1.4 GB and 41 s; past that a single primitive costs gigabytes.
@@ -52,6 +49,8 @@ class AssetConfig:
 
     support_height_m: height of the table plane in the input mesh frame (+z up),
         used by ``flat_bottom``; a capture stands the object on z = 0.
+    mesh_units: the units the mesh file's coordinates are in (m, cm, mm, in); everything
+        else, ``support_height_m`` included, is in metres.
     keep_up: keep the input's +z as the asset's +z (PCA only picks x in the
         horizontal plane); without it the longest principal axis becomes +z, as the
         paper does, which tilts squat objects such as a mug.
@@ -67,6 +66,7 @@ class AssetConfig:
     flat_bottom: bool = False
     support_height_m: float = 0.0
     keep_up: bool = False
+    mesh_units: str = "m"
     formats: tuple[str, ...] = ("urdf",)
     seed: int = 0
     device: str = "cpu"
@@ -132,6 +132,7 @@ def config_record(config: AssetConfig) -> dict:
         "flat_bottom": config.flat_bottom,
         "support_height_m": config.support_height_m,
         "keep_up": config.keep_up,
+        "mesh_units": config.mesh_units,
         "formats": list(config.formats),
         "seed": config.seed,
         "device": config.device,
@@ -155,10 +156,7 @@ def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str
     """
     vertices = np.asarray(mesh.vertices, dtype=float)
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    extent = float((hi - lo).max())
-    if extent > MAX_EXTENT_M:
-        raise UserInputError(f"{label} is {extent:.4g} m across, over the {MAX_EXTENT_M:g} m limit of real2sim's objects "
-                             "(a mesh in millimetres? real2sim reads metres)")
+    extent = check_object_size(mesh, label)
     hint = config.contact.resolution_hint_m
     if config.contact.hydroelastic != "none" and extent > MAX_EXTENT_PER_RESOLUTION_HINT * hint:
         raise UserInputError(f"{label} is {extent:.4g} m across, over {MAX_EXTENT_PER_RESOLUTION_HINT:g} x "
@@ -241,7 +239,7 @@ def build_asset(
     """
     say = progress or null_progress
     out_dir = Path(out_dir)
-    mesh = load_mesh(mesh_path)
+    mesh = load_mesh(mesh_path, config.mesh_units)
     solid = geometry_only(mesh)
     validate_mesh(solid, str(mesh_path))
     check_mesh_for_config(solid, config, str(mesh_path))

@@ -244,13 +244,14 @@ def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: Cap
     mesh file path. The folder appears whole or not at all. ``progress("rendering", done, total)``
     is called after each rendered view.
     """
-    from real2sim.formats.mesh_io import load_mesh, validate_mesh
+    from real2sim.formats.mesh_io import check_object_size, load_mesh, validate_mesh
 
     t_start = time.perf_counter()
     config.validate()
     if not isinstance(mesh, trimesh.Trimesh):
         mesh = load_mesh(mesh)
     validate_mesh(mesh)
+    check_object_size(mesh)
     if not has_texture(mesh):
         mesh = with_procedural_texture(mesh, seed=config.texture_seed + 1)
     cam = config.camera()

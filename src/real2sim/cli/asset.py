@@ -29,6 +29,13 @@ def add_contact_arguments(p: argparse.ArgumentParser) -> None:
                    help="edge length Drake meshes curved compliant primitives with, m (default 0.01)")
 
 
+def add_mesh_units_argument(p: argparse.ArgumentParser) -> None:
+    from real2sim.formats.mesh_io import MESH_UNITS_M
+
+    p.add_argument("--mesh-units", choices=list(MESH_UNITS_M), default="m",
+                   help="units of the mesh file's coordinates (default m; scans and CAD exports are often mm)")
+
+
 def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX) -> None:
     """Flags shared by `asset` and verbs that build assets (demo, run); ``seed_max``: the largest --seed."""
     p.add_argument("--mass", type=positive(1000.0), required=True, metavar="KG", help="measured mass of the object, kg")
@@ -77,9 +84,10 @@ def register(sub) -> None:
         epilog="example: real2sim objects export bottle bottle.obj && "
         "real2sim asset bottle.obj --mass 0.6 --out bottle_asset --collision coacd --collision cylinders:10",
     )
-    p.add_argument("mesh", type=Path, help="object mesh in metres")
+    p.add_argument("mesh", type=Path, help="object mesh (metres, or --mesh-units)")
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR", help="output asset folder (must not exist)")
     p.add_argument("--overwrite", action="store_true", help="replace ASSETDIR if it exists")
+    add_mesh_units_argument(p)
     add_asset_arguments(p)
     options.finish(p)
     p.set_defaults(func=run)
@@ -145,6 +153,7 @@ def config_from_args(args: argparse.Namespace):
         flat_bottom=args.flat_bottom,
         support_height_m=args.support_height,
         keep_up=args.keep_up,
+        mesh_units=getattr(args, "mesh_units", "m"),
         formats=formats,
         seed=args.seed,
         device=args.device,

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from real2sim.cli import options
+from real2sim.cli.asset import add_mesh_units_argument
 from real2sim.cli.options import COLMAP_SEED_MAX, device, integer, nonnegative, seed
 
 #: Image sides, px (the capture's renderer and COLMAP work within this).
@@ -26,8 +27,9 @@ def register(sub) -> None:
         "(exact poses, depth in mm, the mesh and its pose).",
         epilog="example: real2sim capture bottle --out bottle_ds --views 120   (a bundled object name or a mesh file)",
     )
-    p.add_argument("mesh", help="object mesh in metres (standing on z = 0 is not required), or a bundled object "
-                   "name (bottle, can, mug)")
+    p.add_argument("mesh", help="object mesh in metres or --mesh-units (standing on z = 0 is not required), or a "
+                   "bundled object name (bottle, can, mug)")
+    add_mesh_units_argument(p)
     p.add_argument("--out", type=Path, required=True, metavar="DATASET", help="output dataset folder (must not exist)")
     p.add_argument("--overwrite", action="store_true", help="replace DATASET if it exists")
     p.add_argument("--views", type=integer(1, 2000), default=200, help="number of images (default 200)")
@@ -116,6 +118,11 @@ def run_capture(args: argparse.Namespace) -> int:
     cfg.validate()
     check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
     mesh = _resolve_mesh(args.mesh)
+    if isinstance(mesh, Path):
+        from real2sim.formats.mesh_io import check_object_size, load_mesh
+
+        mesh_path, mesh = mesh, load_mesh(mesh, args.mesh_units)
+        check_object_size(mesh, str(mesh_path))
     with progress_display() as progress:
         result = capture(mesh, args.out, cfg, progress=progress, overwrite=args.overwrite)
     print(f"dataset: {result.out_dir} ({result.num_views} views, rendered in {result.render_seconds:.1f} s)")

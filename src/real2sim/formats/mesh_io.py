@@ -10,14 +10,22 @@ import trimesh
 from real2sim.formats.errors import UserInputError
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
+#: Metres per unit of a mesh file (``--mesh-units``): scans and CAD exports are often in mm.
+MESH_UNITS_M = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
+#: Largest object (bounding-box side), m: real2sim models objects a robot handles; a bigger
+#: mesh is almost always in other units (millimetres read as metres).
+MAX_EXTENT_M = 10.0
 
 
-def load_mesh(path: Path | str) -> trimesh.Trimesh:
-    """Load a triangle mesh (OBJ, PLY, STL, GLB, OFF) in metres, merging scenes into one mesh.
+def load_mesh(path: Path | str, units: str = "m") -> trimesh.Trimesh:
+    """Load a triangle mesh (OBJ, PLY, STL, GLB, OFF), merging scenes into one mesh, and return it in
+    metres: coordinates are read in ``units`` (a key of :data:`MESH_UNITS_M`) and scaled.
 
     Raises UserInputError for a missing file, a file that is not a mesh, or an
     empty or degenerate mesh (no faces, zero volume bounding box, non-finite vertices).
     """
+    if units not in MESH_UNITS_M:
+        raise UserInputError(f"unknown mesh units {units!r} (choose from {', '.join(MESH_UNITS_M)})")
     path = Path(path)
     if not path.exists():
         raise UserInputError(f"mesh file not found: {path}")
@@ -38,8 +46,20 @@ def load_mesh(path: Path | str) -> trimesh.Trimesh:
         mesh = loaded
     else:
         raise UserInputError(f"{path} holds no triangle mesh (found {type(loaded).__name__})")
+    if units != "m":
+        mesh.apply_scale(MESH_UNITS_M[units])
     validate_mesh(mesh, str(path))
     return mesh
+
+
+def check_object_size(mesh: trimesh.Trimesh, label: str = "mesh") -> float:
+    """The mesh's largest bounding-box side, m; UserInputError above :data:`MAX_EXTENT_M`."""
+    extent = float((mesh.bounds[1] - mesh.bounds[0]).max())
+    if extent > MAX_EXTENT_M:
+        guess = "mm" if extent / 1000.0 <= MAX_EXTENT_M else "another unit"
+        raise UserInputError(f"{label} is {extent:.4g} m across, over the {MAX_EXTENT_M:g} m limit of real2sim's "
+                             f"objects: a mesh in {guess}? real2sim reads metres; pass --mesh-units mm|cm|in")
+    return extent
 
 
 def validate_mesh(mesh: trimesh.Trimesh, label: str = "mesh") -> None:
