@@ -290,3 +290,28 @@ def test_truth_comparison_splits_the_chamfer_where_silhouettes_cannot_judge():
     box = trimesh.creation.box(extents=[0.05, 0.04, 0.03])
     exact = compare_to_truth(box, box, surface_samples=5_000, volume_samples=20_000)
     assert exact["chamfer_concave_mm"] is None and exact["chamfer_hull_mm"] < 1e-6
+
+
+def test_silhouette_outliers_are_a_fraction_of_the_views_that_see_a_point():
+    """100 cameras, of which three see a point and all three see empty mask there: the point is outside.
+    Counted over all 100 views, the 3 % outlier allowance let the 97 that cast no vote outvote them (the
+    point scored 1), and a wide bowl's search box never closed. With 100 seeing views, three bad masks
+    are still forgiven."""
+    from real2sim.formats.dataset import CameraIntrinsics
+    from real2sim.formats.rotations import rot_z
+    from real2sim.reconstruct.hull import silhouette_scores
+    from real2sim.reconstruct.views import PosedViews
+
+    k = CameraIntrinsics(32, 24, 30.0, 30.0, 16.0, 12.0)
+    c2w = np.tile(np.eye(4), (100, 1, 1))
+    c2w[:, :3, 3] = [0.0, 0.0, -1.0]  # looking along +z at the origin ...
+    c2w[3:, :3, :3] = rot_z(np.pi)[:3, :3] @ np.diag([1.0, -1.0, -1.0])  # ... except 97 turned away from it
+    empty = PosedViews(np.zeros((100, 24, 32, 3), np.float32), np.zeros((100, 24, 32), np.float32), c2w, k,
+                       tuple(f"v{i}" for i in range(100)))
+    assert silhouette_scores(empty, np.zeros((1, 3)), 0.03)[0] == 0.0
+    c2w_all = np.tile(np.eye(4), (100, 1, 1))
+    c2w_all[:, :3, 3] = [0.0, 0.0, -1.0]
+    mask = np.ones((100, 24, 32), np.float32)
+    mask[:3] = 0.0  # three bad masks among 100 seeing views
+    full = PosedViews(np.zeros((100, 24, 32, 3), np.float32), mask, c2w_all, k, tuple(f"v{i}" for i in range(100)))
+    assert silhouette_scores(full, np.zeros((1, 3)), 0.03)[0] == 1.0

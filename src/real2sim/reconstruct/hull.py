@@ -2,9 +2,13 @@
 
 A voxel's *silhouette score* is the mask value (bilinear, so the surface falls
 between pixels) at its projection in each view; views it projects outside of, or
-lies behind, cast no vote. The score kept is a low order statistic rather than
-the minimum, so that a few bad masks or pose errors (``outlier_fraction`` of
-the views) cannot cut the object. The hull is where the score is >= 0.5.
+lies behind, cast no vote. The score kept is a low order statistic of the votes
+rather than their minimum, so that a few bad masks or pose errors
+(``outlier_fraction`` of the views that see the voxel) cannot cut the object. The
+fraction is of the voxels' own voters, not of all views: counted over all views, a
+point only a few cameras see kept the non-voters' "inside" whatever those few said,
+and a wide bowl's search box never closed (its corners, seen by three close-up views,
+all counted as object). The hull is where the score is >= 0.5.
 
 World frame, metres; the table top is z = 0 and nothing is kept below it.
 """
@@ -68,7 +72,6 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
     k = views.intrinsics
     masks = torch.from_numpy(views.mask[:, None])  # (V, 1, H, W)
     w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
-    rank = int(np.floor(outlier_fraction * views.count)) + 1
     out = np.empty(len(points_m), dtype=np.float32)
     with torch.no_grad():
         for start in range(0, len(points_m), chunk):
@@ -77,9 +80,10 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
             grid = torch.stack([u * (2.0 / k.width) - 1.0, v * (2.0 / k.height) - 1.0], dim=-1)
             vals = torch.nn.functional.grid_sample(masks, grid[:, None], mode="bilinear", align_corners=False)[:, 0, 0]
             no_vote = (z <= 0) | (grid.abs() > 1).any(dim=-1)
-            vals = vals.masked_fill(no_vote, 1.0)
-            score = torch.kthvalue(vals, rank, dim=0).values
             seen = (~no_vote).sum(dim=0)
+            ordered = vals.masked_fill(no_vote, 2.0).sort(dim=0).values  # the votes first, in order
+            rank = torch.clamp(torch.floor(outlier_fraction * seen).long(), max=torch.clamp(seen - 1, min=0))
+            score = ordered.gather(0, rank[None])[0]
             out[start:start + chunk] = torch.where(seen >= min_votes, score, torch.zeros_like(score)).numpy()
     return out
 
