@@ -156,7 +156,8 @@ def check_dataset(dataset: Path, masks_needed: bool = True, scale_given: bool = 
     check_frame_options(ds, scale_given)
     missing = [f.file_path for f in ds.frames if not f.mask_path]
     if missing and masks_needed:
-        later = "" if is_model_frame(ds) else ", or make them first with `real2sim mask`"
+        # `real2sim mask` writes mask paths into a transforms.json, which a bare COLMAP model lacks
+        later = "" if ds.extra.get("source") == "colmap" else ", or make them first with `real2sim mask`"
         raise UserInputError(f"{len(missing)} of {len(ds.frames)} frames of {dataset} have no mask; pass "
                              f"--mask provided|maskrcnn|background{later}")
     return dataset
