@@ -15,8 +15,8 @@ from real2sim.cli.reconstruct import IMAGE_PX, STEPS, TABLE_Z_HELP, TABLE_Z_M, T
 RUNS = integer(1, 1000)
 DURATION_SCALE = positive(100.0)
 
-# The reconstruction's table plane is z = 0 of the dataset's world frame: run always closes
-# the bottom there, so these two `asset` flags are hidden (and ignored).
+# run always closes the bottom at the reconstruction's table plane and keeps the table's normal
+# as the asset's +z (unless --pca-up), so these `asset` flags are hidden (and ignored).
 _FORCED_ASSET_FLAGS = ("flat_bottom", "support_height", "keep_up")
 
 
