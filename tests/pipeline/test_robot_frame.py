@@ -307,6 +307,16 @@ def test_second_run_of_a_colmap_capture_skips_every_stage(assets, captures, caps
     assert code == 0 and "none, all unchanged" in stdout
 
 
+def _assert_refused(cases: dict, tmp_path: Path, capsys) -> None:
+    """Each case ``label: (run arguments, words)`` exits 2 with one line holding ``words``, writing nothing."""
+    for label, (args, words) in cases.items():
+        out = tmp_path / label.replace(" ", "_")
+        code, _, err = run_cli(capsys, *args, "--out", out, *FAST)
+        assert code == 2, (label, err)
+        assert len(err.strip().splitlines()) == 1 and words in err, (label, err)
+        assert not out.exists(), label
+
+
 def test_bad_colmap_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
     moved, robot = captures["moved_no_truth"], captures["robot"]
     cases = {
@@ -317,12 +327,7 @@ def test_bad_colmap_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
         "few points": ([captures["few_points"], "--object-height-m", "0.1"], "sparse points"),
         "table z for colmap": ([moved, "--object-height-m", "0.1", "--table-z", "0.2"], "--table-z is for"),
     }
-    for label, (args, words) in cases.items():
-        out = tmp_path / label.replace(" ", "_")
-        code, _, err = run_cli(capsys, *args, "--out", out, *FAST)
-        assert code == 2, (label, err)
-        assert len(err.strip().splitlines()) == 1 and words in err, (label, err)
-        assert not out.exists(), label
+    _assert_refused(cases, tmp_path, capsys)
     code, _, err = run_cli(capsys, moved, "--out", tmp_path / "x", *FAST)
     assert "--scale" in err and "--object-height-m" in err
 
@@ -364,12 +369,7 @@ def test_bad_nerfstudio_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
     cases = {"no scale": ([captures["nerfstudio"]], "nerfstudio-processed capture"),
              "cloud outside": ([outside, "--object-height-m", "0.1"], "outside the dataset folder"),
              "no points": ([bare, "--object-height-m", "0.1"], "no sparse points")}
-    for label, (args, words) in cases.items():
-        out = tmp_path / label.replace(" ", "_")
-        code, _, err = run_cli(capsys, *args, "--out", out, *FAST)
-        assert code == 2, (label, err)
-        assert len(err.strip().splitlines()) == 1 and words in err, (label, err)
-        assert not out.exists(), label
+    _assert_refused(cases, tmp_path, capsys)
     out = tmp_path / "mesh"
     assert main(["reconstruct", str(captures["nerfstudio"]), "--out", str(out), "--backend", "hull"]) == 2
     err = capsys.readouterr().err
