@@ -105,6 +105,13 @@ def test_refine_small_capture_improves_or_falls_back(small_capture, tmp_path):
     assert not np.allclose(ds.poses_c2w_gl(), read_transforms(small_capture / "transforms.json").poses_c2w_gl())
     assert result.sim3_scale == pytest.approx(1.0, abs=0.1)
     assert not [p for p in root.iterdir() if p.name.startswith(".") and p.name != ".real2sim"]
+    # every frame says whether it was refined; the ones that were not kept the robot's pose exactly
+    from real2sim.formats.dataset import POSE_REFINED_KEY
+
+    given = read_transforms(small_capture / "transforms.json").poses_c2w_gl()
+    flags = np.array([f.extra[POSE_REFINED_KEY] for f in ds.frames])
+    assert flags.sum() == result.num_refined_frames
+    assert np.array_equal(~flags, np.all(ds.poses_c2w_gl() == given, axis=(1, 2)))
 
 
 def test_fallback_on_featureless_images(tmp_path):

@@ -38,6 +38,7 @@ import numpy as np
 from real2sim.capture.colmap import ColmapFailure, colmap_logging, refine_steps, run_colmap
 from real2sim.formats.dataset import (
     CV_FROM_GL,
+    POSE_REFINED_KEY,
     Dataset,
     check_dataset_outputs,
     pose_errors,
@@ -302,7 +303,8 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
 
     When a transforms_unrefined.json already exists (a second run), it is kept:
     it still holds the robot's original poses. Errors vs ``ground_truth/`` are
-    filled in when it exists. Writes ``refine_report.json``. Files are written
+    filled in when it exists. Each frame records whether its pose was refined
+    (``POSE_REFINED_KEY``; one COLMAP did not register keeps the robot's pose). Writes ``refine_report.json``. Files are written
     to temporary names and renamed, so an interrupted run leaves the dataset as it was.
     """
     root = Path(dataset_dir)
@@ -322,8 +324,11 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
     if result.refined:
         extra = dict(ds.extra)
         extra["real2sim_refinement"] = {k: v for k, v in result.to_json().items() if k != "timings_s"}
-        new = replace(ds, frames=tuple(replace(f, transform_matrix=poses[i]) for i, f in enumerate(ds.frames)),
-                      extra=extra)
+        # a frame COLMAP could not refine keeps its given pose exactly; say so, for the reconstruction
+        kept = np.all(poses == ds.poses_c2w_gl(), axis=(1, 2))
+        new = replace(ds, frames=tuple(replace(f, transform_matrix=poses[i],
+                                               extra={**f.extra, POSE_REFINED_KEY: not bool(kept[i])})
+                                       for i, f in enumerate(ds.frames)), extra=extra)
         write_transforms(root / "transforms.json", new)
     write_json_atomic(root / "refine_report.json", result.to_json())
     if progress:

@@ -84,6 +84,11 @@ def realsense_d435_intrinsics(width: int = 640, height: int = 480) -> CameraIntr
 MODEL_FRAME_KEYS = ("source", "model_frame", "applied_transform", "ply_file_path")
 
 
+#: Per-frame transforms.json key written by ``refine-poses``: whether COLMAP refined that frame's pose
+#: (a frame it could not register keeps the robot's pose, with the robot's noise).
+POSE_REFINED_KEY = "real2sim_pose_refined"
+
+
 @dataclass(frozen=True)
 class Frame:
     """One posed image. ``transform_matrix``: 4x4 camera-to-world, OpenGL camera axes, metres."""

@@ -111,6 +111,8 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     report: dict = {"backend": config.backend, "device": device, "seed": seed}
     with clock.stage("load"):
         views = load_views(dataset, max_side_px=config.max_image_side_px)
+        if views.unrefined:  # refine-poses could not refine them: the robot's noisy poses
+            report["views_left_out_unrefined"] = list(views.unrefined)
         train_idx, held_idx = held_out_split(views.count, config.held_out_every)
         train, held = views.subset(train_idx), views.subset(held_idx)
         truth = load_truth(dataset)
