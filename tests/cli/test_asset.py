@@ -152,6 +152,13 @@ def test_rewrite_models_changes_contact_without_refitting(tmp_path, can_obj, cap
     assert json.loads((out / "asset_config.json").read_text())["contact"]["mu_dynamic"] == 0.8
 
 
+def test_mesh_units_choices_are_the_loaders_units():
+    from real2sim.cli.asset import MESH_UNITS
+    from real2sim.formats.mesh_io import MESH_UNITS_M
+
+    assert set(MESH_UNITS) == set(MESH_UNITS_M)
+
+
 def test_mesh_in_millimetres(tmp_path, can_obj, capsys):
     """A scan saved in millimetres is refused with a hint (70 m would be no robot's object); with
     --mesh-units mm, `asset` builds the same asset as from the mesh in metres, and `capture` sees the

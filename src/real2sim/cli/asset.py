@@ -29,10 +29,13 @@ def add_contact_arguments(p: argparse.ArgumentParser) -> None:
                    help="edge length Drake meshes curved compliant primitives with, m (default 0.01)")
 
 
-def add_mesh_units_argument(p: argparse.ArgumentParser) -> None:
-    from real2sim.formats.mesh_io import MESH_UNITS_M
+#: The keys of ``real2sim.formats.mesh_io.MESH_UNITS_M``, spelled here because importing that
+#: module pulls in trimesh, which `--help` must not pay for (tests/cli/test_asset.py checks they agree).
+MESH_UNITS = ("m", "cm", "mm", "in")
 
-    p.add_argument("--mesh-units", choices=list(MESH_UNITS_M), default="m",
+
+def add_mesh_units_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--mesh-units", choices=MESH_UNITS, default="m",
                    help="units of the mesh file's coordinates (default m; scans and CAD exports are often mm)")
 
 
