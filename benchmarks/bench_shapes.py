@@ -116,6 +116,8 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="write the captures and assets here (kept) instead of a temporary folder")
     args = parser.parse_args()
     names = args.shapes.split(",")
     unknown = [n for n in names if n not in SHAPES]
@@ -123,6 +125,9 @@ def main() -> int:
         parser.error(f"unknown shapes {unknown} (choose from {', '.join(SHAPES)})")
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_shapes-") as tmp:
+        if args.keep is not None:
+            args.keep.mkdir(parents=True, exist_ok=True)
+            tmp = args.keep
         for name in names:
             rows.append(run_shape(name, Path(tmp), args.quick)["row"])
             body = ((args.note + "\n\n" if args.note else "")

@@ -245,26 +245,20 @@ def test_working_size_keeps_the_aspect_ratio():
     assert working_size(PINHOLE, 640) == (160, 120)  # never enlarged
 
 
-def test_frames_refine_poses_could_not_refine_are_left_out(can_capture, tmp_path):
-    """Frames marked unrefined by refine-poses keep the robot's noisy pose: load_views leaves them out
-    (and names them) unless fewer than MIN_VIEWS frames would remain."""
+def test_frames_refine_poses_could_not_refine_are_named(can_capture, tmp_path):
+    """Frames marked unrefined by refine-poses are kept and named; a subset names those it keeps."""
     from real2sim.formats.dataset import POSE_REFINED_KEY
-    from real2sim.reconstruct.views import MIN_VIEWS
 
     from tests.reconstruct.conftest import copy_dataset, edit_transforms
 
-    def marked(count):
-        def edit(data):
-            data["real2sim_refinement"] = {"refined": True}
-            for i, frame in enumerate(data["frames"]):
-                frame[POSE_REFINED_KEY] = i >= count
-            return data
-        return edit
+    def marked(data):
+        for i, frame in enumerate(data["frames"]):
+            frame[POSE_REFINED_KEY] = i >= 5
+        return data
 
     all_views = load_views(can_capture)
-    some = load_views(edit_transforms(copy_dataset(can_capture, tmp_path / "some"), marked(5)))
-    assert some.count == all_views.count - 5 and some.unrefined == all_views.names[:5]
-    assert some.names == all_views.names[5:]
-    np.testing.assert_array_equal(some.rgb, all_views.rgb[5:])
-    most = load_views(edit_transforms(copy_dataset(can_capture, tmp_path / "most"), marked(all_views.count - MIN_VIEWS + 1)))
-    assert most.count == all_views.count and most.unrefined == ()
+    some = load_views(edit_transforms(copy_dataset(can_capture, tmp_path / "some"), marked))
+    assert some.names == all_views.names and some.unrefined == all_views.names[:5]
+    np.testing.assert_array_equal(some.c2w_cv, all_views.c2w_cv)
+    assert some.subset(np.arange(3, 10)).unrefined == all_views.names[3:5]
+    assert all_views.unrefined == ()

@@ -111,11 +111,19 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     report: dict = {"backend": config.backend, "device": device, "seed": seed}
     with clock.stage("load"):
         views = load_views(dataset, max_side_px=config.max_image_side_px)
-        if views.unrefined:  # refine-poses could not refine them: the robot's noisy poses
-            report["views_left_out_unrefined"] = list(views.unrefined)
         train_idx, held_idx = held_out_split(views.count, config.held_out_every)
         train, held = views.subset(train_idx), views.subset(held_idx)
         truth = load_truth(dataset)
+    if views.unrefined:  # refine-poses could not refine them: the robot's poses, millimetres off
+        with clock.stage("unrefined_poses"):
+            from real2sim.reconstruct.silhouette_poses import align_unrefined
+
+            train, report["unrefined_views"] = align_unrefined(
+                train, outlier_fraction=config.hull_outlier_fraction, table_z_m=config.table_z_m, progress=progress)
+            if report["unrefined_views"]:  # a held-out view with a wrong pose would judge the pose, not the field
+                report["held_out_views_left_out_unrefined"] = list(held.unrefined)
+                held = held.subset(np.asarray([i for i, n in enumerate(held.names) if n not in set(held.unrefined)],
+                                              dtype=int))
     if progress:
         progress("visual hull", 0, 0)
     with clock.stage("visual_hull"):

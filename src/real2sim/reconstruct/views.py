@@ -8,7 +8,7 @@ world frame.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +42,7 @@ class PosedViews:
     c2w_cv: np.ndarray
     intrinsics: CameraIntrinsics
     names: tuple[str, ...]
-    # frames of the dataset left out: refine-poses could not refine their poses
+    # the views whose poses refine-poses could not refine (the robot's, millimetres off): see silhouette_poses
     unrefined: tuple[str, ...] = ()
 
     @property
@@ -51,8 +51,9 @@ class PosedViews:
 
     def subset(self, index: np.ndarray) -> "PosedViews":
         index = np.asarray(index)
-        return PosedViews(self.rgb[index], self.mask[index], self.c2w_cv[index], self.intrinsics,
-                          tuple(self.names[i] for i in index))
+        names = tuple(self.names[i] for i in index)
+        return PosedViews(self.rgb[index], self.mask[index], self.c2w_cv[index], self.intrinsics, names,
+                          tuple(n for n in names if n in set(self.unrefined)))
 
 
 def working_size(k: CameraIntrinsics, max_side_px: int | None) -> tuple[int, int]:
@@ -86,13 +87,13 @@ def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True,
     every image readable and of the intrinsics' size, masks of the same size, and
     cameras that look at a common region (:func:`common_look_at_point`).
 
-    Frames refine-poses could not refine are left out (named in ``unrefined``) when at least
-    ``MIN_VIEWS`` others remain. Images longer than ``max_side_px`` are reduced (area average; masks become soft at their
+    Frames refine-poses marked as not refined are named in ``unrefined`` (kept; the reconstruct stage
+    moves their cameras, :mod:`silhouette_poses`). Images longer than ``max_side_px`` are reduced (area average; masks become soft at their
     edges) and the camera with them, one image at a time: a phone capture of 200 photos at
     4032x3024 would need 29 GB as float images, and the field's grid cannot use the detail.
     """
     ds = dataset if isinstance(dataset, Dataset) else read_dataset(dataset)
-    ds, unrefined = _without_unrefined_frames(ds)
+    unrefined = tuple(f.file_path for f in ds.frames if f.extra.get(POSE_REFINED_KEY) is False)
     full = ds.intrinsics
     k = full.scaled(*working_size(full, max_side_px)) if max_side_px is not None else full
     if is_model_frame(ds):
@@ -125,17 +126,6 @@ def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True,
     views = PosedViews(rgb, mask, ds.poses_c2w_cv(), k, tuple(f.file_path for f in ds.frames), unrefined)
     common_look_at_point(views)
     return views
-
-
-def _without_unrefined_frames(ds: Dataset) -> tuple[Dataset, tuple[str, ...]]:
-    """``ds`` without the frames refine-poses marked as not refined, and their names; ``ds`` as it is when
-    none are marked or too few would be left. Their poses keep the robot's noise (millimetres, a degree),
-    and the visual hull forgives only a few views: on a torus COLMAP refined 81 of 100 frames, and the
-    19 others cut the hull by 14 % of the object's volume."""
-    unrefined = tuple(f.file_path for f in ds.frames if f.extra.get(POSE_REFINED_KEY) is False)
-    if not unrefined or len(ds.frames) - len(unrefined) < MIN_VIEWS:
-        return ds, ()
-    return replace(ds, frames=tuple(f for f in ds.frames if f.extra.get(POSE_REFINED_KEY) is not False)), unrefined
 
 
 def _inside(root: Path, rel: str) -> Path:
