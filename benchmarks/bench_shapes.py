@@ -29,6 +29,7 @@ Writes docs/benchmarks/shapes.md (machine and date included), after each shape.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import tempfile
@@ -124,10 +125,9 @@ def main() -> int:
     if unknown:
         parser.error(f"unknown shapes {unknown} (choose from {', '.join(SHAPES)})")
     rows = []
-    with tempfile.TemporaryDirectory(prefix="bench_shapes-") as tmp:
-        if args.keep is not None:
-            args.keep.mkdir(parents=True, exist_ok=True)
-            tmp = args.keep
+    if args.keep is not None:
+        args.keep.mkdir(parents=True, exist_ok=True)
+    with contextlib.nullcontext(args.keep) if args.keep else tempfile.TemporaryDirectory(prefix="bench_shapes-") as tmp:
         for name in names:
             rows.append(run_shape(name, Path(tmp), args.quick)["row"])
             body = ((args.note + "\n\n" if args.note else "")

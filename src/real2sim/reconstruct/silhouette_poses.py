@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from real2sim.reconstruct.views import PosedViews, project
+from real2sim.formats.dataset import pose_errors
+from real2sim.reconstruct.views import MIN_VIEWS, PosedViews, project
 
 SPILL_WEIGHT = 0.03
 BLUR_PX = 1.5
@@ -106,26 +107,22 @@ def align_unrefined(views: PosedViews, *, outlier_fraction: float, table_z_m: fl
     """``views`` with its unrefined views' cameras moved onto the refined views' visual hull (those whose
     masks it then still leaves uncovered are left out), and a report (per view: coverage of its mask,
     how far its camera moved, kept or not). ``views`` as it is when fewer than 8 views are refined."""
-    from real2sim.reconstruct.views import MIN_VIEWS
-
-    unrefined = [i for i, name in enumerate(views.names) if name in set(views.unrefined)]
-    refined = [i for i in range(views.count) if i not in set(unrefined)]
-    if not unrefined or len(refined) < MIN_VIEWS:
+    is_unrefined = views.is_unrefined
+    unrefined, refined = np.nonzero(is_unrefined)[0], np.nonzero(~is_unrefined)[0]
+    if not len(unrefined) or len(refined) < MIN_VIEWS:
         return views, {}
-    points = hull_surface_points(views.subset(np.asarray(refined)), outlier_fraction=outlier_fraction,
-                                 table_z_m=table_z_m)
+    points = hull_surface_points(views.subset(refined), outlier_fraction=outlier_fraction, table_z_m=table_z_m)
     c2w = views.c2w_cv.copy()
     keep = np.ones(views.count, dtype=bool)
-    report = {}
+    coverage = np.ones(views.count)
     for n, i in enumerate(unrefined):
         if progress:
             progress("poses of unrefined views", n, len(unrefined))
-        c2w[i], coverage = align_view(views, i, points)
-        rotation_deg = float(np.degrees(np.arccos(np.clip((np.trace(views.c2w_cv[i][:3, :3].T @ c2w[i][:3, :3]) - 1) / 2,
-                                                          -1.0, 1.0))))
-        keep[i] = coverage >= min_coverage
-        report[views.names[i]] = {"mask_coverage": round(coverage, 4), "kept": bool(keep[i]),
-                                  "moved_mm": round(1000.0 * float(np.linalg.norm(c2w[i][:3, 3] - views.c2w_cv[i][:3, 3])), 3),
-                                  "turned_deg": round(rotation_deg, 4)}
+        c2w[i], coverage[i] = align_view(views, i, points)
+        keep[i] = coverage[i] >= min_coverage
+    turned_deg, moved_mm = pose_errors(c2w[unrefined], views.c2w_cv[unrefined])
+    report = {views.names[i]: {"mask_coverage": round(float(coverage[i]), 4), "kept": bool(keep[i]),
+                               "moved_mm": round(float(mm), 3), "turned_deg": round(float(deg), 4)}
+              for i, deg, mm in zip(unrefined, turned_deg, moved_mm)}
     moved = PosedViews(views.rgb, views.mask, c2w, views.intrinsics, views.names, views.unrefined)
     return moved.subset(np.nonzero(keep)[0]), report

@@ -122,8 +122,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
                 train, outlier_fraction=config.hull_outlier_fraction, table_z_m=config.table_z_m, progress=progress)
             if report["unrefined_views"]:  # a held-out view with a wrong pose would judge the pose, not the field
                 report["held_out_views_left_out_unrefined"] = list(held.unrefined)
-                held = held.subset(np.asarray([i for i, n in enumerate(held.names) if n not in set(held.unrefined)],
-                                              dtype=int))
+                held = held.subset(np.nonzero(~held.is_unrefined)[0])
     if progress:
         progress("visual hull", 0, 0)
     with clock.stage("visual_hull"):

@@ -49,11 +49,17 @@ class PosedViews:
     def count(self) -> int:
         return len(self.c2w_cv)
 
+    @property
+    def is_unrefined(self) -> np.ndarray:
+        """(N,) bool: which views are named in ``unrefined``."""
+        unrefined = set(self.unrefined)
+        return np.array([name in unrefined for name in self.names], dtype=bool)
+
     def subset(self, index: np.ndarray) -> "PosedViews":
-        index = np.asarray(index)
+        index = np.asarray(index, dtype=int)
         names = tuple(self.names[i] for i in index)
-        return PosedViews(self.rgb[index], self.mask[index], self.c2w_cv[index], self.intrinsics, names,
-                          tuple(n for n in names if n in set(self.unrefined)))
+        unrefined = tuple(n for n, u in zip(names, self.is_unrefined[index]) if u)
+        return PosedViews(self.rgb[index], self.mask[index], self.c2w_cv[index], self.intrinsics, names, unrefined)
 
 
 def working_size(k: CameraIntrinsics, max_side_px: int | None) -> tuple[int, int]:
