@@ -128,9 +128,13 @@ class VoxelRadianceField(torch.nn.Module):
         features = (self.feature_table.index_select(0, flat).view(*idx.shape, self.feature_channels) * weights[:, :, None]).sum(dim=1)
         return torch.cat([density[:, None], features], dim=1)
 
-    def _density_raw(self, points_m: torch.Tensor) -> torch.Tensor:
+    def blend_nodes(self, table: torch.Tensor, points_m: torch.Tensor) -> torch.Tensor:
+        """(P,) trilinear blend at world points of ``table``, one value per grid node (flat, C order)."""
         idx, weights = self._corners(points_m)
-        return (self.density_table[idx] * weights).sum(dim=1)
+        return (table[idx] * weights).sum(dim=1)
+
+    def _density_raw(self, points_m: torch.Tensor) -> torch.Tensor:
+        return self.blend_nodes(self.density_table, points_m)
 
     def density(self, points_m: torch.Tensor) -> torch.Tensor:
         """(P,) density per voxel length at world points; zero outside the occupancy."""

@@ -32,6 +32,8 @@ from real2sim.reconstruct.views import PosedViews, held_out_split, load_views
 
 BACKENDS = ("field", "hull")
 EXTRACTIONS = ("density", "tsdf")
+# where the density extraction cuts: the level the masks' edges choose, or ln 2 per voxel
+SURFACE_LEVELS = ("silhouettes", "half-light")
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,7 @@ class ReconstructConfig:
 
     backend: str = "field"
     extraction: str = "density"
+    surface_level: str = "silhouettes"
     field: FieldConfig = field(default_factory=FieldConfig)
     hull_voxels: int = 192
     hull_outlier_fraction: float = 0.03
@@ -56,6 +59,8 @@ class ReconstructConfig:
             raise UserInputError(f"unknown backend {self.backend!r} (choose from {', '.join(BACKENDS)})")
         if self.extraction not in EXTRACTIONS:
             raise UserInputError(f"unknown extraction {self.extraction!r} (choose from {', '.join(EXTRACTIONS)})")
+        if self.surface_level not in SURFACE_LEVELS:
+            raise UserInputError(f"unknown surface level {self.surface_level!r} (choose from {', '.join(SURFACE_LEVELS)})")
         if not 16 <= self.hull_voxels <= 1024 or not 64 <= self.texture_px <= 8192:
             raise UserInputError("hull voxels must be in 16..1024 and texture size in 64..8192 px")
         if self.max_image_side_px is not None and self.max_image_side_px < 16:
@@ -140,7 +145,8 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
                 progress("texture", 0, 0)
             textured = bake_texture_from_images(mesh, train, size_px=config.texture_px)
     else:
-        from real2sim.reconstruct.extract import density_mesh, render_view, tsdf_mesh
+        from real2sim.reconstruct.extract import (SURFACE_DENSITY_PER_VOXEL, density_mesh, render_view,
+                                                  silhouette_surface_level, tsdf_mesh)
         from real2sim.reconstruct.texture import bake_texture
         from real2sim.reconstruct.train import train_field
 
@@ -158,7 +164,11 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
             if config.extraction == "tsdf":
                 mesh = tsdf_mesh(trained.field, train, table_z_m=config.table_z_m, progress=progress)
             else:
-                mesh = density_mesh(trained.field, table_z_m=config.table_z_m)
+                level = SURFACE_DENSITY_PER_VOXEL
+                if config.surface_level == "silhouettes":
+                    report["surface_level"] = silhouette_surface_level(trained.field, train, seed=seed)
+                    level = report["surface_level"]["level_per_voxel"]
+                mesh = density_mesh(trained.field, table_z_m=config.table_z_m, level_per_voxel=level)
             mesh = simplified(largest_parts(mesh, config.min_part_volume_fraction), config.max_faces)
         with clock.stage("texture"):
             if progress:
