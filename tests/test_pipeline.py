@@ -338,3 +338,16 @@ def test_missing_masks_are_made_with_mask_method_on_a_copy(can_ds_no_truth, tmp_
     masked = json.loads((out / ".run" / "masked" / "transforms.json").read_text())
     assert all(frame.get("mask_path") for frame in masked["frames"])
     assert manifest(out)["stages"]["masks"]["settings"]["method"] == "provided"
+
+
+def test_surface_level_reaches_the_reconstruct_stage(can_ds_no_truth, tmp_path):
+    """`run --surface-level` sets the reconstruct stage's setting (part of its recorded settings, so a
+    change redoes the reconstruction); silhouettes by default."""
+    from real2sim.cli import build_parser
+    from real2sim.cli.run import config_from_args
+
+    base = ["run", str(can_ds_no_truth), "--mass", "0.35", "--out", str(tmp_path / "out")]
+    default = config_from_args(build_parser().parse_args(base))
+    chosen = config_from_args(build_parser().parse_args([*base, "--surface-level", "half-light"]))
+    assert default.reconstruct.surface_level == "silhouettes"
+    assert chosen.reconstruct.surface_level == "half-light"

@@ -89,12 +89,13 @@ def test_unusable_dataset(case, bad_datasets, tmp_path, capsys):
 @pytest.mark.parametrize("args, message", [
     (["--backend", "nerf"], "invalid choice"),
     (["--extraction", "poisson"], "invalid choice"),
+    (["--surface-level", "mean"], "invalid choice"),
     (["--steps", "0"], "positive integer"),
     (["--voxels", "-3"], "16..512"),
     (["--texture-px", "32"], "64..8192"),
     (["--seed", "-1"], "--seed"),
     (["--device", "tpu"], "cpu or cuda"),
-], ids=["backend", "extraction", "steps", "voxels", "texture-px", "seed", "device"])
+], ids=["backend", "extraction", "surface-level", "steps", "voxels", "texture-px", "seed", "device"])
 def test_bad_options(args, message, can_without_truth, tmp_path, capsys):
     out = tmp_path / "mesh_out"
     code, _, err = run_cli(capsys, "reconstruct", can_without_truth, "--out", out, *args)

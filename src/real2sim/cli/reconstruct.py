@@ -39,6 +39,9 @@ def register(sub) -> None:
     p.add_argument("--backend", choices=["field", "hull"], default="field", help="reconstruction method (default field)")
     p.add_argument("--extraction", choices=["density", "tsdf"], default="density",
                    help="field backend: surface by marching cubes on the density (default) or TSDF fusion")
+    p.add_argument("--surface-level", choices=["silhouettes", "half-light"], default="silhouettes",
+                   help="density extraction: cut the density where the masks' edges say (default) or at ln 2 "
+                        "per voxel")
     p.add_argument("--device", type=device, default="cpu", help="cpu (default), cuda or cuda:N")
     p.add_argument("--seed", type=seed(), default=0, help="random seed of the field's training (default 0)")
     p.add_argument("--steps", type=STEPS, default=None,
@@ -87,7 +90,8 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
                                  config=ReconstructConfig(table_z_m=args.table_z))
     else:
         field = replace(FieldConfig().with_budget(args.steps, args.voxels), photo_carving=args.photo_carving)
-        config = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
+        config = ReconstructConfig(backend=args.backend, extraction=args.extraction,
+                                   surface_level=args.surface_level, field=field,
                                    texture_px=args.texture_px, max_image_side_px=args.max_image_px,
                                    table_z_m=args.table_z)
         config.validate()

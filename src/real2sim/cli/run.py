@@ -59,6 +59,9 @@ def register(sub) -> None:
                    help="radiance field (default) or visual hull (fast)")
     g.add_argument("--extraction", choices=["density", "tsdf"], default="density",
                    help="field backend: surface by marching cubes on the density (default) or TSDF fusion")
+    g.add_argument("--surface-level", choices=["silhouettes", "half-light"], default="silhouettes",
+                   help="density extraction: cut the density where the masks' edges say (default) or at ln 2 "
+                        "per voxel")
     g.add_argument("--steps", type=STEPS, default=None, help="field: fine-grid training steps")
     g.add_argument("--voxels", type=VOXELS, default=None,
                    help="voxels along the object's longest side (field: fine grid; hull: carving grid, default 192)")
@@ -120,7 +123,8 @@ def config_from_args(args: argparse.Namespace):
     # --voxels is the field's grid for the field, the carving grid for the hull
     field_voxels = args.voxels if args.backend == "field" else None
     field = replace(FieldConfig().with_budget(args.steps, field_voxels), photo_carving=args.photo_carving)
-    recon = ReconstructConfig(backend=args.backend, extraction=args.extraction, field=field,
+    recon = ReconstructConfig(backend=args.backend, extraction=args.extraction,
+                              surface_level=args.surface_level, field=field,
                               texture_px=args.texture_px, max_image_side_px=args.max_image_px,
                               table_z_m=args.table_z)
     if args.voxels is not None and args.backend != "field":
