@@ -83,3 +83,12 @@ def test_a_level_outside_the_search_is_not_chosen():
     chosen = silhouette_surface_level(field, _ball_views(), search=(0.25, 2.0))
     lowest = 0.25 * SURFACE_DENSITY_PER_VOXEL
     assert lowest <= chosen["level_per_voxel"] <= 1.05 * lowest
+
+
+def test_masks_without_edges_leave_the_level_at_half_light():
+    """Empty masks (the object out of view) have no edge to judge by: ln 2 per voxel, no shares."""
+    views = _ball_views()
+    empty = PosedViews(views.rgb, np.zeros_like(views.mask), views.c2w_cv, views.intrinsics, views.names)
+    chosen = silhouette_surface_level(_soft_ball(level_at_radius=0.2, slope_per_m=350.0), empty)
+    assert chosen == {"level_per_voxel": SURFACE_DENSITY_PER_VOXEL, "edge_pixels": 0,
+                      "disagreement": None, "disagreement_ln2": None}

@@ -29,6 +29,7 @@ from real2sim.reconstruct.train import occupancy_ranges
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
 SURFACE_DENSITY_PER_VOXEL = float(np.log(2.0))
+MIN_EDGE_PIXELS = 100  # fewer mask-edge pixels than this: the surface is cut at ln 2 per voxel
 
 
 def _sampled_density(field: VoxelRadianceField, upsample: int = 1) -> tuple[np.ndarray, VoxelGrid]:
@@ -71,7 +72,8 @@ def silhouette_surface_level(field: VoxelRadianceField, views: PosedViews, *, ba
     ``SURFACE_DENSITY_PER_VOXEL`` (the middle, in log, of the best stretch).
 
     Returns ``level_per_voxel``, ``edge_pixels`` and the share of them misclassified at that level
-    and at ``ln 2`` (``disagreement``, ``disagreement_ln2``).
+    and at ``ln 2`` (``disagreement``, ``disagreement_ln2``); with fewer than ``MIN_EDGE_PIXELS``
+    edge pixels, ``ln 2`` and no shares (None).
     """
     from scipy.ndimage import binary_dilation, binary_erosion
 
@@ -94,6 +96,9 @@ def silhouette_surface_level(field: VoxelRadianceField, views: PosedViews, *, ba
         inside.append(mask[v_px, u_px])
     to = lambda a: torch.from_numpy(np.concatenate(a).astype(np.float32)).to(field.device)
     o, d, inside = to(origins), to(directions), np.concatenate(inside)
+    if len(inside) < MIN_EDGE_PIXELS:  # masks without edges (nothing in view, or all object) say nothing
+        return {"level_per_voxel": SURFACE_DENSITY_PER_VOXEL, "edge_pixels": int(len(inside)),
+                "disagreement": None, "disagreement_ln2": None}
     t_in, t_out = occupancy_ranges(field, o, d)
     step = step_voxels * grid.voxel_m
     counts = torch.ceil((t_out - t_in).clamp_min(0.0) / step).long()
