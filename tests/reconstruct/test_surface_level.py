@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.reconstruct.extract import SURFACE_DENSITY_PER_VOXEL, density_mesh, silhouette_surface_level
-from real2sim.reconstruct.field import VoxelRadianceField, _softplus_inverse
+from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.hull import VoxelGrid
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
@@ -25,10 +24,7 @@ def _soft_ball(level_at_radius: float, slope_per_m: float) -> VoxelRadianceField
     grid = VoxelGrid(CENTRE_M - 0.5 * VOXEL_M * (np.asarray(shape) - 1), VOXEL_M, shape)
     r = np.linalg.norm(grid.centres() - CENTRE_M, axis=1)
     density = np.clip(level_at_radius + slope_per_m * (RADIUS_M - r), 1e-4, 6.0).reshape(shape)
-    field = VoxelRadianceField(grid, np.ones(shape, bool), feature_channels=4, hidden=8)
-    with torch.no_grad():
-        field.density_table.copy_(torch.from_numpy(_softplus_inverse(density.reshape(-1)).astype(np.float32)))
-    return field
+    return VoxelRadianceField(grid, np.ones(shape, bool), feature_channels=4, hidden=8, init_density=density)
 
 
 def _ball_views(count: int = 24) -> PosedViews:
