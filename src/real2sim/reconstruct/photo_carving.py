@@ -38,15 +38,30 @@ surfaces, measured on the bundled objects:
   surface disagree -- carving would otherwise eat the object from the top down (a
   35 mm box on an unrefined 5 mm / 1 degree capture kept 2.5 mm of it).
 
-It stops early where the views inside a concavity agree (a deep cup's floor and
-lower wall seen only from steep views): on the bundled mug about half of the
-filled cavity opens. It cannot see a concavity whose inside is one flat colour. World frame, metres; the lowest layer of voxels
-(standing on the table) is never carved.
+It stops early where the views inside a concavity agree for want of texture (a
+deep cup's floor and lower wall, one flat colour, seen only from steep views):
+there any depth looks the same from every view. So, once a concavity is open,
+a second pass (*the opening*) chooses the hollow shape where the images cannot
+place a surface: a voxel of the concavity's surface goes when at least
+``min_views`` views see it through the carved space, fewer than ``min_views``
+from outside, it is more than ``min_wall_voxels`` from the visual hull's outside
+and the table, and its views either look at featureless image (RGB contrast
+below ``featureless_contrast`` over ``contrast_window_voxels`` footprints) or
+disagree at least ``min_spread_to_contrast`` times as much as the image varies
+there (a true textured surface is seen alike from every view). Walls keep what
+the silhouettes vouch for; the masks then judge the opening on its own (a ray it
+emptied gets back what it took). On the bundled mug (100 views, 320x240, 80
+voxels) the carved solid's wrong voxels fell from 46039 kept + 928 removed to
+8520 + 3711, on `bench_shapes`' bowl from 18274 + 23 to 10372 + 171; the
+ratio 1.0 took more of both walls (4935 true voxels of the bowl). A concavity
+the first pass never opens (no colour disagreement anywhere) stays filled.
+World frame, metres; the lowest layer of voxels (standing on the table) is never carved.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.ndimage import binary_dilation, binary_erosion, convolve, gaussian_filter
@@ -72,6 +87,14 @@ class CarvingConfig:
     max_rounds: int = 150
     visibility_tolerance_voxels: float = 1.0
     min_component_fraction: float = 0.1
+    # the opening (see module docstring): image contrast (RGB std over a window of
+    # ``contrast_window_voxels`` footprints) below which a view cannot place a surface; 0 turns it off
+    featureless_contrast: float = 0.03
+    contrast_window_voxels: float = 2.0
+    # ... or where its views disagree at least this many times as much as its images vary locally
+    min_spread_to_contrast: float = 1.5
+    # the opening keeps every voxel within this many voxels of the visual hull's outside (or the table)
+    min_wall_voxels: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -83,6 +106,7 @@ class CarvingResult:
     carved_voxels: int
     rounds: int
     restored_voxels: int = 0
+    opened_voxels: int = 0  # of ``carved_voxels``, those the opening (second pass) removed
 
 
 #: Parts of the carved solid smaller than this fraction of it, cut off from the rest, are dropped.
@@ -106,16 +130,16 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
             break
         idx = np.argwhere(candidates)
         surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
-        spread, hue_spread, seen, two_sided = _spread(views, images, grid, idx, surface_mesh, original & ~solid,
-                                                      config)
+        verdict = _spread(views, images, grid, idx, surface_mesh, original & ~solid, config)
         # a carve starts only where the views disagree in hue, and grows wherever they disagree
         # at all: brightness alone differs between views of a shiny or curved true surface
         bad, hue_bad = np.zeros(solid.shape, bool), np.zeros(solid.shape, bool)
-        inconsistent = (seen >= config.min_views) & (spread > config.max_spread)
+        inconsistent = (verdict.seen >= config.min_views) & (verdict.spread > config.max_spread)
         bad[tuple(idx[inconsistent].T)] = True
-        hue_bad[tuple(idx[inconsistent & (hue_spread > config.max_hue_spread)].T)] = True
+        hue_bad[tuple(idx[inconsistent & (verdict.hue_spread > config.max_hue_spread)].T)] = True
         grows = binary_dilation(original & ~solid, _FACES)
-        grows[tuple(idx[two_sided].T)] = False
+        # a voxel some views reach through the carved space and others from outside is a wall
+        grows[tuple(idx[(verdict.through >= config.min_views) & (verdict.outside >= config.min_views)].T)] = False
         carve = bad & (grows | hue_bad) & _mostly_bad_neighbourhood(bad, _surface(solid), config.neighbour_fraction)
         if progress:
             progress("photo-consistent carving", rounds, config.max_rounds)
@@ -125,14 +149,64 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
         # only voxels near a change can change verdict: newly exposed ones, and those that now see more views
         near = binary_dilation(carve, np.ones((3, 3, 3), bool), iterations=2)
         candidates = _surface(solid) & near & ~floor
-    restored = _emptied_rays(views, grid, original, solid)
-    solid |= restored
-    solid |= _small_components(original & ~solid, config.min_component_fraction * original.sum())
+    restored = int(_settled(views, grid, original, solid, config).sum())
+    opened_count = 0
+    if config.featureless_contrast > 0 and (original & ~solid).any():
+        contrast = _local_contrast(images, config.contrast_window_voxels * _voxel_footprint_px(views, grid))
+        opened = _open_concavity(views, images, contrast, grid, original, solid, floor, config, progress)
+        # the masks judge the opening on its own: a ray it emptied gets back what the opening took
+        # from it (the concavity the first carve opened stays open)
+        again = _emptied_rays(views, grid, solid, opened)
+        opened |= again
+        opened_count, restored = int((solid & ~opened).sum()), restored + int(again.sum())
+        solid = opened
     # A ray that lost a thin rim to carving gets back every carved voxel on it, specks in mid-air
     # included; what is left of them floating is no object.
     solid &= ~_small_components(solid, FLOATER_FRACTION * solid.sum())
     return CarvingResult(solid=solid, carved_voxels=int((original & ~solid).sum()), rounds=rounds,
-                         restored_voxels=int(restored.sum()))
+                         restored_voxels=restored, opened_voxels=opened_count)
+
+
+def _settled(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
+             config: CarvingConfig) -> np.ndarray:
+    """Applies the silhouettes' last word and the minimum concavity size to ``solid`` (in place);
+    returns the voxels the masks' rays put back."""
+    restored = _emptied_rays(views, grid, original, solid)
+    solid |= restored
+    solid |= _small_components(original & ~solid, config.min_component_fraction * original.sum())
+    return restored
+
+
+def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray, grid: VoxelGrid,
+                      original: np.ndarray, solid: np.ndarray, floor: np.ndarray, config: CarvingConfig,
+                      progress: ProgressFn | None) -> np.ndarray:
+    """``solid`` (a copy) with the space behind an opened concavity that the images cannot place a
+    surface in removed, round by round (the opening of the module docstring). ``contrast``:
+    :func:`_local_contrast` of ``images``; ``floor``: voxels never carved."""
+    from scipy.ndimage import distance_transform_edt
+
+    solid = solid.copy()
+    # the wall the silhouettes vouch for: near the hull's outside, or near the table under it
+    keep = floor | (distance_transform_edt(np.pad(original, 1))[1:-1, 1:-1, 1:-1] <= config.min_wall_voxels)
+    candidates = _surface(solid) & binary_dilation(original & ~solid, _FACES) & ~keep
+    for rounds in range(1, config.max_rounds + 1):
+        if not candidates.any():
+            break
+        idx = np.argwhere(candidates)
+        surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
+        verdict = _spread(views, images, grid, idx, surface_mesh, original & ~solid, config, contrast)
+        unplaced = (verdict.contrast < config.featureless_contrast) | \
+            (verdict.spread >= config.min_spread_to_contrast * verdict.contrast)
+        open_ = (verdict.through >= config.min_views) & (verdict.outside < config.min_views) & unplaced
+        if progress:
+            progress("opening concavities", rounds, config.max_rounds)
+        if not open_.any():
+            break
+        carve = np.zeros(solid.shape, bool)
+        carve[tuple(idx[open_].T)] = True
+        solid &= ~carve
+        candidates = _surface(solid) & binary_dilation(carve, _FACES) & ~keep
+    return solid
 
 
 def _emptied_rays(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
@@ -224,11 +298,24 @@ def _mostly_bad_neighbourhood(bad: np.ndarray, surface: np.ndarray, fraction: fl
     return bad_count >= fraction * np.maximum(surface_count, 1.0)
 
 
+class _Verdict(NamedTuple):
+    """Per tested voxel: its views' colour ``spread`` and ``hue_spread`` (see :func:`_spread`), how
+    many views see it (``seen``), how many of those reach it through the carved space (``through``)
+    and from outside (``outside``), and the median image ``contrast`` around its projections in
+    the views that see it (NaN when none does, or when no contrast map was given)."""
+
+    spread: np.ndarray
+    hue_spread: np.ndarray
+    seen: np.ndarray
+    through: np.ndarray
+    outside: np.ndarray
+    contrast: np.ndarray
+
+
 def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndarray, surface_mesh,
-            carved: np.ndarray, config: CarvingConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per voxel of ``idx`` (P, 3): the ``spread_quantile`` of its views' colour distances from their
-    median, the same for their hues, the number of views that see it, and whether it is a wall:
-    at least ``min_views`` views reach it through what was carved and as many from outside."""
+            carved: np.ndarray, config: CarvingConfig, contrast: np.ndarray | None = None) -> _Verdict:
+    """The verdict on each voxel of ``idx`` (P, 3): the ``spread_quantile`` of its views' colour
+    distances from their median, the same for their hues, and the counts of :class:`_Verdict`."""
     points = grid.origin_m + idx * grid.voxel_m
     uv, depth = project(views.intrinsics, views.c2w_cv, points)  # (V, P, 2), (V, P)
     height, width = views.mask.shape[1:]
@@ -250,22 +337,39 @@ def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndar
     through = carved[tuple(cell.T)]
     through_count = np.bincount(point_of, weights=through, minlength=len(points))
     outside_count = np.bincount(point_of, weights=~through, minlength=len(points))
-    two_sided = (through_count >= config.min_views) & (outside_count >= config.min_views)
-    colours = _bilinear(images, view_of, uv[view_of, point_of])
+    pixel_uv = uv[view_of, point_of]
+    colours = _bilinear(images, view_of, pixel_uv)
     # hue: colour over brightness, damped for dark pixels whose ratios are noise
     hues = 3.0 * colours / (colours.sum(axis=1, keepdims=True) + config.hue_floor)
     seen = np.bincount(point_of, minlength=len(points))
+    some = seen > 0
     spreads = []
     for values, quantile in ((colours, config.spread_quantile), (hues, config.hue_quantile)):
         per_point = np.full((len(points), views.count, 3), np.nan, dtype=np.float32)
         per_point[point_of, view_of] = values
         spread = np.zeros(len(points))
-        some = seen > 0
         if some.any():
             median = np.nanmedian(per_point[some], axis=1)
             spread[some] = _row_nanquantile(np.linalg.norm(per_point[some] - median[:, None], axis=2), quantile)
         spreads.append(spread)
-    return spreads[0], spreads[1], seen, two_sided
+    median_contrast = np.full(len(points), np.nan)
+    if contrast is not None and some.any():
+        u, v = (np.clip(pixel_uv[:, k].astype(int), 0, n - 1) for k, n in ((0, width), (1, height)))
+        per_view = np.full((len(points), views.count), np.nan, dtype=np.float32)
+        per_view[point_of, view_of] = contrast[view_of, v, u]
+        median_contrast[some] = _row_nanquantile(per_view[some], 0.5)
+    return _Verdict(spreads[0], spreads[1], seen, through_count, outside_count, median_contrast)
+
+
+def _local_contrast(images: np.ndarray, window_px: float) -> np.ndarray:
+    """Per pixel (V, H, W): the RGB standard deviation (norm over channels) over a square window
+    ``window_px`` wide: how well a view can tell one depth of a surface from another there."""
+    from scipy.ndimage import uniform_filter
+
+    size = (1, max(3, int(round(window_px)) | 1), max(3, int(round(window_px)) | 1), 1)
+    mean = uniform_filter(images, size=size)
+    mean_sq = uniform_filter(images * images, size=size)
+    return np.sqrt(np.clip(mean_sq - mean * mean, 0.0, None).sum(axis=-1)).astype(np.float32)
 
 
 def _row_nanquantile(values: np.ndarray, quantile: float) -> np.ndarray:
