@@ -351,3 +351,16 @@ def test_surface_level_reaches_the_reconstruct_stage(can_ds_no_truth, tmp_path):
     chosen = config_from_args(build_parser().parse_args([*base, "--surface-level", "half-light"]))
     assert default.reconstruct.surface_level == "silhouettes"
     assert chosen.reconstruct.surface_level == "half-light"
+
+
+def test_hollow_prior_reaches_the_reconstruct_stage(can_ds_no_truth, tmp_path):
+    """`run --no-hollow-prior` turns photo carving's second pass off (on by default), and nothing else."""
+    from real2sim.cli import build_parser
+    from real2sim.cli.run import config_from_args
+
+    base = ["run", str(can_ds_no_truth), "--mass", "0.35", "--out", str(tmp_path / "out")]
+    default = config_from_args(build_parser().parse_args(base))
+    chosen = config_from_args(build_parser().parse_args([*base, "--no-hollow-prior"]))
+    assert default.reconstruct.field.carving.hollow_prior and default.reconstruct.field.photo_carving
+    assert not chosen.reconstruct.field.carving.hollow_prior and chosen.reconstruct.field.photo_carving
+    assert chosen.reconstruct.field.carving.min_wall_voxels == default.reconstruct.field.carving.min_wall_voxels

@@ -151,6 +151,8 @@ def test_small_field_reconstruction(can_without_truth, tmp_path, capsys):
     assert report["config"]["texture_px"] == 64 and report["loss_curve"][-1][0] == 30
     # carving is on by default and finds nothing to open on a can
     assert report["config"]["field"]["photo_carving"] is True and report["photo_carved_voxels"] == 0
+    assert report["config"]["field"]["carving"]["hollow_prior"] is True
+    assert report["photo_carving_opened_voxels"] == 0  # the hollow prior works only behind what was carved
     mesh = trimesh.load(out / "mesh.obj", force="mesh")
     assert mesh.vertices[:, 2].min() >= -1e-9
     assert 0.05 < mesh.extents[2] < 0.15  # the can is 10 cm tall; measured 10.2 cm
@@ -159,9 +161,10 @@ def test_small_field_reconstruction(can_without_truth, tmp_path, capsys):
 def test_photo_carving_can_be_turned_off(can_without_truth, tmp_path, capsys):
     out = tmp_path / "mesh_out"
     code, _, err = run_cli(capsys, "reconstruct", can_without_truth, "--out", out, "--steps", "4", "--voxels", "16",
-                           "--texture-px", "64", "--no-photo-carving")
+                           "--texture-px", "64", "--no-photo-carving", "--no-hollow-prior")
     assert code == 0, err
-    assert json.loads((out / "report.json").read_text())["config"]["field"]["photo_carving"] is False
+    field = json.loads((out / "report.json").read_text())["config"]["field"]
+    assert field["photo_carving"] is False and field["carving"]["hollow_prior"] is False
 
 
 def test_summary_line_reports_the_truth(hull_result, tmp_path):

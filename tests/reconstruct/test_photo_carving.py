@@ -63,22 +63,23 @@ def test_carving_opens_the_mug_cavity_and_keeps_its_walls(mug_capture):
     assert not (result.solid & ~hull).any()  # carving only removes
 
 
-def test_the_opening_empties_the_mugs_flat_coloured_lower_cavity(mug_capture):
+def test_the_hollow_prior_empties_the_mugs_flat_coloured_lower_cavity(mug_capture):
     """The first pass stops where the cup's inside is one flat colour (measured at 160x120, 48 voxels:
-    63 % of the filled cavity left); the opening takes most of the rest (26 % left) and nothing
-    of the wall the silhouettes vouch for (within ``min_wall_voxels`` of the hull's outside)."""
+    63 % of the filled cavity left); the second pass (the hollow prior) takes most of the rest (26 %
+    left) and nothing of the wall the silhouettes vouch for (within ``min_wall_voxels`` of the
+    hull's outside)."""
     from scipy.ndimage import distance_transform_edt
 
     from real2sim.reconstruct.photo_carving import CarvingConfig
 
-    grid, hull, first_pass = _hull_and_carving(mug_capture, CarvingConfig(featureless_contrast=0.0))
+    grid, hull, first_pass = _hull_and_carving(mug_capture, CarvingConfig(hollow_prior=False))
     _, _, opened = _hull_and_carving(mug_capture)
     inside, concave = _truth_labels(mug_capture, grid)
     left = lambda result: np.count_nonzero(result.solid & concave) / np.count_nonzero(hull & concave)
     assert first_pass.opened_voxels == 0
     assert opened.opened_voxels > 0.5 * first_pass.carved_voxels
     assert left(first_pass) > 0.5 and left(opened) < 0.4, (left(first_pass), left(opened))
-    assert not (opened.solid & ~first_pass.solid & hull).any()  # the opening only removes
+    assert not (opened.solid & ~first_pass.solid & hull).any()  # the second pass only removes
     wall_lost = np.count_nonzero(hull & inside & ~opened.solid) / np.count_nonzero(hull & inside)
     assert wall_lost < 0.01, f"{wall_lost:.3f} of the true solid was carved"
     skin = hull & (distance_transform_edt(np.pad(hull, 1))[1:-1, 1:-1, 1:-1] <= CarvingConfig().min_wall_voxels)
@@ -167,3 +168,22 @@ def test_row_quantile_matches_numpys_nanquantile(quantile):
     spreads[3, :5] = np.nan  # a voxel seen once
     np.testing.assert_allclose(_row_nanquantile(spreads, quantile), np.nanquantile(spreads, quantile, axis=1),
                                atol=1e-6)
+
+
+def test_the_fields_start_leaves_the_opened_cavity_empty(mug_capture):
+    """train_field's starting density: nearly nothing where either pass carved, and the hollow prior's
+    count carried out (the stage reports it as ``photo_carving_opened_voxels``)."""
+    from real2sim.reconstruct.hull import VoxelGrid, object_region
+    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.train import FieldConfig, hull_density
+    from real2sim.reconstruct.views import load_views
+
+    views = load_views(mug_capture)
+    grid = VoxelGrid.covering(*object_region(views), VOXELS, 0.0)
+    config = FieldConfig(carving=CarvingConfig(voxels=VOXELS))
+    density, carved, result = hull_density(views, grid, config)
+    assert result.opened_voxels > 0 and result.carved_voxels == np.count_nonzero(carved)
+    assert np.all(density[carved] <= 1e-3 * config.init_density)
+    assert np.median(density[~carved & (density > 0.5 * config.init_density)]) > 0.9 * config.init_density
+    _, no_carving, nothing = hull_density(views, grid, FieldConfig(photo_carving=False))
+    assert nothing is None and not no_carving.any()

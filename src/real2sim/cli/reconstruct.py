@@ -56,6 +56,10 @@ def register(sub) -> None:
     p.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
                    help="field backend: train from the visual hull as it is, without opening the concavities "
                         "the views disagree about (see docs/reconstruct.md)")
+    p.add_argument("--no-hollow-prior", dest="hollow_prior", action="store_false",
+                   help="field backend: leave filled the space behind an opened concavity that the images "
+                        "cannot place a surface in (a flat-coloured inside); by default it is taken as "
+                        "empty within the walls the silhouettes show (see docs/reconstruct.md)")
     p.add_argument("--from-mesh", type=existing_file, default=None, metavar="MESH",
                    help="import this mesh exported by nerfstudio instead of reconstructing")
     p.add_argument("--dataparser-transforms", type=existing_file, default=None, metavar="JSON",
@@ -77,8 +81,6 @@ def run_reconstruct(args: argparse.Namespace) -> int:
 
 
 def _reconstruct(args: argparse.Namespace, out: Path) -> int:
-    from dataclasses import replace
-
     from real2sim.formats.errors import UserInputError
     from real2sim.reconstruct.stage import ReconstructConfig, import_external, reconstruct, write_reconstruction
     from real2sim.reconstruct.train import FieldConfig
@@ -89,7 +91,7 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
         result = import_external(args.dataset, args.from_mesh, args.dataparser_transforms,
                                  config=ReconstructConfig(table_z_m=args.table_z))
     else:
-        field = replace(FieldConfig().with_budget(args.steps, args.voxels), photo_carving=args.photo_carving)
+        field = FieldConfig().with_budget(args.steps, args.voxels).with_carving(args.photo_carving, args.hollow_prior)
         config = ReconstructConfig(backend=args.backend, extraction=args.extraction,
                                    surface_level=args.surface_level, field=field,
                                    texture_px=args.texture_px, max_image_side_px=args.max_image_px,

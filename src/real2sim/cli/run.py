@@ -73,6 +73,10 @@ def register(sub) -> None:
     g.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
                    help="field backend: train from the visual hull as it is, without opening the concavities "
                         "the views disagree about (see docs/reconstruct.md)")
+    g.add_argument("--no-hollow-prior", dest="hollow_prior", action="store_false",
+                   help="field backend: leave filled the space behind an opened concavity that the images "
+                        "cannot place a surface in (a flat-coloured inside); by default it is taken as "
+                        "empty within the walls the silhouettes show (see docs/reconstruct.md)")
     g.add_argument("--max-faces", type=integer(100, 5_000_000), default=None, help="simplify the mesh to this many faces "
                    "(default 40000)")
     add_asset_arguments(p, seed_max=COLMAP_SEED_MAX)  # the seed reaches COLMAP with --refine-poses
@@ -122,7 +126,7 @@ def config_from_args(args: argparse.Namespace):
     resolve_device(args.device)
     # --voxels is the field's grid for the field, the carving grid for the hull
     field_voxels = args.voxels if args.backend == "field" else None
-    field = replace(FieldConfig().with_budget(args.steps, field_voxels), photo_carving=args.photo_carving)
+    field = FieldConfig().with_budget(args.steps, field_voxels).with_carving(args.photo_carving, args.hollow_prior)
     recon = ReconstructConfig(backend=args.backend, extraction=args.extraction,
                               surface_level=args.surface_level, field=field,
                               texture_px=args.texture_px, max_image_side_px=args.max_image_px,

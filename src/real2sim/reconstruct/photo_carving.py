@@ -41,15 +41,15 @@ surfaces, measured on the bundled objects:
 It stops early where the views inside a concavity agree for want of texture (a
 deep cup's floor and lower wall, one flat colour, seen only from steep views):
 there any depth looks the same from every view. So, once a concavity is open,
-a second pass (*the opening*) chooses the hollow shape where the images cannot
-place a surface: a voxel of the concavity's surface goes when at least
+a second pass (*the hollow prior*, ``hollow_prior``) chooses the hollow shape where
+the images cannot place a surface: a voxel of the concavity's surface goes when at least
 ``min_views`` views see it through the carved space, fewer than ``min_views``
 from outside, it is more than ``min_wall_voxels`` from the visual hull's outside
 and the table, and its views either look at featureless image (RGB contrast
 below ``featureless_contrast`` over ``contrast_window_voxels`` footprints) or
 disagree at least ``min_spread_to_contrast`` times as much as the image varies
 there (a true textured surface is seen alike from every view). Walls keep what
-the silhouettes vouch for; the masks then judge the opening on its own (a ray it
+the silhouettes vouch for; the masks then judge the second pass on its own (a ray it
 emptied gets back what it took). On the bundled mug (100 views, 320x240, 80
 voxels) the carved solid's wrong voxels fell from 46039 kept + 928 removed to
 8520 + 3711, on `bench_shapes`' bowl from 18274 + 23 to 10372 + 171; the
@@ -64,7 +64,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.ndimage import binary_dilation, binary_erosion, convolve, gaussian_filter
+from scipy.ndimage import binary_dilation, binary_erosion, convolve, distance_transform_edt, gaussian_filter
 
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.hull import VoxelGrid, surface_from_grid
@@ -87,13 +87,14 @@ class CarvingConfig:
     max_rounds: int = 150
     visibility_tolerance_voxels: float = 1.0
     min_component_fraction: float = 0.1
-    # the opening (see module docstring): image contrast (RGB std over a window of
-    # ``contrast_window_voxels`` footprints) below which a view cannot place a surface; 0 turns it off
+    # the second pass, the hollow prior (see module docstring); the image contrast (RGB std over a
+    # window of ``contrast_window_voxels`` footprints) below which a view cannot place a surface
+    hollow_prior: bool = True
     featureless_contrast: float = 0.03
     contrast_window_voxels: float = 2.0
     # ... or where its views disagree at least this many times as much as its images vary locally
     min_spread_to_contrast: float = 1.5
-    # the opening keeps every voxel within this many voxels of the visual hull's outside (or the table)
+    # the hollow prior keeps every voxel within this many voxels of the visual hull's outside (or the table)
     min_wall_voxels: float = 2.0
 
 
@@ -106,7 +107,7 @@ class CarvingResult:
     carved_voxels: int
     rounds: int
     restored_voxels: int = 0
-    opened_voxels: int = 0  # of ``carved_voxels``, those the opening (second pass) removed
+    opened_voxels: int = 0  # of ``carved_voxels``, those the second pass (the hollow prior) removed
 
 
 #: Parts of the carved solid smaller than this fraction of it, cut off from the rest, are dropped.
@@ -151,11 +152,11 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
         candidates = _surface(solid) & near & ~floor
     restored = int(_settled(views, grid, original, solid, config).sum())
     opened_count = 0
-    if config.featureless_contrast > 0 and (original & ~solid).any():
+    if config.hollow_prior and (original & ~solid).any():
         contrast = _local_contrast(images, config.contrast_window_voxels * _voxel_footprint_px(views, grid))
         opened = _open_concavity(views, images, contrast, grid, original, solid, floor, config, progress)
-        # the masks judge the opening on its own: a ray it emptied gets back what the opening took
-        # from it (the concavity the first carve opened stays open)
+        # the masks judge the second pass on its own: a ray it emptied gets back what that pass took
+        # from it (the concavity the first pass opened stays open)
         again = _emptied_rays(views, grid, solid, opened)
         opened |= again
         opened_count, restored = int((solid & ~opened).sum()), restored + int(again.sum())
@@ -178,13 +179,11 @@ def _settled(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np
 
 
 def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray, grid: VoxelGrid,
-                      original: np.ndarray, solid: np.ndarray, floor: np.ndarray, config: CarvingConfig,
-                      progress: ProgressFn | None) -> np.ndarray:
+                    original: np.ndarray, solid: np.ndarray, floor: np.ndarray, config: CarvingConfig,
+                    progress: ProgressFn | None) -> np.ndarray:
     """``solid`` (a copy) with the space behind an opened concavity that the images cannot place a
-    surface in removed, round by round (the opening of the module docstring). ``contrast``:
+    surface in removed, round by round (the hollow prior of the module docstring). ``contrast``:
     :func:`_local_contrast` of ``images``; ``floor``: voxels never carved."""
-    from scipy.ndimage import distance_transform_edt
-
     solid = solid.copy()
     # the wall the silhouettes vouch for: near the hull's outside, or near the table under it
     keep = floor | (distance_transform_edt(np.pad(original, 1))[1:-1, 1:-1, 1:-1] <= config.min_wall_voxels)
@@ -199,7 +198,7 @@ def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray,
             (verdict.spread >= config.min_spread_to_contrast * verdict.contrast)
         open_ = (verdict.through >= config.min_views) & (verdict.outside < config.min_views) & unplaced
         if progress:
-            progress("opening concavities", rounds, config.max_rounds)
+            progress("hollow prior", rounds, config.max_rounds)
         if not open_.any():
             break
         carve = np.zeros(solid.shape, bool)

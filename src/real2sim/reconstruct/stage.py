@@ -157,6 +157,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         report["field_grid"] = list(trained.field.grid.shape)
         report["photo_carved_voxels"] = trained.carved_voxels
         report["photo_carving_restored_voxels"] = trained.restored_voxels  # many: poses not refined?
+        report["photo_carving_opened_voxels"] = trained.opened_voxels
         report["field_voxel_mm"] = 1000.0 * trained.field.grid.voxel_m
         with clock.stage("extract_mesh"):
             if progress:

@@ -23,7 +23,7 @@ from scipy.ndimage import binary_dilation, binary_erosion
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.hull import VoxelGrid, carve
-from real2sim.reconstruct.photo_carving import CarvingConfig, photo_carve
+from real2sim.reconstruct.photo_carving import CarvingConfig, CarvingResult, photo_carve
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
 
@@ -81,6 +81,11 @@ class FieldConfig:
             config = replace(config, fine_voxels=voxels, coarse_voxels=max(voxels // 2, 4))
         return config
 
+    def with_carving(self, photo_carving: bool, hollow_prior: bool = True) -> "FieldConfig":
+        """These settings with photo-consistent carving on or off, and its second pass (the hollow
+        prior, :mod:`real2sim.reconstruct.photo_carving`) on or off."""
+        return replace(self, photo_carving=photo_carving, carving=replace(self.carving, hollow_prior=hollow_prior))
+
     def validate(self) -> None:
         from real2sim.formats.errors import UserInputError
 
@@ -99,6 +104,8 @@ class TrainResult:
     carved_voxels: int = 0  # coarse-grid voxels of the visual hull removed by photo-consistent carving
     # carving-grid voxels the carving removed and the masks' rays put back (poses off, see photo_carving)
     restored_voxels: int = 0
+    # carving-grid voxels the second pass (the hollow prior, see photo_carving) removed
+    opened_voxels: int = 0
 
 
 @dataclass(frozen=True)
@@ -137,35 +144,35 @@ def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> 
 
 
 def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig,
-                 progress: ProgressFn | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+                 progress: ProgressFn | None = None) -> tuple[np.ndarray, np.ndarray, CarvingResult | None]:
     """Initial density per voxel (``grid.shape``): ``init_density`` inside the visual hull, fading to
     nearly nothing outside it over about a voxel (a smooth step of the silhouette score), and
     nearly nothing where photo-consistent carving removed the hull; the voxels carved (bool); and
-    the carving-grid voxels the masks' rays put back (:class:`CarvingResult`)."""
+    the carving's result on its own grid (None without photo carving)."""
     score = carve(views, grid, config.hull_outlier_fraction)
     density = config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
     if not config.photo_carving:
-        return density, np.zeros(grid.shape, bool), 0
-    carved, restored = _photo_carved(views, grid, score >= 0.5, config, progress)
-    return np.where(carved, 1e-3 * config.init_density, density), carved, restored
+        return density, np.zeros(grid.shape, bool), None
+    carved, result = _photo_carved(views, grid, score >= 0.5, config, progress)
+    return np.where(carved, 1e-3 * config.init_density, density), carved, result
 
 
 def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: FieldConfig,
-                  progress: ProgressFn | None) -> tuple[np.ndarray, int]:
+                  progress: ProgressFn | None) -> tuple[np.ndarray, CarvingResult]:
     """Voxels of ``grid`` that photo-consistent carving removes from the visual hull (``hull`` on ``grid``),
-    and the count of carving-grid voxels it put back for the masks.
+    and the carving's result on its own grid.
 
     Carving runs on a grid of at least ``config.carving.voxels`` along the longest side: on
     coarser voxels a true surface's voxel centres lie so far inside it that the views of
     them disagree (a 24-voxel can lost a quarter of its volume)."""
     if max(grid.shape) >= config.carving.voxels:
         result = photo_carve(views, grid, hull, config.carving, progress=progress)
-        return hull & ~result.solid, result.restored_voxels
+        return hull & ~result.solid, result
     lo, hi = grid.bounds_m
     fine = VoxelGrid.covering(lo, hi, config.carving.voxels, table_z_m=float(lo[2]))
     fine_hull = carve(views, fine, config.hull_outlier_fraction) >= 0.5
     result = photo_carve(views, fine, fine_hull, config.carving, progress=progress)
-    return _resampled(fine_hull & ~result.solid, fine, grid), result.restored_voxels
+    return _resampled(fine_hull & ~result.solid, fine, grid), result
 
 
 def _resampled(mask: np.ndarray, source: VoxelGrid, target: VoxelGrid) -> np.ndarray:
@@ -229,7 +236,7 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     stages = [(n, s) for n, s in stages if s > 0]
     total = sum(s for _, s in stages)
     first_grid = VoxelGrid.covering(lo, hi, stages[0][0], table_z_m)
-    init_density, carved, restored = hull_density(views, first_grid, config, progress)
+    init_density, carved, carving = hull_density(views, first_grid, config, progress)
     field, done, curve = None, 0, []
     for voxels, steps in stages:
         grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
@@ -242,7 +249,8 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
             field = field.upsampled(grid, occupancy)
         done = _optimise(field, pool, config, steps, done, total, gen, progress, curve)
     return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
-                       carved_voxels=int(carved.sum()), restored_voxels=restored)
+                       carved_voxels=int(carved.sum()), restored_voxels=carving.restored_voxels if carving else 0,
+                       opened_voxels=carving.opened_voxels if carving else 0)
 
 
 def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
