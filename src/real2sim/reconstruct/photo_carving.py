@@ -365,10 +365,13 @@ def _local_contrast(images: np.ndarray, window_px: float) -> np.ndarray:
     ``window_px`` wide: how well a view can tell one depth of a surface from another there."""
     from scipy.ndimage import uniform_filter
 
-    size = (1, max(3, int(round(window_px)) | 1), max(3, int(round(window_px)) | 1), 1)
-    mean = uniform_filter(images, size=size)
-    mean_sq = uniform_filter(images * images, size=size)
-    return np.sqrt(np.clip(mean_sq - mean * mean, 0.0, None).sum(axis=-1)).astype(np.float32)
+    width = max(3, int(round(window_px)) | 1)
+    contrast = np.empty(images.shape[:3], np.float32)
+    for i, image in enumerate(images):  # a view at a time: whole-stack temporaries were 1 GB at 640x480
+        mean = uniform_filter(image, size=(width, width, 1))
+        mean_sq = uniform_filter(image * image, size=(width, width, 1))
+        contrast[i] = np.sqrt(np.clip(mean_sq - mean * mean, 0.0, None).sum(axis=-1))
+    return contrast
 
 
 def _row_nanquantile(values: np.ndarray, quantile: float) -> np.ndarray:
