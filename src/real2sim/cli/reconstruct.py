@@ -37,11 +37,6 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="MESHDIR", help="output folder (must not exist)")
     p.add_argument("--overwrite", action="store_true", help="replace MESHDIR if it exists")
     p.add_argument("--backend", choices=["field", "hull"], default="field", help="reconstruction method (default field)")
-    p.add_argument("--extraction", choices=["density", "tsdf"], default="density",
-                   help="field backend: surface by marching cubes on the density (default) or TSDF fusion")
-    p.add_argument("--surface-level", choices=["silhouettes", "half-light"], default="silhouettes",
-                   help="density extraction: cut the density where the masks' edges say (default) or at ln 2 "
-                        "per voxel")
     p.add_argument("--device", type=device, default="cpu", help="cpu (default), cuda or cuda:N")
     p.add_argument("--seed", type=seed(), default=0, help="random seed of the field's training (default 0)")
     p.add_argument("--steps", type=STEPS, default=None,
@@ -53,6 +48,23 @@ def register(sub) -> None:
                    help="work on images reduced to this many px on their longer side (default 640; larger "
                         "photos cost memory and time the field's grid cannot use)")
     p.add_argument("--table-z", type=TABLE_Z_M, default=0.0, metavar="M", help=TABLE_Z_HELP)
+    add_field_arguments(p)
+    p.add_argument("--from-mesh", type=existing_file, default=None, metavar="MESH",
+                   help="import this mesh exported by nerfstudio instead of reconstructing")
+    p.add_argument("--dataparser-transforms", type=existing_file, default=None, metavar="JSON",
+                   help="nerfstudio's dataparser_transforms.json for --from-mesh")
+    options.finish(p)
+    p.set_defaults(func=run_reconstruct)
+
+
+def add_field_arguments(p) -> None:
+    """The field backend's extraction and carving choices (``reconstruct`` and ``run``)."""
+    # choices written out: importing the stage's tuples here would load torch for every command
+    p.add_argument("--extraction", choices=["density", "tsdf"], default="density",
+                   help="field backend: surface by marching cubes on the density (default) or TSDF fusion")
+    p.add_argument("--surface-level", choices=["silhouettes", "half-light"], default="silhouettes",
+                   help="density extraction: cut the density where the masks' edges say (default) or at ln 2 "
+                        "per voxel")
     p.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
                    help="field backend: train from the visual hull as it is, without opening the concavities "
                         "the views disagree about (see docs/reconstruct.md)")
@@ -60,12 +72,17 @@ def register(sub) -> None:
                    help="field backend: leave filled the space behind an opened concavity that the images "
                         "cannot place a surface in (a flat-coloured inside); by default it is taken as "
                         "empty within the walls the silhouettes show (see docs/reconstruct.md)")
-    p.add_argument("--from-mesh", type=existing_file, default=None, metavar="MESH",
-                   help="import this mesh exported by nerfstudio instead of reconstructing")
-    p.add_argument("--dataparser-transforms", type=existing_file, default=None, metavar="JSON",
-                   help="nerfstudio's dataparser_transforms.json for --from-mesh")
-    options.finish(p)
-    p.set_defaults(func=run_reconstruct)
+
+
+def reconstruct_config(args: argparse.Namespace, field_voxels: int | None):
+    """The ReconstructConfig the flags ask for (``field_voxels``: the field's fine grid, None for its default)."""
+    from real2sim.reconstruct.stage import ReconstructConfig
+    from real2sim.reconstruct.train import FieldConfig
+
+    field = FieldConfig().with_budget(args.steps, field_voxels).with_carving(args.photo_carving, args.hollow_prior)
+    return ReconstructConfig(backend=args.backend, extraction=args.extraction, surface_level=args.surface_level,
+                             field=field, texture_px=args.texture_px, max_image_side_px=args.max_image_px,
+                             table_z_m=args.table_z)
 
 
 def run_reconstruct(args: argparse.Namespace) -> int:
@@ -83,7 +100,6 @@ def run_reconstruct(args: argparse.Namespace) -> int:
 def _reconstruct(args: argparse.Namespace, out: Path) -> int:
     from real2sim.formats.errors import UserInputError
     from real2sim.reconstruct.stage import ReconstructConfig, import_external, reconstruct, write_reconstruction
-    from real2sim.reconstruct.train import FieldConfig
 
     if (args.from_mesh is None) != (args.dataparser_transforms is None):
         raise UserInputError("--from-mesh and --dataparser-transforms go together")
@@ -91,11 +107,7 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
         result = import_external(args.dataset, args.from_mesh, args.dataparser_transforms,
                                  config=ReconstructConfig(table_z_m=args.table_z))
     else:
-        field = FieldConfig().with_budget(args.steps, args.voxels).with_carving(args.photo_carving, args.hollow_prior)
-        config = ReconstructConfig(backend=args.backend, extraction=args.extraction,
-                                   surface_level=args.surface_level, field=field,
-                                   texture_px=args.texture_px, max_image_side_px=args.max_image_px,
-                                   table_z_m=args.table_z)
+        config = reconstruct_config(args, args.voxels)
         config.validate()
         from real2sim.cli.progress import progress_display
 

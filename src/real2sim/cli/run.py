@@ -9,7 +9,8 @@ from pathlib import Path
 from real2sim.cli import options
 from real2sim.cli.asset import add_asset_arguments
 from real2sim.cli.options import COLMAP_SEED_MAX, existing_file, integer, jobs, nonnegative, positive
-from real2sim.cli.reconstruct import IMAGE_PX, STEPS, TABLE_Z_HELP, TABLE_Z_M, TEXTURE_PX, VOXELS
+from real2sim.cli.reconstruct import (IMAGE_PX, STEPS, TABLE_Z_HELP, TABLE_Z_M, TEXTURE_PX, VOXELS,
+                                      add_field_arguments, reconstruct_config)
 
 #: Evaluation: runs per task, scale of the tasks' durations.
 RUNS = integer(1, 1000)
@@ -57,11 +58,6 @@ def register(sub) -> None:
     g = p.add_argument_group("reconstruction")
     g.add_argument("--backend", choices=["field", "hull"], default="field",
                    help="radiance field (default) or visual hull (fast)")
-    g.add_argument("--extraction", choices=["density", "tsdf"], default="density",
-                   help="field backend: surface by marching cubes on the density (default) or TSDF fusion")
-    g.add_argument("--surface-level", choices=["silhouettes", "half-light"], default="silhouettes",
-                   help="density extraction: cut the density where the masks' edges say (default) or at ln 2 "
-                        "per voxel")
     g.add_argument("--steps", type=STEPS, default=None, help="field: fine-grid training steps")
     g.add_argument("--voxels", type=VOXELS, default=None,
                    help="voxels along the object's longest side (field: fine grid; hull: carving grid, default 192)")
@@ -70,13 +66,7 @@ def register(sub) -> None:
                    help="reconstruct from images reduced to this many px on their longer side (default 640)")
     g.add_argument("--table-z", type=TABLE_Z_M, default=0.0, metavar="M",
                    help=TABLE_Z_HELP + "; the flat bottom is closed there")
-    g.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
-                   help="field backend: train from the visual hull as it is, without opening the concavities "
-                        "the views disagree about (see docs/reconstruct.md)")
-    g.add_argument("--no-hollow-prior", dest="hollow_prior", action="store_false",
-                   help="field backend: leave filled the space behind an opened concavity that the images "
-                        "cannot place a surface in (a flat-coloured inside); by default it is taken as "
-                        "empty within the walls the silhouettes show (see docs/reconstruct.md)")
+    add_field_arguments(g)
     g.add_argument("--max-faces", type=integer(100, 5_000_000), default=None, help="simplify the mesh to this many faces "
                    "(default 40000)")
     add_asset_arguments(p, seed_max=COLMAP_SEED_MAX)  # the seed reaches COLMAP with --refine-poses
@@ -106,8 +96,7 @@ def config_from_args(args: argparse.Namespace):
     from real2sim.cli.asset import config_from_args as asset_config
     from real2sim.formats.errors import UserInputError
     from real2sim.pipeline.run import RunConfig, check_dataset
-    from real2sim.reconstruct.stage import ReconstructConfig, resolve_device
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.reconstruct.stage import resolve_device
 
     if args.seed < 0 or args.seed >= 2**63:
         raise UserInputError(f"--seed must be in 0..2^63-1 (got {args.seed})")
@@ -126,11 +115,7 @@ def config_from_args(args: argparse.Namespace):
     resolve_device(args.device)
     # --voxels is the field's grid for the field, the carving grid for the hull
     field_voxels = args.voxels if args.backend == "field" else None
-    field = FieldConfig().with_budget(args.steps, field_voxels).with_carving(args.photo_carving, args.hollow_prior)
-    recon = ReconstructConfig(backend=args.backend, extraction=args.extraction,
-                              surface_level=args.surface_level, field=field,
-                              texture_px=args.texture_px, max_image_side_px=args.max_image_px,
-                              table_z_m=args.table_z)
+    recon = reconstruct_config(args, field_voxels)
     if args.voxels is not None and args.backend != "field":
         recon = replace(recon, hull_voxels=args.voxels)
     if args.max_faces is not None:

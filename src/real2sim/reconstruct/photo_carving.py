@@ -121,7 +121,8 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
                 progress: ProgressFn | None = None) -> CarvingResult:
     """Carve the photo-inconsistent surface voxels of ``solid`` (bool, ``grid.shape``) round by round."""
     original, solid = solid, solid.copy()
-    images = _blurred(views.rgb, config.blur_voxels * _voxel_footprint_px(views, grid))
+    footprint_px = _voxel_footprint_px(views, grid)
+    images = _blurred(views.rgb, config.blur_voxels * footprint_px)
     floor = np.zeros(solid.shape, bool)
     floor[:, :, 0] = True
     candidates = _surface(solid) & ~floor
@@ -129,9 +130,7 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
     for rounds in range(1, config.max_rounds + 1):
         if not candidates.any():
             break
-        idx = np.argwhere(candidates)
-        surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
-        verdict = _spread(views, images, grid, idx, surface_mesh, original & ~solid, config)
+        idx, verdict = _tested(views, images, grid, candidates, original, solid, config)
         # a carve starts only where the views disagree in hue, and grows wherever they disagree
         # at all: brightness alone differs between views of a shiny or curved true surface
         bad, hue_bad = np.zeros(solid.shape, bool), np.zeros(solid.shape, bool)
@@ -150,10 +149,12 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
         # only voxels near a change can change verdict: newly exposed ones, and those that now see more views
         near = binary_dilation(carve, np.ones((3, 3, 3), bool), iterations=2)
         candidates = _surface(solid) & near & ~floor
-    restored = int(_settled(views, grid, original, solid, config).sum())
-    opened_count = 0
+    put_back = _emptied_rays(views, grid, original, solid)
+    solid |= put_back
+    solid |= _small_components(original & ~solid, config.min_component_fraction * original.sum())
+    restored, opened_count = int(put_back.sum()), 0
     if config.hollow_prior and (original & ~solid).any():
-        contrast = _local_contrast(images, config.contrast_window_voxels * _voxel_footprint_px(views, grid))
+        contrast = _local_contrast(images, config.contrast_window_voxels * footprint_px)
         opened = _open_concavity(views, images, contrast, grid, original, solid, floor, config, progress)
         # the masks judge the second pass on its own: a ray it emptied gets back what that pass took
         # from it (the concavity the first pass opened stays open)
@@ -168,14 +169,14 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
                          restored_voxels=restored, opened_voxels=opened_count)
 
 
-def _settled(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
-             config: CarvingConfig) -> np.ndarray:
-    """Applies the silhouettes' last word and the minimum concavity size to ``solid`` (in place);
-    returns the voxels the masks' rays put back."""
-    restored = _emptied_rays(views, grid, original, solid)
-    solid |= restored
-    solid |= _small_components(original & ~solid, config.min_component_fraction * original.sum())
-    return restored
+def _tested(views: PosedViews, images: np.ndarray, grid: VoxelGrid, candidates: np.ndarray, original: np.ndarray,
+            solid: np.ndarray, config: CarvingConfig,
+            contrast: np.ndarray | None = None) -> tuple[np.ndarray, _Verdict]:
+    """The indices (P, 3) of the ``candidates`` voxels and the views' :class:`_Verdict` on each, seen
+    against the current ``solid`` (carved so far: ``original & ~solid``)."""
+    idx = np.argwhere(candidates)
+    surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
+    return idx, _spread(views, images, grid, idx, surface_mesh, original & ~solid, config, contrast)
 
 
 def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray, grid: VoxelGrid,
@@ -191,9 +192,7 @@ def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray,
     for rounds in range(1, config.max_rounds + 1):
         if not candidates.any():
             break
-        idx = np.argwhere(candidates)
-        surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
-        verdict = _spread(views, images, grid, idx, surface_mesh, original & ~solid, config, contrast)
+        idx, verdict = _tested(views, images, grid, candidates, original, solid, config, contrast)
         unplaced = (verdict.contrast < config.featureless_contrast) | \
             (verdict.spread >= config.min_spread_to_contrast * verdict.contrast)
         open_ = (verdict.through >= config.min_views) & (verdict.outside < config.min_views) & unplaced
