@@ -146,6 +146,46 @@ def test_emptied_rays_put_back_a_removed_top(can_capture):
     assert not _emptied_rays(views, grid, hull, hull).any()
 
 
+def test_a_hollow_behind_an_intact_skin_empties_no_ray_and_chunks_do_not_matter(can_capture):
+    """Hollowing the can inside a skin two voxels thick leaves every mask ray meeting the skin:
+    nothing is put back. Walking the rays a few hundred samples at a time finds the same voxels as
+    walking a whole view at once (the removed top of the test above)."""
+    from scipy.ndimage import binary_erosion
+
+    from real2sim.reconstruct.photo_carving import _emptied_rays
+    from real2sim.reconstruct.views import load_views
+
+    grid, hull, _ = _hull_and_carving(can_capture)
+    views = load_views(can_capture)
+    hollow = hull & ~binary_erosion(hull, iterations=2)
+    assert np.count_nonzero(hull & ~hollow) > 0.3 * np.count_nonzero(hull)
+    assert not _emptied_rays(views, grid, hull, hollow).any()
+    topless = hull.copy()
+    topless[:, :, grid.shape[2] // 2:] = False
+    whole = _emptied_rays(views, grid, hull, topless)
+    assert whole.any()
+    np.testing.assert_array_equal(_emptied_rays(views, grid, hull, topless, samples_per_chunk=300), whole)
+
+
+@pytest.mark.cuda
+def test_emptied_rays_on_cuda_match_the_cpu(can_capture):
+    """The masks' rays walked on CUDA put back exactly the CPU's voxels (same float64 samples)."""
+    import torch
+
+    from real2sim.reconstruct.photo_carving import _emptied_rays
+    from real2sim.reconstruct.views import load_views
+
+    if not torch.cuda.is_available():
+        pytest.skip("needs a CUDA GPU")
+    grid, hull, _ = _hull_and_carving(can_capture)
+    views = load_views(can_capture)
+    topless = hull.copy()
+    topless[:, :, grid.shape[2] // 2:] = False
+    cpu = _emptied_rays(views, grid, hull, topless)
+    assert cpu.any()
+    np.testing.assert_array_equal(_emptied_rays(views, grid, hull, topless, device="cuda"), cpu)
+
+
 def test_small_carved_pockets_are_put_back(mug_capture):
     """Carved parts smaller than ``min_component_fraction`` of the hull are filled again: at 0.99 even the
     cavity (less than half the hull's voxels) is."""

@@ -144,7 +144,7 @@ def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> 
 
 
 def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig,
-                 progress: ProgressFn | None = None) -> tuple[np.ndarray, np.ndarray, CarvingResult | None]:
+                 progress: ProgressFn | None = None, device: str = "cpu") -> tuple[np.ndarray, np.ndarray, CarvingResult | None]:
     """Initial density per voxel (``grid.shape``): ``init_density`` inside the visual hull, fading to
     nearly nothing outside it over about a voxel (a smooth step of the silhouette score), and
     nearly nothing where photo-consistent carving removed the hull; the voxels carved (bool); and
@@ -153,12 +153,12 @@ def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig,
     density = config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
     if not config.photo_carving:
         return density, np.zeros(grid.shape, bool), None
-    carved, result = _photo_carved(views, grid, score >= 0.5, config, progress)
+    carved, result = _photo_carved(views, grid, score >= 0.5, config, progress, device)
     return np.where(carved, 1e-3 * config.init_density, density), carved, result
 
 
 def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: FieldConfig,
-                  progress: ProgressFn | None) -> tuple[np.ndarray, CarvingResult]:
+                  progress: ProgressFn | None, device: str = "cpu") -> tuple[np.ndarray, CarvingResult]:
     """Voxels of ``grid`` that photo-consistent carving removes from the visual hull (``hull`` on ``grid``),
     and the carving's result on its own grid.
 
@@ -166,12 +166,12 @@ def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: 
     coarser voxels a true surface's voxel centres lie so far inside it that the views of
     them disagree (a 24-voxel can lost a quarter of its volume)."""
     if max(grid.shape) >= config.carving.voxels:
-        result = photo_carve(views, grid, hull, config.carving, progress=progress)
+        result = photo_carve(views, grid, hull, config.carving, progress=progress, device=device)
         return hull & ~result.solid, result
     lo, hi = grid.bounds_m
     fine = VoxelGrid.covering(lo, hi, config.carving.voxels, table_z_m=float(lo[2]))
     fine_hull = carve(views, fine, config.hull_outlier_fraction) >= 0.5
-    result = photo_carve(views, fine, fine_hull, config.carving, progress=progress)
+    result = photo_carve(views, fine, fine_hull, config.carving, progress=progress, device=device)
     return _resampled(fine_hull & ~result.solid, fine, grid), result
 
 
@@ -236,7 +236,7 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     stages = [(n, s) for n, s in stages if s > 0]
     total = sum(s for _, s in stages)
     first_grid = VoxelGrid.covering(lo, hi, stages[0][0], table_z_m)
-    init_density, carved, carving = hull_density(views, first_grid, config, progress)
+    init_density, carved, carving = hull_density(views, first_grid, config, progress, device)
     field, done, curve = None, 0, []
     for voxels, steps in stages:
         grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
