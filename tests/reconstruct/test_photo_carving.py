@@ -65,7 +65,7 @@ def test_carving_opens_the_mug_cavity_and_keeps_its_walls(mug_capture):
 
 def test_the_hollow_prior_empties_the_mugs_flat_coloured_lower_cavity(mug_capture):
     """The first pass stops where the cup's inside is one flat colour (measured at 160x120, 48 voxels:
-    63 % of the filled cavity left); the second pass (the hollow prior) takes most of the rest (26 %
+    63 % of the filled cavity left); the second pass (the hollow prior) takes most of the rest (25 %
     left) and nothing of the wall the silhouettes vouch for (within ``min_wall_voxels`` of the
     hull's outside)."""
     from scipy.ndimage import distance_transform_edt
