@@ -110,7 +110,8 @@ def test_refine_small_capture_improves_or_falls_back(small_capture, tmp_path):
 
     given = read_transforms(small_capture / "transforms.json").poses_c2w_gl()
     flags = np.array([f.extra[POSE_REFINED_KEY] for f in ds.frames])
-    assert flags.sum() == result.num_refined_frames
+    assert flags.sum() == result.num_refined_frames and list(flags) == list(result.frame_refined)
+    assert "frame_refined" not in json.loads((root / "refine_report.json").read_text())
     assert np.array_equal(~flags, np.all(ds.poses_c2w_gl() == given, axis=(1, 2)))
 
 

@@ -110,11 +110,14 @@ class RefineResult:
     trans_error_after_mm: float | None = None
     seconds: float = 0.0
     timings_s: dict = field(default_factory=dict)
+    # per frame, in the dataset's order: whether COLMAP's pose replaced the given one (written into
+    # transforms.json per frame, not into the report)
+    frame_refined: tuple[bool, ...] = ()
 
     def to_json(self) -> dict:
         from dataclasses import asdict
 
-        return asdict(self)
+        return {k: v for k, v in asdict(self).items() if k != "frame_refined"}
 
 
 # ----------------------------------------------------------------------------- geometry helpers
@@ -280,7 +283,8 @@ def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progre
         return fallback(f"only {int(ok.sum())} of {n} refined frames stayed within {cfg.max_change_deg} deg / "
                         f"{cfg.max_change_mm} mm of the given poses", **info)
     return aligned, RefineResult(refined=True, reason="ok", num_frames=n, num_refined_frames=int(ok.sum()),
-                                 sim3_scale=float(s), seconds=time.perf_counter() - t_start, **info)
+                                 sim3_scale=float(s), seconds=time.perf_counter() - t_start,
+                                 frame_refined=tuple(bool(x) for x in ok), **info)
 
 
 def _with_errors(result: RefineResult, gt: Dataset | None, names: list[str], before: np.ndarray,
@@ -324,10 +328,9 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
     if result.refined:
         extra = dict(ds.extra)
         extra["real2sim_refinement"] = {k: v for k, v in result.to_json().items() if k != "timings_s"}
-        # a frame COLMAP could not refine keeps its given pose exactly; say so, for the reconstruction
-        kept = np.all(poses == ds.poses_c2w_gl(), axis=(1, 2))
+        # a frame COLMAP could not refine keeps its given pose; say so, for the reconstruction
         new = replace(ds, frames=tuple(replace(f, transform_matrix=poses[i],
-                                               extra={**f.extra, POSE_REFINED_KEY: not bool(kept[i])})
+                                               extra={**f.extra, POSE_REFINED_KEY: result.frame_refined[i]})
                                        for i, f in enumerate(ds.frames)), extra=extra)
         write_transforms(root / "transforms.json", new)
     write_json_atomic(root / "refine_report.json", result.to_json())
