@@ -153,6 +153,7 @@ def test_small_field_reconstruction(can_without_truth, tmp_path, capsys):
     assert report["config"]["field"]["photo_carving"] is True and report["photo_carved_voxels"] == 0
     assert report["config"]["field"]["carving"]["hollow_prior"] is True
     assert report["photo_carving_opened_voxels"] == 0  # the hollow prior works only behind what was carved
+    assert 0 < report["hull_and_carving_seconds"] < report["stages"]["train_field"]["seconds"]
     mesh = trimesh.load(out / "mesh.obj", force="mesh")
     assert mesh.vertices[:, 2].min() >= -1e-9
     assert 0.05 < mesh.extents[2] < 0.15  # the can is 10 cm tall; measured 10.2 cm

@@ -106,6 +106,8 @@ class TrainResult:
     restored_voxels: int = 0
     # carving-grid voxels the second pass (the hollow prior, see photo_carving) removed
     opened_voxels: int = 0
+    # of ``seconds``, the starting density: the visual hull's score and photo-consistent carving
+    hull_and_carving_seconds: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -236,7 +238,9 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     stages = [(n, s) for n, s in stages if s > 0]
     total = sum(s for _, s in stages)
     first_grid = VoxelGrid.covering(lo, hi, stages[0][0], table_z_m)
+    t_hull = time.perf_counter()
     init_density, carved, carving = hull_density(views, first_grid, config, progress, device)
+    hull_and_carving_s = time.perf_counter() - t_hull
     field, done, curve = None, 0, []
     for voxels, steps in stages:
         grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
@@ -250,7 +254,8 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
         done = _optimise(field, pool, config, steps, done, total, gen, progress, curve)
     return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
                        carved_voxels=int(carved.sum()), restored_voxels=carving.restored_voxels if carving else 0,
-                       opened_voxels=carving.opened_voxels if carving else 0)
+                       opened_voxels=carving.opened_voxels if carving else 0,
+                       hull_and_carving_seconds=hull_and_carving_s)
 
 
 def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
