@@ -364,3 +364,21 @@ def test_hollow_prior_reaches_the_reconstruct_stage(can_ds_no_truth, tmp_path):
     assert default.reconstruct.field.carving.hollow_prior and default.reconstruct.field.photo_carving
     assert not chosen.reconstruct.field.carving.hollow_prior and chosen.reconstruct.field.photo_carving
     assert chosen.reconstruct.field.carving.min_wall_voxels == default.reconstruct.field.carving.min_wall_voxels
+
+
+def test_a_reconstruction_short_of_the_table_is_named_before_the_asset_is_built(tmp_path):
+    """A reconstruction whose lowest point is above the table by more than the asset's flat-bottom
+    tolerance (5 % of its height) gets run's own message, not asset's ``--support-height`` one."""
+    import trimesh
+
+    from real2sim.formats.errors import UserInputError
+    from real2sim.pipeline.stages import check_reaches_table
+
+    box = trimesh.creation.box((0.05, 0.05, 0.04))
+    box.apply_translation([0.0, 0.0, 0.02 + 0.005])  # 40 mm tall, 5 mm above z = 0
+    path = tmp_path / "mesh.obj"
+    box.export(path)
+    with pytest.raises(UserInputError, match=r"5\.0 mm above the table \(z = 0 m\).*--table-z"):
+        check_reaches_table(path, 0.0)
+    check_reaches_table(path, 0.0035)  # 1.5 mm short: within 2 mm, the flat bottom closes it
+    check_reaches_table(path, 0.01)  # the table cuts the mesh

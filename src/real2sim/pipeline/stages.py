@@ -80,10 +80,31 @@ def _reconstruct(dataset: Path, out: Path, cfg, device: str, seed: int, progress
                         "truth": report.get("truth")}}
 
 
+def check_reaches_table(mesh: Path, table_z_m: float) -> None:
+    """UserInputError (one line) when the reconstruction ``mesh`` (world frame, metres) stops short
+    of the table by more than the asset's flat-bottom tolerance: its lowest part was not
+    reconstructed (masks that miss it near the table, a table height that is wrong), and there is
+    no bottom to close at the table. ``asset``'s own message speaks of ``--support-height``, which
+    ``run`` sets itself."""
+    from real2sim.asset.build import SUPPORT_BELOW_TOLERANCE
+    from real2sim.formats.errors import UserInputError
+    from real2sim.formats.mesh_io import load_mesh
+
+    z_m = load_mesh(mesh).vertices[:, 2]
+    gap_m, height_m = float(z_m.min()) - table_z_m, float(z_m.max() - z_m.min())
+    if gap_m > SUPPORT_BELOW_TOLERANCE * height_m:
+        raise UserInputError(
+            f"the reconstruction's lowest point is {1000 * gap_m:.1f} mm above the table (z = {table_z_m:g} m), "
+            f"more than {100 * SUPPORT_BELOW_TOLERANCE:g} % of its {1000 * height_m:.0f} mm height, so its bottom "
+            "cannot be closed at the table: check that the masks reach the table in the low views, or give the "
+            "table's height with --table-z")
+
+
 def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: ProgressFn) -> dict:
     """build_asset into ``.run/asset`` (whole or not at all), then move its entries into ASSETDIR."""
     from real2sim.asset.build import build_asset
 
+    check_reaches_table(mesh, cfg.support_height_m)
     built = asset_dir / mf.RUN_DIRNAME / "asset"
     build_asset(mesh, built, cfg, overwrite=True, progress=progress)
     # Downstream outputs of the previous asset are stale now.
