@@ -43,6 +43,13 @@ MAX_EXTENT_PER_RESOLUTION_HINT = 300.0
 SUPPORT_BELOW_TOLERANCE = 0.05
 
 
+def support_below_mesh(bottom_m: float, top_m: float, support_m: float) -> bool:
+    """Whether a support plane at height ``support_m`` lies below a mesh spanning ``bottom_m`` ..
+    ``top_m`` (same frame, +z up) by more than :data:`SUPPORT_BELOW_TOLERANCE` of its height: there
+    is nothing to crop there and no bottom to close."""
+    return support_m < bottom_m - SUPPORT_BELOW_TOLERANCE * (top_m - bottom_m)
+
+
 @dataclass(frozen=True)
 class AssetConfig:
     """Everything ``real2sim asset`` needs besides the mesh and the output folder.
@@ -171,7 +178,7 @@ def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str
         if height >= top:
             raise UserInputError(f"--support-height {height:g} m leaves nothing of {label} above it "
                                  f"(the mesh spans z = {bottom:.4g} .. {top:.4g} m)")
-        if height < bottom - SUPPORT_BELOW_TOLERANCE * (top - bottom):
+        if support_below_mesh(bottom, top, height):
             raise UserInputError(f"--support-height {height:g} m lies {bottom - height:.4g} m below {label} "
                                  f"(the mesh spans z = {bottom:.4g} .. {top:.4g} m): nothing to crop and no bottom to "
                                  "close there; give the table's height in the mesh frame")

@@ -86,13 +86,14 @@ def check_reaches_table(mesh: Path, table_z_m: float) -> None:
     reconstructed (masks that miss it near the table, a table height that is wrong), and there is
     no bottom to close at the table. ``asset``'s own message speaks of ``--support-height``, which
     ``run`` sets itself."""
-    from real2sim.asset.build import SUPPORT_BELOW_TOLERANCE
+    from real2sim.asset.build import SUPPORT_BELOW_TOLERANCE, support_below_mesh
     from real2sim.formats.errors import UserInputError
     from real2sim.formats.mesh_io import load_mesh
 
     z_m = load_mesh(mesh).vertices[:, 2]
-    gap_m, height_m = float(z_m.min()) - table_z_m, float(z_m.max() - z_m.min())
-    if gap_m > SUPPORT_BELOW_TOLERANCE * height_m:
+    bottom_m, top_m = float(z_m.min()), float(z_m.max())
+    if support_below_mesh(bottom_m, top_m, table_z_m):
+        gap_m, height_m = bottom_m - table_z_m, top_m - bottom_m
         raise UserInputError(
             f"the reconstruction's lowest point is {1000 * gap_m:.1f} mm above the table (z = {table_z_m:g} m), "
             f"more than {100 * SUPPORT_BELOW_TOLERANCE:g} % of its {1000 * height_m:.0f} mm height, so its bottom "

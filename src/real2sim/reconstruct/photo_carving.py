@@ -256,12 +256,12 @@ def _emptied_rays(views: PosedViews, grid: VoxelGrid, original: np.ndarray, soli
         # the step numbers k (t = near + k * step) whose samples can fall in the box, a step to spare each side
         first = torch.clamp(torch.floor((enter - near) / step_m) - 1, 0, last_step).to(torch.int64)
         last = torch.clamp(torch.ceil((leave - near) / step_m) + 1, 0, last_step).to(torch.int64)
-        count = torch.where(leave > enter, last - first + 1, 0)
-        ends = torch.cumsum(count, 0)
-        chunk_of = torch.div(ends - 1, samples_per_chunk, rounding_mode="floor").cpu().numpy()
-        for chunk in np.unique(chunk_of[count.cpu().numpy() > 0]):
-            r = torch.from_numpy(np.nonzero(chunk_of == chunk)[0]).to(device)
-            r = r[count[r] > 0]
+        count = last - first + 1
+        crosses = leave > enter
+        o, d, near, far, first, count = (a[crosses] for a in (o, d, near, far, first, count))
+        chunk_of = torch.div(torch.cumsum(count, 0) - 1, samples_per_chunk, rounding_mode="floor")
+        for chunk in torch.unique(chunk_of).tolist():
+            r = torch.nonzero(chunk_of == chunk)[:, 0]
             n = count[r]
             ray = torch.repeat_interleave(torch.arange(len(r), device=device), n)
             k = torch.arange(len(ray), device=device) - torch.repeat_interleave(torch.cumsum(n, 0) - n, n) \
@@ -387,7 +387,7 @@ def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndar
         if some.any():
             rows = per_point[some]  # (S, V, 3): the per-channel median over views, by rows of (S * 3, V)
             median = _row_nanquantile(rows.transpose(0, 2, 1).reshape(-1, views.count), 0.5).reshape(-1, 3)
-            spread[some] = _row_nanquantile(np.linalg.norm(per_point[some] - median[:, None], axis=2), quantile)
+            spread[some] = _row_nanquantile(np.linalg.norm(rows - median[:, None], axis=2), quantile)
         spreads.append(spread)
     median_contrast = np.full(len(points), np.nan)
     if contrast is not None and some.any():
