@@ -9,6 +9,8 @@ refinement, the radiance field and three representations (no evaluation):
   whose longest side is horizontal;
 * ``bowl``: an open spherical bowl, 12.6 cm wide, 4 cm deep, 8 mm wall: a wide concavity
   every high view looks into;
+* ``bin``: an open box, 10 x 7 x 6 cm, 4 mm walls and floor: a concavity with thin walls, whose
+  rim carving can lower (the masks' re-check then has to grow the rim back, not lay a lid);
 * ``torus``: a ring lying flat, 12 cm across: a through-hole;
 * ``rod``: a cylinder 2.4 cm wide and 20 cm tall: thin and tall;
 * ``box`` again with the robot's poses as they are (``--refine-poses`` left out): what pose
@@ -41,7 +43,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import markdown_table, write_section  # noqa: E402
 
-SHAPES = ("box", "bowl", "torus", "rod", "box_unrefined")
+SHAPES = ("box", "bowl", "bin", "torus", "rod", "box_unrefined")
 SPECS = ("cylinders:10", "ellipsoids:16", "coacd")
 MASS_KG = 0.2
 
@@ -60,6 +62,10 @@ def make_shape(name: str):
         above = trimesh.creation.box((0.3, 0.3, 0.3))
         above.apply_translation([0, 0, 0.12])  # keeps z < -0.03: a 4 cm deep cap of the shell
         mesh = outer.difference(inner).difference(above)
+    elif name == "bin":
+        inside = trimesh.creation.box((0.092, 0.062, 0.066))
+        inside.apply_translation([0, 0, 0.007])  # from 4 mm above the floor's underside up through the top
+        mesh = trimesh.creation.box((0.1, 0.07, 0.06)).difference(inside)
     elif name == "torus":
         mesh = trimesh.creation.torus(major_radius=0.045, minor_radius=0.015)
     elif name == "rod":

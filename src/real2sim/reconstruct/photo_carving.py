@@ -32,11 +32,14 @@ surfaces, measured on the bundled objects:
 * what is carved in the end is kept only in connected parts of at least
   ``min_component_fraction`` of the hull's volume;
 * the silhouettes have the last word: a ray through a mask pixel that met the hull
-  must still meet the carved solid (something is on it), so the carved voxels along
-  every ray the carving emptied are put back. Where the views disagree for another
-  reason than a concavity -- poses a few millimetres off, which make every textured
-  surface disagree -- carving would otherwise eat the object from the top down (a
-  35 mm box on an unrefined 5 mm / 1 degree capture kept 2.5 mm of it).
+  must still meet the carved solid (something is on it), so carved voxels on every
+  ray the carving emptied are put back: first those next to what is left (a thin rim
+  carving lowered grows back; putting back the whole ray laid a lid across an open
+  bin), then whatever that skin closes off, then all of them on rays still empty
+  (``_put_back_for_masks``). Where the views disagree for another reason than a
+  concavity -- poses a few millimetres off, which make every textured surface
+  disagree -- carving would otherwise eat the object from the top down (a 35 mm box
+  on an unrefined 5 mm / 1 degree capture kept 2.5 mm of it).
 
 It stops early where the views inside a concavity agree for want of texture (a
 deep cup's floor and lower wall, one flat colour, seen only from steep views):
@@ -97,6 +100,12 @@ class CarvingConfig:
     min_spread_to_contrast: float = 1.5
     # the hollow prior keeps every voxel within this many voxels of the visual hull's outside (or the table)
     min_wall_voxels: float = 2.0
+    # the masks' re-check puts back first what lies within this many voxels of the carved solid, round
+    # by round (at most ``max_restore_rounds``), and then fills the voids its skin closes off: openings
+    # at most 2 * ``void_gap_voxels`` wide do not count as a way out (see ``_put_back_for_masks``)
+    restore_band_voxels: int = 2
+    max_restore_rounds: int = 20
+    void_gap_voxels: int = 2
 
 
 @dataclass(frozen=True)
@@ -149,7 +158,7 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
             break
         solid &= ~carve
         candidates = _surface(solid) & _near(carve) & ~floor
-    put_back = _emptied_rays(views, grid, original, solid, device)
+    put_back = _put_back_for_masks(views, grid, original, solid, config, device)
     solid |= put_back
     solid |= _small_components(original & ~solid, config.min_component_fraction * original.sum())
     restored, opened_count = int(put_back.sum()), 0
@@ -158,7 +167,7 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
         opened = _open_concavity(views, images, contrast, grid, original, solid, floor, config, progress)
         # the masks judge the second pass on its own: a ray it emptied gets back what that pass took
         # from it (the concavity the first pass opened stays open)
-        again = _emptied_rays(views, grid, solid, opened, device)
+        again = _put_back_for_masks(views, grid, solid, opened, config, device)
         opened |= again
         opened_count, restored = int((solid & ~opened).sum()), restored + int(again.sum())
         solid = opened
@@ -207,10 +216,72 @@ def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray,
     return solid
 
 
+def _put_back_for_masks(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
+                        config: CarvingConfig, device: str = "cpu") -> np.ndarray:
+    """The carved voxels (of ``original & ~solid``) to put back so that every mask ray that met
+    ``original`` meets the solid again.
+
+    A ray the carving emptied says that something is on it, not where. Where carving went wrong
+    (poses a few millimetres off) it ate the object's outside, and the rays through it are deep in
+    what it removed; where it opened a true concavity, the rays it emptied graze a rim it lowered by
+    a few voxels (a thin-walled bin), and putting back every carved voxel on them lays a lid across
+    the opening at the rim's height. So, round by round, each emptied ray gets back only the carved
+    voxels within ``restore_band_voxels`` of the solid (the rim grows back up to meet it); a ray that
+    stays further than that from anything gets back every carved voxel on it, as before.
+
+    Growing back only a skin leaves the space behind it carved; carving reached that space only
+    through the skin, which the masks have now put back, so what the skin closes off (no way out to
+    the grid's sides or top wider than ``2 * void_gap_voxels``: one mask ray per voxel footprint
+    leaves gaps that no ray checks) is filled too, unless it was closed off before the put-back.
+    Measured on the can with 5 mm / 1 degree pose noise (``test_photo_carving``): without the fill
+    24 % of the hull stayed carved, with gaps of 2 voxels 13 %, of 4 voxels none."""
+    cube = np.ones((3, 3, 3), bool)
+    now, deep = solid.copy(), True
+    for _ in range(config.max_restore_rounds):
+        near = binary_dilation(now, cube, iterations=config.restore_band_voxels) & original & ~now
+        put, deep_rays = _mask_ray_check(views, grid, original, now, device, within=near)
+        now |= put
+        deep = deep_rays > 0
+        if not deep or not put.any():
+            break
+    if (now != solid).any():
+        now |= _closed_off(~now, config.void_gap_voxels) & original & ~_closed_off(~solid, config.void_gap_voxels)
+    if deep:
+        now |= _emptied_rays(views, grid, original, now, device)
+    return now & ~solid
+
+
+def _closed_off(empty: np.ndarray, gap_voxels: int) -> np.ndarray:
+    """The ``empty`` voxels with no way out (through faces) to the grid's sides or top once openings at
+    most ``2 * gap_voxels`` wide are shut; the table below is no way out."""
+    from scipy.ndimage import label
+
+    cube = np.ones((3, 3, 3), bool)
+    shut = ~binary_dilation(~empty, cube, iterations=gap_voxels) if gap_voxels else empty
+    padded = np.pad(shut, 1, constant_values=True)
+    padded[:, :, 0] = False
+    labels, _ = label(padded)
+    border = np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(), labels[:, :, -1].ravel()])
+    outside = np.isin(labels, np.unique(border[border > 0]))[1:-1, 1:-1, 1:-1]
+    if gap_voxels:
+        outside = binary_dilation(outside, cube, iterations=gap_voxels)
+    return empty & ~outside
+
+
 def _emptied_rays(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
                   device: str = "cpu", samples_per_chunk: int = 1 << 21) -> np.ndarray:
     """The carved voxels (``original & ~solid``) on rays through mask pixels that meet ``original``
     but no longer meet ``solid``: the silhouette says something is on each such ray.
+    See :func:`_mask_ray_check`."""
+    return _mask_ray_check(views, grid, original, solid, device, samples_per_chunk)[0]
+
+
+def _mask_ray_check(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
+                    device: str = "cpu", samples_per_chunk: int = 1 << 21,
+                    within: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """The carved voxels (``original & ~solid``, and in ``within`` where given) on rays through mask
+    pixels that meet ``original`` but no longer meet ``solid``, and how many such rays meet none of
+    those voxels (0 when ``within`` is None).
 
     One ray per mask pixel, at most one per voxel footprint (a finer stride only repeats rays),
     sampled every half voxel from where it enters the grid's box. Pixels within a voxel footprint of the
@@ -227,8 +298,10 @@ def _emptied_rays(views: PosedViews, grid: VoxelGrid, original: np.ndarray, soli
     from real2sim.reconstruct.views import pixel_rays
 
     carved = original & ~solid
-    if not carved.any():
-        return np.zeros(original.shape, bool)
+    if within is not None:
+        carved = carved & within
+    if not (original & ~solid).any():
+        return np.zeros(original.shape, bool), 0
     shape = np.asarray(grid.shape)
     lo = grid.origin_m - 0.5 * grid.voxel_m
     step_m = 0.5 * grid.voxel_m
@@ -240,7 +313,7 @@ def _emptied_rays(views: PosedViews, grid: VoxelGrid, original: np.ndarray, soli
         return torch.as_tensor(np.ascontiguousarray(a), dtype=dtype, device=device)
 
     original_f, solid_f, carved_f = (on_device(a.ravel(), torch.bool) for a in (original, solid, carved))
-    restore_f = torch.zeros_like(original_f)
+    restore_f, unmet = torch.zeros_like(original_f), 0
     shape_t, lo_t = on_device(shape, torch.int64), on_device(lo)
     strides = on_device([shape[1] * shape[2], shape[2], 1], torch.int64)
     box_t = [on_device(b) for b in box]
@@ -277,7 +350,9 @@ def _emptied_rays(views: PosedViews, grid: VoxelGrid, original: np.ndarray, soli
 
             emptied = meets(original_f) & ~meets(solid_f)
             restore_f[index[emptied[ray] & carved_f[index] & inside]] = True
-    return restore_f.cpu().numpy().reshape(original.shape)
+            if within is not None:
+                unmet += int((emptied & ~meets(carved_f)).sum())
+    return restore_f.cpu().numpy().reshape(original.shape), unmet
 
 
 def _small_components(carved: np.ndarray, min_voxels: float) -> np.ndarray:
