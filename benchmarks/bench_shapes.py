@@ -123,6 +123,7 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
+    parser.add_argument("--tag", default="", help="write docs/benchmarks/shapes_TAG.md instead of shapes.md")
     parser.add_argument("--keep", type=Path, default=None,
                         help="write the captures and assets here (kept) instead of a temporary folder")
     args = parser.parse_args()
@@ -147,7 +148,7 @@ def main() -> int:
                     + markdown_table(["shape", "poses refined", "Chamfer mm", "hull / concave mm", "IoU", "F@1mm",
                                       "concave", "photo-carved voxels", "restored voxels", "CoM error mm",
                                       "inertia error %", "up error deg", "reconstruct wall s", "run wall s"], rows))
-            print(write_section("shapes", "Shapes that are not the bundled objects (bench_shapes.py)", body,
+            print(write_section("shapes" + (f"_{args.tag}" if args.tag else ""), "Shapes that are not the bundled objects (bench_shapes.py)", body,
                                 "python benchmarks/bench_shapes.py " + " ".join(sys.argv[1:])))
     return 0
 
