@@ -23,6 +23,7 @@ asset's +z and the table's normal, and the reconstruct stage's wall time.
 
     python benchmarks/bench_shapes.py                   # every shape, full settings
     python benchmarks/bench_shapes.py --shapes box,rod
+    python benchmarks/bench_shapes.py --shapes bin --tag bin  # docs/benchmarks/shapes_bin.md
     python benchmarks/bench_shapes.py --quick           # 60 noise-free views at 160x120, visual hull
 
 Writes docs/benchmarks/shapes.md (machine and date included), after each shape.
@@ -148,7 +149,8 @@ def main() -> int:
                     + markdown_table(["shape", "poses refined", "Chamfer mm", "hull / concave mm", "IoU", "F@1mm",
                                       "concave", "photo-carved voxels", "restored voxels", "CoM error mm",
                                       "inertia error %", "up error deg", "reconstruct wall s", "run wall s"], rows))
-            print(write_section("shapes" + (f"_{args.tag}" if args.tag else ""), "Shapes that are not the bundled objects (bench_shapes.py)", body,
+            section = "shapes" + (f"_{args.tag}" if args.tag else "")
+            print(write_section(section, "Shapes that are not the bundled objects (bench_shapes.py)", body,
                                 "python benchmarks/bench_shapes.py " + " ".join(sys.argv[1:])))
     return 0
 
