@@ -1,9 +1,10 @@
 """Can colour tell a true surface from a false one? What stops photo-consistent carving.
 
 For each object: a capture (100 views at 320x240, exact poses, as the carving tests'
-captures but full size), its visual hull and photo-consistent carving on an 80-voxel
-grid (the field's defaults). Then every surface voxel that carving left is tested once
-more, and grouped by its distance from the true surface:
+captures but full size), its visual hull and photo-consistent carving's first pass, the
+colour test, on an 80-voxel grid (the field's defaults; the second pass, the hollow prior,
+is off: it decides by a prior where colour cannot). Then every surface voxel that the first
+pass left is tested once more, and grouped by its distance from the true surface:
 
 * on it (within one voxel): the colours the views see there are those of one point;
 * far from it (more than four voxels): a surface the object does not have (on the mug,
@@ -43,9 +44,8 @@ def measure(name: str, work: Path, views_count: int, width: int, height: int, se
     from real2sim.capture.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.fidelity import surface_distance_m
     from real2sim.geometry.objects import make_textured_object
-    from real2sim.reconstruct.hull import VoxelGrid, carve, object_region, surface_from_grid
-    from real2sim.reconstruct.photo_carving import (CarvingConfig, _blurred, _spread, _surface,
-                                                    _voxel_footprint_px, photo_carve)
+    from real2sim.reconstruct.hull import VoxelGrid, carve, object_region, surface_from_grid, voxel_footprint_px
+    from real2sim.reconstruct.photo_carving import CarvingConfig, _blurred, _spread, _surface, photo_carve
     from real2sim.reconstruct.truth import load_truth
     from real2sim.reconstruct.views import load_views
 
@@ -53,16 +53,17 @@ def measure(name: str, work: Path, views_count: int, width: int, height: int, se
     capture(make_textured_object(name), dataset, CaptureConfig(views=views_count, width=width, height=height,
                                                               pose_noise_mm=0, pose_noise_deg=0, seed=seed))
     views = load_views(dataset)
-    config = CarvingConfig()
+    config = CarvingConfig(hollow_prior=False)
     grid = VoxelGrid.covering(*object_region(views), config.voxels, 0.0)
     hull = carve(views, grid) >= 0.5
     start = time.perf_counter()
     solid = photo_carve(views, grid, hull, config).solid
     seconds = time.perf_counter() - start
     idx = np.argwhere(_surface(solid))
-    images = _blurred(views.rgb, config.blur_voxels * _voxel_footprint_px(views, grid))
+    images = _blurred(views.rgb, config.blur_voxels * voxel_footprint_px(views, grid))
     mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
-    spread, hue, seen, _ = _spread(views, images, grid, idx, mesh, hull & ~solid, config)
+    verdict = _spread(views, images, grid, idx, mesh, hull & ~solid, config)
+    spread, hue, seen = verdict.spread, verdict.hue_spread, verdict.seen
     off_voxels = surface_distance_m(grid.origin_m + idx * grid.voxel_m, load_truth(dataset)) / grid.voxel_m
     judged = seen >= config.min_views
     rows = []
@@ -95,8 +96,9 @@ def main(argv: list[str] | None = None) -> int:
             facts.append(object_facts)
             print(object_rows, object_facts, flush=True)
     body = (
-        f"{args.views} views at {args.width}x{args.height}, exact poses; visual hull and photo-consistent carving "
-        "with the field's defaults (80 voxels along the longest side). Every surface voxel carving left, seen by at "
+        f"{args.views} views at {args.width}x{args.height}, exact poses; visual hull and photo-consistent carving's "
+        "first pass (the colour test) with the field's defaults (80 voxels along the longest side; the hollow prior "
+        "off). Every surface voxel it left, seen by at "
         "least 4 views, grouped by its distance from the true surface. `spread`: the 75th percentile of the views' "
         f"RGB distances from their median colour (RGB in [0, 1]), which carving compares with "
         f"{facts[0]['max_spread']}; `hue`: the same for colour over brightness (median / 90th percentile).\n\n"

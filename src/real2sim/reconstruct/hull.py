@@ -62,6 +62,14 @@ class VoxelGrid:
         return VoxelGrid(lo + 0.5 * voxel, voxel, shape)
 
 
+def voxel_footprint_px(views: PosedViews, grid: VoxelGrid) -> float:
+    """How many pixels one voxel of ``grid`` spans in a typical view (at the median camera distance
+    from the grid's centre)."""
+    centre = grid.origin_m + 0.5 * grid.voxel_m * (np.asarray(grid.shape) - 1)
+    distance = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - centre, axis=1)))
+    return grid.voxel_m * views.intrinsics.fl_x / distance
+
+
 def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction: float,
                       chunk: int = 100_000, min_votes: int = MIN_VOTES) -> np.ndarray:
     """(P,) float32 silhouette score of world points: see the module docstring.

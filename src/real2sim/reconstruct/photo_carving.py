@@ -32,14 +32,10 @@ surfaces, measured on the bundled objects:
 * what is carved in the end is kept only in connected parts of at least
   ``min_component_fraction`` of the hull's volume;
 * the silhouettes have the last word: a ray through a mask pixel that met the hull
-  must still meet the carved solid (something is on it), so carved voxels on every
-  ray the carving emptied are put back: first those next to what is left (a thin rim
-  carving lowered grows back; putting back the whole ray laid a lid across an open
-  bin), then whatever that skin closes off, then all of them on rays still empty
-  (``_put_back_for_masks``). Where the views disagree for another reason than a
-  concavity -- poses a few millimetres off, which make every textured surface
-  disagree -- carving would otherwise eat the object from the top down (a 35 mm box
-  on an unrefined 5 mm / 1 degree capture kept 2.5 mm of it).
+  must still meet the carved solid, so carving that emptied such a ray gets put back
+  (``mask_recheck``): where the views disagree for another reason than a concavity --
+  poses a few millimetres off, which make every textured surface disagree -- carving
+  would otherwise eat the object from the top down.
 
 It stops early where the views inside a concavity agree for want of texture (a
 deep cup's floor and lower wall, one flat colour, seen only from steep views):
@@ -71,7 +67,8 @@ import numpy as np
 from scipy.ndimage import binary_dilation, binary_erosion, convolve, distance_transform_edt, gaussian_filter
 
 from real2sim.formats.progress import ProgressFn
-from real2sim.reconstruct.hull import VoxelGrid, surface_from_grid
+from real2sim.reconstruct.hull import VoxelGrid, surface_from_grid, voxel_footprint_px
+from real2sim.reconstruct.mask_recheck import put_back_for_masks
 from real2sim.reconstruct.views import PosedViews, project
 
 
@@ -102,7 +99,7 @@ class CarvingConfig:
     min_wall_voxels: float = 2.0
     # the masks' re-check puts back first what lies within this many voxels of the carved solid, round
     # by round (at most ``max_restore_rounds``), and then fills the voids its skin closes off: openings
-    # at most 2 * ``void_gap_voxels`` wide do not count as a way out (see ``_put_back_for_masks``)
+    # at most 2 * ``void_gap_voxels`` wide do not count as a way out (``mask_recheck.put_back_for_masks``)
     restore_band_voxels: int = 1
     max_restore_rounds: int = 20
     void_gap_voxels: int = 2
@@ -132,7 +129,7 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
     """Carve the photo-inconsistent surface voxels of ``solid`` (bool, ``grid.shape``) round by round.
     ``device``: where the masks' rays are walked (torch); the colour tests run on the CPU."""
     original, solid = solid, solid.copy()
-    footprint_px = _voxel_footprint_px(views, grid)
+    footprint_px = voxel_footprint_px(views, grid)
     images = _blurred(views.rgb, config.blur_voxels * footprint_px)
     floor = np.zeros(solid.shape, bool)
     floor[:, :, 0] = True
@@ -158,7 +155,9 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
             break
         solid &= ~carve
         candidates = _surface(solid) & _near(carve) & ~floor
-    put_back = _put_back_for_masks(views, grid, original, solid, config, device)
+    recheck = dict(band_voxels=config.restore_band_voxels, max_rounds=config.max_restore_rounds,
+                   void_gap_voxels=config.void_gap_voxels, device=device)
+    put_back = put_back_for_masks(views, grid, original, solid, **recheck)
     solid |= put_back
     solid |= _small_components(original & ~solid, config.min_component_fraction * original.sum())
     restored, opened_count = int(put_back.sum()), 0
@@ -167,7 +166,7 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
         opened = _open_concavity(views, images, contrast, grid, original, solid, floor, config, progress)
         # the masks judge the second pass on its own: a ray it emptied gets back what that pass took
         # from it (the concavity the first pass opened stays open)
-        again = _put_back_for_masks(views, grid, solid, opened, config, device)
+        again = put_back_for_masks(views, grid, solid, opened, **recheck)
         opened |= again
         opened_count, restored = int((solid & ~opened).sum()), restored + int(again.sum())
         solid = opened
@@ -216,150 +215,6 @@ def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray,
     return solid
 
 
-def _put_back_for_masks(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
-                        config: CarvingConfig, device: str = "cpu") -> np.ndarray:
-    """The carved voxels (of ``original & ~solid``) to put back so that every mask ray that met
-    ``original`` meets the solid again.
-
-    A ray the carving emptied says that something is on it, not where. Where carving went wrong
-    (poses a few millimetres off) it ate the object's outside, and the rays through it are deep in
-    what it removed; where it opened a true concavity, the rays it emptied graze a rim it lowered by
-    a few voxels (a thin-walled bin), and putting back every carved voxel on them lays a lid across
-    the opening at the rim's height. So, round by round, each emptied ray gets back only the carved
-    voxels within ``restore_band_voxels`` of the solid (the rim grows back up to meet it); a ray that
-    stays further than that from anything, or is still empty after ``max_restore_rounds``, gets back
-    every carved voxel on it, as before.
-
-    Growing back only a skin leaves the space behind it carved; carving reached that space only
-    through the skin, which the masks have now put back, so what the skin closes off (no way out to
-    the grid's sides or top wider than ``2 * void_gap_voxels``: one mask ray per voxel footprint
-    leaves gaps that no ray checks) is filled too, unless it was closed off before the put-back;
-    filled last, after the whole rays (a box on unrefined poses ran out of rounds with its skin
-    unfinished, and filling before the whole rays closed it left its inside hollow).
-    Measured on the can with 5 mm / 1 degree pose noise (``test_photo_carving``): without the fill
-    36 % of the hull stayed carved, shutting gaps of 2 voxels 24 %, of 4 voxels none. A band of one
-    voxel rather than two left fewer wrong voxels on an open bin's carving (33926 against 36907,
-    from 52819 putting back whole rays) and on the mug's (10052 against 10162)."""
-    cube = np.ones((3, 3, 3), bool)
-    now, deep = solid.copy(), True
-    for _ in range(config.max_restore_rounds):
-        near = binary_dilation(now, cube, iterations=config.restore_band_voxels) & original & ~now
-        put, deep_rays = _mask_ray_check(views, grid, original, now, device, within=near)
-        now |= put
-        deep = deep_rays > 0
-        if not deep or not put.any():
-            break
-    if deep:
-        now |= _emptied_rays(views, grid, original, now, device)
-    if (now != solid).any():
-        now |= _closed_off(~now, config.void_gap_voxels) & original & ~_closed_off(~solid, config.void_gap_voxels)
-    return now & ~solid
-
-
-def _closed_off(empty: np.ndarray, gap_voxels: int) -> np.ndarray:
-    """The ``empty`` voxels with no way out (through faces) to the grid's sides or top once openings at
-    most ``2 * gap_voxels`` wide are shut; the table below is no way out."""
-    from scipy.ndimage import label
-
-    cube = np.ones((3, 3, 3), bool)
-    shut = ~binary_dilation(~empty, cube, iterations=gap_voxels) if gap_voxels else empty
-    padded = np.pad(shut, 1, constant_values=True)
-    padded[:, :, 0] = False
-    labels, _ = label(padded)
-    border = np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(), labels[:, :, -1].ravel()])
-    outside = np.isin(labels, np.unique(border[border > 0]))[1:-1, 1:-1, 1:-1]
-    if gap_voxels:
-        outside = binary_dilation(outside, cube, iterations=gap_voxels)
-    return empty & ~outside
-
-
-def _emptied_rays(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
-                  device: str = "cpu", samples_per_chunk: int = 1 << 21) -> np.ndarray:
-    """The carved voxels (``original & ~solid``) on rays through mask pixels that meet ``original``
-    but no longer meet ``solid``: the silhouette says something is on each such ray.
-    See :func:`_mask_ray_check`."""
-    return _mask_ray_check(views, grid, original, solid, device, samples_per_chunk)[0]
-
-
-def _mask_ray_check(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
-                    device: str = "cpu", samples_per_chunk: int = 1 << 21,
-                    within: np.ndarray | None = None) -> tuple[np.ndarray, int]:
-    """The carved voxels (``original & ~solid``, and in ``within`` where given) on rays through mask
-    pixels that meet ``original`` but no longer meet ``solid``, and how many such rays meet none of
-    those voxels (0 when ``within`` is None).
-
-    One ray per mask pixel, at most one per voxel footprint (a finer stride only repeats rays),
-    sampled every half voxel from where it enters the grid's box. Pixels within a voxel footprint of the
-    mask's edge cast none: their rays graze the object, and on voxels they may miss a thin rim
-    that the true object has (on a bowl they put back specks of the lid carving removed).
-
-    Each ray is walked only across the box around ``original`` (outside it nothing can change a
-    verdict), as one flat list of samples for all rays of a view rather than a padded (rays, steps)
-    array: the same samples, 3-5x faster on the mug and bowl (and on ``device``)."""
-    import torch
-    from scipy.ndimage import binary_erosion as erode
-
-    from real2sim.reconstruct.field import ray_box
-    from real2sim.reconstruct.views import pixel_rays
-
-    carved = original & ~solid
-    if within is not None:
-        carved = carved & within
-    if not (original & ~solid).any():
-        return np.zeros(original.shape, bool), 0
-    shape = np.asarray(grid.shape)
-    lo = grid.origin_m - 0.5 * grid.voxel_m
-    step_m = 0.5 * grid.voxel_m
-    last_step = int(np.ceil(np.linalg.norm(shape) * 2))
-    occupied = np.argwhere(original)
-    box = [lo + occupied.min(axis=0) * grid.voxel_m, lo + (occupied.max(axis=0) + 1) * grid.voxel_m]
-
-    def on_device(a, dtype=torch.float64):
-        return torch.as_tensor(np.ascontiguousarray(a), dtype=dtype, device=device)
-
-    original_f, solid_f, carved_f = (on_device(a.ravel(), torch.bool) for a in (original, solid, carved))
-    restore_f, unmet = torch.zeros_like(original_f), 0
-    shape_t, lo_t = on_device(shape, torch.int64), on_device(lo)
-    strides = on_device([shape[1] * shape[2], shape[2], 1], torch.int64)
-    box_t = [on_device(b) for b in box]
-    footprint_px = _voxel_footprint_px(views, grid)
-    stride = max(1, int(footprint_px))
-    margin = np.ones((2 * int(np.ceil(footprint_px)) + 1,) * 2, bool)
-    for i in range(views.count):
-        v_px, u_px = np.nonzero(erode(views.mask[i] >= 0.5, margin)[::stride, ::stride])
-        rays = pixel_rays(views.intrinsics, views.c2w_cv[i], u_px * stride + 0.5, v_px * stride + 0.5)
-        o, d = (on_device(a) for a in rays)
-        near, far = ray_box(o, d, lo_t, lo_t + shape_t * grid.voxel_m)
-        enter, leave = ray_box(o, d, *box_t)
-        # the step numbers k (t = near + k * step) whose samples can fall in the box, a step to spare each side
-        first = torch.clamp(torch.floor((enter - near) / step_m) - 1, 0, last_step).to(torch.int64)
-        last = torch.clamp(torch.ceil((leave - near) / step_m) + 1, 0, last_step).to(torch.int64)
-        count = last - first + 1
-        crosses = leave > enter
-        o, d, near, far, first, count = (a[crosses] for a in (o, d, near, far, first, count))
-        chunk_of = torch.div(torch.cumsum(count, 0) - 1, samples_per_chunk, rounding_mode="floor")
-        for chunk in torch.unique(chunk_of).tolist():
-            r = torch.nonzero(chunk_of == chunk)[:, 0]
-            n = count[r]
-            ray = torch.repeat_interleave(torch.arange(len(r), device=device), n)
-            k = torch.arange(len(ray), device=device) - torch.repeat_interleave(torch.cumsum(n, 0) - n, n) \
-                + first[r][ray]
-            t = near[r][ray] + k.to(torch.float64) * step_m
-            cells = torch.floor((o[r][ray] + t[:, None] * d[r][ray] - lo_t) / grid.voxel_m).to(torch.int64)
-            inside = (t <= far[r][ray]) & ((cells >= 0) & (cells < shape_t)).all(dim=1)
-            index = (torch.minimum(cells.clamp_min(0), shape_t - 1) * strides).sum(dim=1)
-
-            def meets(occupancy):
-                hits = torch.zeros(len(r), dtype=torch.int64, device=device)
-                return hits.index_add_(0, ray, (occupancy[index] & inside).to(torch.int64)) > 0
-
-            emptied = meets(original_f) & ~meets(solid_f)
-            restore_f[index[emptied[ray] & carved_f[index] & inside]] = True
-            if within is not None:
-                unmet += int((emptied & ~meets(carved_f)).sum())
-    return restore_f.cpu().numpy().reshape(original.shape), unmet
-
-
 def _small_components(carved: np.ndarray, min_voxels: float) -> np.ndarray:
     """The connected parts (26-neighbours) of ``carved`` smaller than ``min_voxels`` (carved parts to
     put back; applied to the solid, floaters to drop).
@@ -377,13 +232,6 @@ def _small_components(carved: np.ndarray, min_voxels: float) -> np.ndarray:
     small = sizes < min_voxels
     small[0] = False
     return small[labels]
-
-
-def _voxel_footprint_px(views: PosedViews, grid: VoxelGrid) -> float:
-    """How many pixels one voxel spans in a typical view (median camera distance to the grid's centre)."""
-    centre = grid.origin_m + 0.5 * grid.voxel_m * (np.asarray(grid.shape) - 1)
-    distance = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - centre, axis=1)))
-    return grid.voxel_m * views.intrinsics.fl_x / distance
 
 
 def _blurred(rgb: np.ndarray, sigma_px: float) -> np.ndarray:
