@@ -14,6 +14,8 @@ shape. The rays are walked with torch on ``device``.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import torch
 from scipy.ndimage import binary_dilation, binary_erosion, label
@@ -48,16 +50,17 @@ def put_back_for_masks(views: PosedViews, grid: VoxelGrid, original: np.ndarray,
     voxel rather than two left fewer wrong voxels on an open bin's carving (33926 against 36907,
     from 52819 putting back whole rays) and on the mug's (10052 against 10162)."""
     cube = np.ones((3, 3, 3), bool)
-    now, deep = solid.copy(), True
+    now, deep, emptied = solid.copy(), True, None
     for _ in range(max_rounds):
         near = binary_dilation(now, cube, iterations=band_voxels) & original & ~now
-        put, deep_rays = _mask_ray_check(views, grid, original, now, device, within=near)
+        # the solid only grows: each round walks just the rays the round before found empty
+        put, deep_rays, emptied = _mask_ray_check(views, grid, original, now, device, within=near, only=emptied)
         now |= put
         deep = deep_rays > 0
         if not deep or not put.any():
             break
     if deep:
-        now |= emptied_rays(views, grid, original, now, device)
+        now |= _mask_ray_check(views, grid, original, now, device, only=emptied).voxels
     if (now != solid).any():
         now |= _closed_off(~now, void_gap_voxels) & original & ~_closed_off(~solid, void_gap_voxels)
     return now & ~solid
@@ -68,15 +71,27 @@ def emptied_rays(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid
     """The carved voxels (``original & ~solid``) on rays through mask pixels that meet ``original``
     but no longer meet ``solid``: the silhouette says something is on each such ray.
     See :func:`_mask_ray_check`."""
-    return _mask_ray_check(views, grid, original, solid, device, samples_per_chunk)[0]
+    return _mask_ray_check(views, grid, original, solid, device, samples_per_chunk).voxels
+
+
+class _RayCheck(NamedTuple):
+    """What :func:`_mask_ray_check` found: the carved ``voxels`` to put back (bool, grid shape); how
+    many emptied rays meet none of them (``unmet_rays``, 0 without ``within``); and per view, which
+    of its rays that cross the object's box were emptied (bool tensors, in the order the rays are
+    made), to pass back as ``only``."""
+
+    voxels: np.ndarray
+    unmet_rays: int
+    emptied: list
 
 
 def _mask_ray_check(views: PosedViews, grid: VoxelGrid, original: np.ndarray, solid: np.ndarray,
                     device: str = "cpu", samples_per_chunk: int = 1 << 21,
-                    within: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                    within: np.ndarray | None = None, only: list | None = None) -> _RayCheck:
     """The carved voxels (``original & ~solid``, and in ``within`` where given) on rays through mask
     pixels that meet ``original`` but no longer meet ``solid``, and how many such rays meet none of
-    those voxels (0 when ``within`` is None).
+    those voxels (0 when ``within`` is None). ``only``: walk just these rays (a previous call's
+    ``emptied``): a ray that meets the solid, or misses ``original``, does so for any larger solid.
 
     One ray per mask pixel, at most one per voxel footprint (a finer stride only repeats rays),
     sampled every half voxel from where it enters the grid's box. Pixels within a voxel footprint of the
@@ -90,7 +105,7 @@ def _mask_ray_check(views: PosedViews, grid: VoxelGrid, original: np.ndarray, so
     if within is not None:
         carved = carved & within
     if not (original & ~solid).any():
-        return np.zeros(original.shape, bool), 0
+        return _RayCheck(np.zeros(original.shape, bool), 0, [None] * views.count)
     shape = np.asarray(grid.shape)
     lo = grid.origin_m - 0.5 * grid.voxel_m
     step_m = 0.5 * grid.voxel_m
@@ -102,7 +117,7 @@ def _mask_ray_check(views: PosedViews, grid: VoxelGrid, original: np.ndarray, so
         return torch.as_tensor(np.ascontiguousarray(a), dtype=dtype, device=device)
 
     original_f, solid_f, carved_f = (on_device(a.ravel(), torch.bool) for a in (original, solid, carved))
-    restore_f, unmet = torch.zeros_like(original_f), 0
+    restore_f, unmet, emptied_by_view = torch.zeros_like(original_f), 0, []
     shape_t, lo_t = on_device(shape, torch.int64), on_device(lo)
     strides = on_device([shape[1] * shape[2], shape[2], 1], torch.int64)
     box_t = [on_device(b) for b in box]
@@ -121,6 +136,12 @@ def _mask_ray_check(views: PosedViews, grid: VoxelGrid, original: np.ndarray, so
         count = last - first + 1
         crosses = leave > enter
         o, d, near, far, first, count = (a[crosses] for a in (o, d, near, far, first, count))
+        emptied_here = torch.zeros(len(o), dtype=torch.bool, device=device)
+        emptied_by_view.append(emptied_here)
+        walked = torch.arange(len(o), device=device)
+        if only is not None:
+            walked = walked if only[i] is None else walked[only[i]]
+            o, d, near, far, first, count = (a[walked] for a in (o, d, near, far, first, count))
         chunk_of = torch.div(torch.cumsum(count, 0) - 1, samples_per_chunk, rounding_mode="floor")
         for chunk in torch.unique(chunk_of).tolist():
             r = torch.nonzero(chunk_of == chunk)[:, 0]
@@ -138,10 +159,11 @@ def _mask_ray_check(views: PosedViews, grid: VoxelGrid, original: np.ndarray, so
                 return hits.index_add_(0, ray, (occupancy[index] & inside).to(torch.int64)) > 0
 
             emptied = meets(original_f) & ~meets(solid_f)
+            emptied_here[walked[r]] = emptied
             restore_f[index[emptied[ray] & carved_f[index] & inside]] = True
             if within is not None:
                 unmet += int((emptied & ~meets(carved_f)).sum())
-    return restore_f.cpu().numpy().reshape(original.shape), unmet
+    return _RayCheck(restore_f.cpu().numpy().reshape(original.shape), unmet, emptied_by_view)
 
 
 def _closed_off(empty: np.ndarray, gap_voxels: int) -> np.ndarray:
