@@ -421,7 +421,10 @@ def test_signals_end_the_workers_and_a_second_sweep_is_locked_out(tmp_path):
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
         before = _row_count(partial / "runs.csv")
         # stdout and stderr are pipes: communicate() returns only when no process holds them.
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        # its own process group, so that freezing the group below reaches every worker, even one the pool
+        # starts after the children are listed
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                                start_new_session=True)
         deadline = time.monotonic() + 90
         while _row_count(partial / "runs.csv") <= before and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -432,10 +435,7 @@ def test_signals_end_the_workers_and_a_second_sweep_is_locked_out(tmp_path):
             # 3. While this sweep holds the output (frozen, so it surely does), a second one is refused.
             # Its workers are frozen too: left running on a loaded machine, they once finished the
             # whole sweep while the second one started, and the SIGINT below came after a clean exit.
-            frozen = [proc.pid, *children]
-            for pid in frozen:
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGSTOP)
+            os.killpg(proc.pid, signal.SIGSTOP)
             try:
                 second = subprocess.run(cmd, capture_output=True, text=True, timeout=90, env=env)
             finally:
@@ -443,9 +443,7 @@ def test_signals_end_the_workers_and_a_second_sweep_is_locked_out(tmp_path):
                 # wakes: sent after the SIGCONT, it once came after a sweep that finished its last
                 # rows in between (a worker the freeze missed had done them) and exited cleanly.
                 proc.send_signal(sig)
-                for pid in reversed(frozen):
-                    with contextlib.suppress(ProcessLookupError):
-                        os.kill(pid, signal.SIGCONT)
+                os.killpg(proc.pid, signal.SIGCONT)
             assert second.returncode == 2, second.stderr
             lines = second.stderr.strip().splitlines()
             assert len(lines) == 1 and "another real2sim process is writing" in lines[0], lines

@@ -45,7 +45,7 @@ def put_back_for_masks(views: PosedViews, grid: VoxelGrid, original: np.ndarray,
     leaves gaps that no ray checks) is filled too, unless it was closed off before the put-back;
     filled last, after the whole rays (a box on unrefined poses ran out of rounds with its skin
     unfinished, and filling before the whole rays closed it left its inside hollow).
-    Measured on the can with 5 mm / 1 degree pose noise (``test_mask_recheck``): without the fill
+    Measured on the can with 5 mm / 1 degree pose noise (``test_photo_carving``): without the fill
     36 % of the hull stayed carved, shutting gaps of 2 voxels 24 %, of 4 voxels none. A band of one
     voxel rather than two left fewer wrong voxels on an open bin's carving (33926 against 36907,
     from 52819 putting back whole rays) and on the mug's (10052 against 10162)."""
