@@ -188,6 +188,31 @@ def _sdf_grid_mesh(cropped: trimesh.Trimesh, voxel_m: float) -> trimesh.Trimesh:
     return surface
 
 
+def closed_solid(mesh: trimesh.Trimesh, voxel_m: float | None = None) -> trimesh.Trimesh:
+    """``mesh`` itself when it is a closed oriented 2-manifold; otherwise the solid it bounds, closed.
+
+    Scans have holes. CoACD and V-HACD read an open mesh as a shell: on a cylinder with its top cap
+    missing V-HACD's 64 pieces held 2 % of the solid's volume and CoACD's 17 pieces 14 %, and a
+    sphere with one triangle missing took CoACD 264 s. The closed solid is the remesh path of
+    :func:`close_flat_bottom` without the plane: the generalized winding number says what is inside
+    (robust to holes), and marching cubes on a signed distance grid of ``voxel_m`` (default 1/100 of
+    the largest extent) closes it. ``metadata["closed_by"]``: ``"as is"`` or ``"remesh"``."""
+    try:
+        to_manifold(mesh)
+        closed, how = mesh, "as is"
+    except ValueError:
+        extent = float(np.ptp(mesh.vertices, axis=0).max())
+        surface = _sdf_grid_mesh(mesh, float(voxel_m) if voxel_m is not None else extent / 100.0)
+        try:
+            body = to_manifold(surface)
+        except ValueError:
+            surface.merge_vertices()
+            body = to_manifold(surface)
+        closed, how = from_manifold(body), "remesh"
+    closed.metadata["closed_by"] = how
+    return closed
+
+
 def _slab_hulls(solid: trimesh.Trimesh, up: np.ndarray, height: float, slab_m: float, max_hulls: int) -> list:
     """Convex pieces of ``solid`` (V-HACD) near the support plane, cut to height <= p.up <= height + slab.
 

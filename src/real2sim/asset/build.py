@@ -198,12 +198,23 @@ def build_collision(
     """One collision representation of the canonical mesh, with its fitting report.
 
     Baselines and superquadric fits write their convex pieces under ``rep_dir/pieces``;
-    a primitive fit reports its SDF sampling and iterations to ``progress``.
+    a primitive fit reports its SDF sampling and iterations to ``progress``. CoACD and V-HACD
+    decompose the closed solid the mesh bounds (:func:`real2sim.asset.bottom.closed_solid`: an open
+    scan is remeshed closed first, and ``input_closed_by`` in the report says so); primitive fits
+    read the mesh's winding number, which holes do not upset.
     """
     start = time.perf_counter()
     if spec.baseline is not None:
         from real2sim.collision.decomposition import decompose
 
+        closed_by = None
+        if spec.baseline in ("coacd", "vhacd"):
+            from real2sim.asset.bottom import closed_solid
+
+            mesh_canonical = closed_solid(mesh_canonical)
+            closed_by = mesh_canonical.metadata["closed_by"]
+            if closed_by != "as is" and progress is not None:
+                progress(f"the mesh is not closed: {spec.baseline} decomposes it remeshed closed", 0, 0)
         kwargs = {}
         if spec.baseline == "coacd" and config.coacd_config is not None:
             kwargs["coacd_config"] = config.coacd_config
@@ -211,6 +222,8 @@ def build_collision(
             kwargs["vhacd_config"] = config.vhacd_config
         geometry = decompose(mesh_canonical, spec.baseline, rep_dir, seed=config.seed, **kwargs)
         report = {"method": spec.baseline, "final_loss": None, "device": "cpu"}
+        if closed_by is not None:
+            report["input_closed_by"] = closed_by
     else:
         from real2sim.collision.fit.config import FitConfig
         from real2sim.collision.fit.stage import fit_collision
