@@ -275,6 +275,13 @@ def build_asset(
             say(f"closing a flat bottom at z = {config.support_height_m} m (input frame)", 0, 0)
             solid = close_flat_bottom(solid, support_height_m=config.support_height_m)
 
+        from real2sim.asset.floaters import without_floaters
+
+        # inertia drops debris apart from the object; collision geometry and the canonical pose must too
+        solid = without_floaters(solid, seed=config.seed)
+        if solid.metadata["floater_faces_dropped"]:
+            say(f"dropped {solid.metadata['floater_faces_dropped']} faces of debris apart from the object "
+                "(under 1 % of its surface)", 0, 0)
         transform = canonical_transform(solid, up_axis=(0.0, 0.0, 1.0) if config.keep_up else None)
         solid = solid.copy()
         solid.apply_transform(transform)
