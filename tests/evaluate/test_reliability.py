@@ -421,10 +421,13 @@ def test_signals_end_the_workers_and_a_second_sweep_is_locked_out(tmp_path):
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
         before = _row_count(partial / "runs.csv")
         # stdout and stderr are pipes: communicate() returns only when no process holds them.
-        # its own process group, so that freezing the group below reaches every worker, even one the pool
-        # starts after the children are listed
+        # Its own process group, so that freezing the group below reaches every worker, even one the pool
+        # starts after the children are listed. SIGINT at its default: a test run started in the
+        # background (`pytest &`) ignores SIGINT, a child inherits that, and Python keeps it ignored (as
+        # for any background job); the sweep then finished all its rows and exited 0.
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                                start_new_session=True)
+                                start_new_session=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         deadline = time.monotonic() + 90
         while _row_count(partial / "runs.csv") <= before and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)
