@@ -25,45 +25,34 @@ def without_floaters(mesh: trimesh.Trimesh, *, min_area_fraction: float = 0.01, 
     """``mesh`` without the bodies (see the module docstring) holding less than ``min_area_fraction``
     of its area; ``mesh`` itself when nothing is dropped. ``metadata["floater_faces_dropped"]``: how
     many faces went."""
-    from trimesh.graph import connected_components
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
 
-    parts = connected_components(mesh.face_adjacency, nodes=np.arange(len(mesh.faces)), min_len=1)
-    if len(parts) <= 1:
+    faces = len(mesh.faces)
+    adjacency = np.asarray(mesh.face_adjacency, dtype=np.int64).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(adjacency)), (adjacency[:, 0], adjacency[:, 1])), shape=(faces, faces))
+    parts, part_of_face = connected_components(graph, directed=False)
+    if parts <= 1:
         mesh.metadata["floater_faces_dropped"] = 0
         return mesh
-    part_of_face = np.empty(len(mesh.faces), np.int64)
-    for k, faces in enumerate(parts):
-        part_of_face[faces] = k
     points, face_index = trimesh.sample.sample_surface(mesh, samples, seed=seed)
     # every face's centroid too, so that a part too small to be sampled still has a voxel
     points = np.concatenate([points, mesh.triangles_center])
-    point_part = part_of_face[np.concatenate([face_index, np.arange(len(mesh.faces))])]
+    point_part = part_of_face[np.concatenate([face_index, np.arange(faces)])]
     voxel = gap_fraction * float(np.ptp(mesh.vertices, axis=0).max())
     cell = np.floor((points - points.min(axis=0)) / voxel).astype(np.int64)
     occupied = np.zeros(cell.max(axis=0) + 1, bool)
     occupied[tuple(cell.T)] = True
-    voxel_body, _ = label(occupied, np.ones((3, 3, 3), bool))
-    # a part whose samples fall in several voxel clusters joins them (union-find over clusters)
-    parent = np.arange(voxel_body.max() + 1)
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    point_body = voxel_body[tuple(cell.T)]
-    pairs = np.unique(np.stack([point_part, point_body], axis=1), axis=0)
-    first_body: dict[int, int] = {}
-    for part, body in pairs:
-        if part in first_body:
-            a, b = find(first_body[part]), find(body)
-            parent[max(a, b)] = min(a, b)
-        else:
-            first_body[part] = body
-    body_of_part = np.array([find(first_body[k]) for k in range(len(parts))])
-    body_of_face = body_of_part[part_of_face]
-    area = np.bincount(body_of_face, weights=mesh.area_faces, minlength=len(parent))
+    clusters, cluster_count = label(occupied, np.ones((3, 3, 3), bool))
+    # parts and voxel clusters as one graph: a part joins every cluster its samples fall in, so two
+    # parts are one body when they share a cluster (touching), and so are a part's scattered clusters
+    point_cluster = clusters[tuple(cell.T)] - 1
+    links = np.unique(np.stack([point_part, parts + point_cluster], axis=1), axis=0)
+    nodes = parts + cluster_count
+    _, body_of_node = connected_components(
+        coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(nodes, nodes)), directed=False)
+    body_of_face = body_of_node[part_of_face]
+    area = np.bincount(body_of_face, weights=mesh.area_faces)
     keep_body = area >= min_area_fraction * area.sum()
     keep_body[np.argmax(area)] = True
     keep = keep_body[body_of_face]
