@@ -25,6 +25,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -275,8 +276,6 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
     progress = progress or null_progress
     if method == "provided":
         return _provided_masks(root, ds, progress)
-    n = len(ds.frames)
-    ious, fractions = [], []
 
     if method == "background":
         missing = [f.file_path for f in ds.frames if not (root / "background" / Path(f.file_path).name).is_file()]
@@ -289,19 +288,31 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
         model = load_maskrcnn(cfg.weights, cfg.device, cfg.maskrcnn_min_size_px, cfg.maskrcnn_max_size_px,
                               cfg.score_threshold, cfg.maskrcnn_max_instances)
 
+    def mask_of(i: int, f: Frame) -> np.ndarray:
+        img = load_image_rgb(root / f.file_path)
+        if method == "background":
+            return background_difference_mask(img, load_image_rgb(root / "background" / Path(f.file_path).name), cfg)
+        return maskrcnn_mask(model, img, cfg)
+
+    return publish_masks(root, ds, method, mask_of, progress)
+
+
+def publish_masks(root: Path, ds: Dataset, method: str, mask_of: Callable[[int, Frame], np.ndarray],
+                  progress: ProgressFn = null_progress) -> MaskResult:
+    """Write ``mask_of(i, frame)`` ((H, W) bool) of every frame to ``root/masks_<method>/`` and point the
+    frames of ``root/transforms.json`` to them, the folder replaced whole or not at all; IoU against
+    ``ground_truth/masks`` when present. For methods whose masks come from elsewhere (another stage)."""
     from PIL import Image
 
+    n = len(ds.frames)
+    ious, fractions = [], []
     out_name = f"masks_{method}"
     target = root / out_name
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_name}.tmp-", dir=root))
     try:
         new_frames = []
         for i, f in enumerate(ds.frames):
-            img = load_image_rgb(root / f.file_path)
-            if method == "background":
-                m = background_difference_mask(img, load_image_rgb(root / "background" / Path(f.file_path).name), cfg)
-            else:
-                m = maskrcnn_mask(model, img, cfg)
+            m = np.asarray(mask_of(i, f), dtype=bool)
             name = f"{Path(f.file_path).stem}.png"
             Image.fromarray((m * 255).astype(np.uint8)).save(tmp / name)
             fractions.append(m.mean())

@@ -8,6 +8,7 @@ from pathlib import Path
 from real2sim.cli import options
 from real2sim.cli.asset import add_mesh_units_argument
 from real2sim.cli.options import COLMAP_SEED_MAX, device, integer, nonnegative, seed
+from real2sim.cli.reconstruct import TABLE_Z_M
 
 #: Image sides, px (the capture's renderer and COLMAP work within this).
 IMAGE_PX = integer(16, 8192)
@@ -76,11 +77,16 @@ def register(sub) -> None:
         description="Object masks (255 = object) for the frames of a dataset: 'provided' checks the masks the "
         "frames name (or masks/<image stem>.png); 'maskrcnn' runs torchvision's Mask R-CNN from a local weights "
         "file (pixels with probability > 0.5); 'background' differences each image with background/<image name> "
-        "(the empty scene from the same pose). Computed masks go to masks_<method>/ and transforms.json points "
-        "to them; IoU against ground_truth/masks is printed when present.",
+        "(the empty scene from the same pose); 'parallax' needs neither weights nor an empty scene: it finds "
+        "what stands above the table from how it moves against the table between views (a textured table, "
+        "poses good to a pixel: refine them first). Computed masks go to masks_<method>/ and transforms.json "
+        "points to them; IoU against ground_truth/masks is printed when present.",
     )
     p.add_argument("dataset", type=Path, help="dataset folder with transforms.json")
-    p.add_argument("--method", choices=["provided", "maskrcnn", "background"], required=True)
+    p.add_argument("--method", choices=["provided", "maskrcnn", "background", "parallax"], required=True)
+    p.add_argument("--table-z", type=TABLE_Z_M, default=0.0, metavar="M",
+                   help="--method parallax: height of the table top in the dataset's frame, m (default 0; a COLMAP "
+                   "model's table is fitted to its sparse points)")
     p.add_argument("--weights", type=Path, default=None, metavar="PATH",
                    help="Mask R-CNN (torchvision ResNet-50 FPN) weights file, for --method maskrcnn")
     p.add_argument("--threshold", type=nonnegative(255.0), default=12.0,
@@ -164,15 +170,16 @@ def run_refine(args: argparse.Namespace) -> int:
 
 
 def run_mask(args: argparse.Namespace) -> int:
-    from real2sim.capture.masking import MaskConfig, compute_masks
+    from real2sim.capture.masking import MaskConfig
     from real2sim.cli.progress import progress_display
     from real2sim.formats.outputs import output_lock
+    from real2sim.pipeline.masks import make_masks
 
     cfg = MaskConfig(threshold=args.threshold, weights=args.weights, device=args.device,
                      maskrcnn_min_size_px=args.maskrcnn_min_size, maskrcnn_max_size_px=args.maskrcnn_max_size,
                      maskrcnn_max_instances=args.maskrcnn_max_instances)
     with output_lock(args.dataset, inside=True), progress_display() as progress:  # masks are written into the dataset
-        result = compute_masks(args.dataset, args.method, cfg, progress=progress)
+        result = make_masks(args.dataset, args.method, cfg, table_z_m=args.table_z, progress=progress)
     line = f"masks: {result.num_frames} frames in {result.mask_dir}/, object covers {100 * result.mean_object_fraction:.1f}% of pixels"
     if result.mean_iou is not None:
         line += f"; IoU vs ground truth mean {result.mean_iou:.4f}, min {result.min_iou:.4f}"

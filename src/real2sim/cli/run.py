@@ -47,10 +47,11 @@ def register(sub) -> None:
                    help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
     p.add_argument("--overwrite", action="store_true", help="discard ASSETDIR (and its cached stages) first")
     p.add_argument("--refine-poses", action="store_true", help="refine the camera poses with COLMAP first")
-    p.add_argument("--mask", choices=["provided", "maskrcnn", "background"], default=None, metavar="METHOD",
+    p.add_argument("--mask", choices=["provided", "maskrcnn", "background", "parallax"], default=None, metavar="METHOD",
                    help="make the masks first (on a copy in ASSETDIR/.run/masked): provided (masks/<image stem>.png), "
-                   "maskrcnn (needs --mask-weights), background (background/<image name>); default: use the "
-                   "masks the frames name, all frames must have one")
+                   "maskrcnn (needs --mask-weights), background (background/<image name>), parallax (from the "
+                   "images and poses alone: what stands above a textured table; after --refine-poses); default: use "
+                   "the masks the frames name, all frames must have one")
     p.add_argument("--mask-weights", type=existing_file, default=None, metavar="PATH",
                    help="local Mask R-CNN weights file for --mask maskrcnn")
     p.add_argument("--mask-threshold", type=nonnegative(255.0), default=12.0,

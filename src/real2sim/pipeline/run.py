@@ -33,6 +33,7 @@ from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import check_output_dir, make_output_dir, output_lock
 from real2sim.formats.progress import ProgressFn, null_progress
 from real2sim.pipeline import manifest as mf
+from real2sim.pipeline.masks import PARALLAX
 from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, sparse_point_files
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
                                       _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine, _robot_frame)
@@ -59,8 +60,9 @@ class RunConfig:
     on the bottom closed at the table (the paper's PCA rule, ``pca_up``, stands a box on
     its end and lays a mug on its side). reconstruct: None -> the
     stage's defaults. mask_method: None -> the dataset's own masks (every frame must
-    have one); else masks are made with :func:`real2sim.capture.compute_masks` (``mask``
-    its settings, None -> defaults) on a copy. refine: None -> no pose refinement.
+    have one); else masks are made with :func:`real2sim.pipeline.masks.make_masks` (``mask``
+    the capture methods' settings, None -> defaults) on a copy; ``parallax`` masks of a robot
+    capture are made after refine_poses, on the refined poses. refine: None -> no pose refinement.
     evaluation: None -> no evaluation. object_height_m (the object's height above the table,
     metres) or scale (metres per model unit): exactly one for a COLMAP dataset (poses in an
     arbitrary frame and scale), which the ``robot_frame`` stage then normalises; neither for a
@@ -292,26 +294,36 @@ def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: 
     return result
 
 
-def _prepare_dataset(runner: _Runner, dataset: Path, run_dir: Path, config: RunConfig
+def _prepare_dataset(runner: _Runner, dataset: Path, run_dir: Path, config: RunConfig, table_z_m: float
                      ) -> tuple[Path, Path, str | None]:
     """The optional stages before the reconstruction (masks, robot_frame, refine_poses): the dataset
     the reconstruction reads, the one whose ground_truth/ is in its frame, and the last stage's key.
     A stage no longer asked for is forgotten, with its folder."""
     manifest, progress = runner.manifest, runner.progress
     used, upstream = dataset, None
-    if config.mask_method is not None:
+    truth_root, robot_frame = dataset, config.robot_frame()
+    # Parallax masks test the table through the poses: on a robot capture they wait for refine_poses
+    # (which needs no masks). A COLMAP capture's poses are COLMAP's already, and robot_frame needs masks.
+    masks_last = config.mask_method == PARALLAX and robot_frame is None and config.refine is not None
+
+    def masks_stage(source: Path, upstream: str | None) -> str:
         from real2sim.capture.masking import MaskConfig
 
         mask_cfg = config.mask or MaskConfig()
-        upstream = runner.stage("masks", {"dataset": mf.files_digest(dataset, _dataset_files(dataset))},
-                                {"method": config.mask_method, "config": mask_cfg}, None,
-                                [f"{mf.RUN_DIRNAME}/masked"],
-                                lambda: _masks(dataset, run_dir, config.mask_method, mask_cfg, progress))
+        settings = {"method": config.mask_method, "config": mask_cfg}
+        if config.mask_method == PARALLAX:
+            settings = {"method": PARALLAX, "table_z_m": table_z_m, "seed": config.seed}
+        return runner.stage("masks", {"dataset": mf.files_digest(source, _dataset_files(source))}, settings,
+                            upstream, [f"{mf.RUN_DIRNAME}/masked"],
+                            lambda: _masks(source, run_dir, config.mask_method, mask_cfg, progress, table_z_m,
+                                           config.seed))
+
+    if config.mask_method is not None and not masks_last:
+        upstream = masks_stage(dataset, None)
         used = run_dir / "masked"
-    elif manifest.entry("masks"):
+    elif config.mask_method is None and manifest.entry("masks"):
         manifest.forget("masks")
         shutil.rmtree(run_dir / "masked", ignore_errors=True)
-    truth_root, robot_frame = dataset, config.robot_frame()
     if robot_frame is not None:
         source = used
         upstream = runner.stage("robot_frame", {"dataset": mf.files_digest(source, _dataset_files(source))},
@@ -331,6 +343,9 @@ def _prepare_dataset(runner: _Runner, dataset: Path, run_dir: Path, config: RunC
     elif manifest.entry("refine_poses"):
         manifest.forget("refine_poses")
         shutil.rmtree(run_dir / "dataset", ignore_errors=True)
+    if masks_last:
+        upstream = masks_stage(used, upstream)
+        used = run_dir / "masked"
     return used, truth_root, upstream
 
 
@@ -338,7 +353,7 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
                 with_truth: bool) -> RunResult:
     run_dir = asset_dir / mf.RUN_DIRNAME
     manifest, progress = runner.manifest, runner.progress
-    used, truth_root, upstream = _prepare_dataset(runner, dataset, run_dir, config)
+    used, truth_root, upstream = _prepare_dataset(runner, dataset, run_dir, config, recon_cfg.table_z_m)
 
     recon_dir = run_dir / "reconstruct"
     upstream = runner.stage(

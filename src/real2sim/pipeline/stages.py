@@ -37,15 +37,16 @@ def _edited_copy(dataset: Path, target: Path, edit: Callable[[Path], dict]) -> d
     return extra
 
 
-def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: ProgressFn) -> dict:
-    from real2sim.capture.masking import compute_masks
+def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: ProgressFn, table_z_m: float = 0.0,
+           seed: int = 0) -> dict:
+    from real2sim.pipeline.masks import make_masks
 
     def edit(copy: Path) -> dict:
         if not (copy / "transforms.json").exists():  # a COLMAP model: masks need a transforms.json to point from
             from real2sim.pipeline.normalise import write_model_transforms
 
             write_model_transforms(copy)
-        result = compute_masks(copy, method, mask_cfg, progress=progress)
+        result = make_masks(copy, method, mask_cfg, table_z_m=table_z_m, seed=seed, progress=progress)
         return {"result": {"num_frames": result.num_frames, "mean_object_fraction": result.mean_object_fraction,
                            "mean_iou": result.mean_iou, "min_iou": result.min_iou}}
 

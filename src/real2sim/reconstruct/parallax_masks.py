@@ -1,0 +1,281 @@
+"""Object masks from the capture itself: what moves against the table between views (no weights, no empty scene).
+
+A pixel that sees the table looks the same from a neighbouring camera once that camera's
+image is warped through the table plane (a homography); a pixel that sees something above
+the table does not, by the parallax of its height. Per view:
+
+1. each of ``neighbours`` views (8 to 35 degrees away, seen from the cameras' common point)
+   is warped onto it through the plane z = ``table_z_m``, with a per-channel gain for
+   cameras that change exposure between shots;
+2. a neighbour *agrees* at a pixel when the pixel's colour lies within ``threshold`` of the
+   range its warped image spans half a pixel around (Birchfield and Tomasi: a sharp edge
+   printed on the table, resampled a fraction of a pixel off, is no evidence). A pixel is
+   *table* when ``agreement`` of the neighbours that see its table point agree and the image
+   has texture around it; *not table* when they do not and it has texture; each plain patch
+   (a white table, a grey wall, the plain side of a can) takes the verdict of the textured
+   pixels around it (:func:`_plain_patches_decided`). Each neighbour sees the object's own
+   surface at a different place, so a patterned object does not agree with all of them;
+3. everything not table is a candidate, and the candidates' visual hull
+   (:func:`real2sim.reconstruct.hull.visual_hull_mesh`, with a generous outlier allowance)
+   is the object: a voxel survives only if no more than a few views see table through it;
+4. the object stands on the table, and within a few millimetres of the plane the parallax is
+   below a pixel, so the bottom of the object can look like table: each column of the hull
+   whose lowest voxel lies within ``bottom_band`` of the table is filled down to it (a mug's
+   handle, higher up, is not extended);
+5. steps 2-4 again, now that the first object tells which table points each neighbour has
+   hidden behind it: those neighbours do not vote, and the table right next to the object,
+   which the first round could not confirm, is confirmed;
+6. the masks are that solid, ray cast into every view (Embree, through trimesh).
+
+World frame: the views', table plane z = ``table_z_m``; lengths in the views' units. The
+method needs a textured table (or floor) around the object and poses good to about a pixel
+(refine them first); on a plain table step 3 finds nothing to carve with and the hull does
+not close (one-line error).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import trimesh
+
+from real2sim.formats.dataset import CameraIntrinsics
+from real2sim.formats.errors import UserInputError
+from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.reconstruct.hull import VoxelGrid, largest_parts, surface_from_grid, visual_hull_mesh
+from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, project_torch
+
+
+TABLE_VOTE_RATIO = 3.0
+
+
+@dataclass(frozen=True)
+class ParallaxConfig:
+    """``neighbours``: views warped onto each view; chosen among those whose direction from the
+    cameras' common point differs by ``min_angle_deg`` to ``max_angle_deg`` (more angle, more
+    parallax, more of the table hidden differently). ``threshold``: largest channel difference
+    (0-255) of a table pixel to its empty table. ``min_texture``: local standard deviation
+    (0-255, grey, ``texture_px`` radius) below which a pixel is undecided. ``outlier_fraction``:
+    share of the views seeing a voxel that may call it table and not carve it. ``hull_voxels``:
+    the hull grid's longest side. ``max_image_px``: images are reduced to this longer side first (the
+    masks come back at full size). ``bottom_band``: fraction of the hull's height above the table
+    filled down to it (step 4)."""
+
+    neighbours: int = 8
+    min_angle_deg: float = 8.0
+    max_angle_deg: float = 35.0
+    threshold: float = 14.0
+    agreement: float = 0.6
+    min_texture: float = 4.0
+    texture_px: int = 2
+    outlier_fraction: float = 0.1
+    hull_voxels: int = 160
+    max_image_px: int = 640
+    bottom_band: float = 0.08
+    table_z_m: float = 0.0
+
+    def validate(self) -> None:
+        if self.neighbours < 2:
+            raise UserInputError("parallax masks need at least 2 neighbouring views per view")
+        if not 0 <= self.min_angle_deg < self.max_angle_deg <= 90:
+            raise UserInputError("parallax masks: need 0 <= min_angle_deg < max_angle_deg <= 90")
+
+
+def neighbour_views(views: PosedViews, config: ParallaxConfig) -> np.ndarray:
+    """(N, neighbours) indices: for each view, the views nearest in direction from the common point
+    among those at least ``min_angle_deg`` away (the nearest beyond it when too few are in range)."""
+    centre = common_look_at_point(views)
+    dirs = views.c2w_cv[:, :3, 3] - centre
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    angle = np.degrees(np.arccos(np.clip(dirs @ dirs.T, -1.0, 1.0)))
+    n = views.count
+    if n - 1 < config.neighbours:
+        raise UserInputError(f"parallax masks need more than {config.neighbours} views (got {n})")
+    # too close (no parallax) or too far (too much hidden differently) sort after the views in range
+    penalty = np.where(angle < config.min_angle_deg, 1e3, 0.0) + np.where(angle > config.max_angle_deg, 1e3, 0.0)
+    cost = angle + penalty
+    np.fill_diagonal(cost, np.inf)
+    return np.argsort(cost, axis=1)[:, :config.neighbours]
+
+
+def _half_pixel_range(image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(low, high), each (..., C, H, W): the range of ``image`` (..., C, H, W) over each pixel and the four points half a
+    pixel away (Birchfield and Tomasi's sampling-insensitive range): a sharp edge printed on the table,
+    resampled a fraction of a pixel off, is no evidence of height. Wider (a whole 3x3 window) and a
+    black-and-white pattern on the object would match anything."""
+    flat = image.reshape(-1, *image.shape[-3:])
+    padded = torch.nn.functional.pad(flat, (1, 1, 1, 1), mode="replicate").reshape(*image.shape[:-2], *(n + 2 for n in image.shape[-2:]))
+    h, w = image.shape[-2:]
+    halves = [0.5 * (image + padded[..., 1 + dy:1 + dy + h, 1 + dx:1 + dx + w])
+              for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1))]
+    stack = torch.stack([image, *halves])
+    return stack.amin(dim=0), stack.amax(dim=0)
+
+
+def _local_std(gray: torch.Tensor, radius: int) -> torch.Tensor:
+    """(H, W) standard deviation over a (2r+1)^2 window (edges replicated)."""
+    size = 2 * radius + 1
+    padded = torch.nn.functional.pad(gray[None, None], (radius,) * 4, mode="replicate")
+    mean = torch.nn.functional.avg_pool2d(padded, size, stride=1)
+    mean_sq = torch.nn.functional.avg_pool2d(padded * padded, size, stride=1)
+    return (mean_sq - mean * mean).clamp_min(0.0).sqrt()[0, 0]
+
+
+def table_evidence(views: PosedViews, config: ParallaxConfig, occluders: np.ndarray | None = None,
+                   progress: ProgressFn = null_progress) -> np.ndarray:
+    """(N, H, W) bool: the pixels that see the textured table (steps 1-2 of the module docstring).
+
+    ``occluders`` (N, H, W) bool, optional: where each view sees the object (a first estimate). A neighbour
+    in whose image the table point behind a pixel falls there cannot show that point and does not vote;
+    a pixel with fewer than two voting neighbours keeps the verdict it gets with every neighbour voting."""
+    k = views.intrinsics
+    h, w = k.height, k.width
+    v_px, u_px = np.mgrid[0:h, 0:w]
+    images = torch.from_numpy(np.ascontiguousarray(views.rgb.transpose(0, 3, 1, 2)))  # (N, 3, H, W), [0, 1]
+    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
+    near = neighbour_views(views, config)
+    out = np.zeros((views.count, h, w), dtype=bool)
+    occ = None if occluders is None else torch.from_numpy(occluders[:, None].astype(np.float32))
+    with torch.no_grad():
+        for i in range(views.count):
+            origin, direction = pixel_rays(k, views.c2w_cv[i], u_px.ravel() + 0.5, v_px.ravel() + 0.5)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (config.table_z_m - origin[:, 2]) / direction[:, 2]
+            hits = np.isfinite(t) & (t > 0)
+            on_plane = origin + np.where(hits, t, 0.0)[:, None] * direction
+            u, v, z = project_torch(k, w2c[near[i]], torch.from_numpy(on_plane.astype(np.float32)))
+            grid = torch.stack([u * (2.0 / w) - 1.0, v * (2.0 / h) - 1.0], dim=-1).reshape(len(near[i]), h, w, 2)
+            warped = torch.nn.functional.grid_sample(images[near[i]], grid, mode="bilinear", align_corners=False)
+            valid = ((z > 0).reshape(-1, h, w) & (grid.abs() <= 1).all(dim=-1)
+                     & torch.from_numpy(hits.reshape(1, h, w)))
+            hidden = None
+            if occluders is not None:  # a table point lies behind the object in a neighbour that sees it inside
+                hidden = torch.nn.functional.grid_sample(occ[near[i]], grid, mode="nearest", align_corners=False)[:, 0] > 0.5
+            own = images[i]
+            # exposure: per-channel gain of each neighbour on the pixels both see (medians: the object is a minority)
+            for j in range(len(near[i])):
+                m = valid[j]
+                if m.sum() > 100:
+                    gain = own[:, m].median(dim=1).values / warped[j][:, m].median(dim=1).values.clamp_min(1e-3)
+                    warped[j] *= gain.clamp(0.5, 2.0)[:, None, None]
+            # per neighbour, against the range of its warped image half a pixel around (Birchfield-Tomasi)
+            low, high = _half_pixel_range(warped)
+            diff = torch.maximum(own - high, low - own).clamp_min(0.0).amax(dim=1) * 255.0  # (K, H, W)
+            matches = _agreed(valid, diff <= config.threshold, config.agreement)
+            if hidden is not None:
+                open_view = valid & ~hidden
+                matches = torch.where(open_view.sum(dim=0) >= 2, _agreed(open_view, diff <= config.threshold,
+                                                                          config.agreement), matches)
+            matches = matches.numpy()
+            textured = (_local_std(own.mean(dim=0) * 255.0, config.texture_px) >= config.min_texture).numpy()
+            beyond = (valid.sum(dim=0) < 2).numpy()
+            out[i] = _plain_patches_decided(matches & textured, ~matches & textured, beyond)
+            progress("parallax masks: table", i + 1, views.count)
+    return out
+
+
+def _agreed(voting: torch.Tensor, match: torch.Tensor, agreement: float) -> torch.Tensor:
+    """(H, W) bool: at least two neighbours vote (``voting``, (K, H, W)) and ``agreement`` of them match."""
+    seeing = voting.sum(dim=0)
+    return (seeing >= 2) & ((voting & match).sum(dim=0) >= agreement * seeing)
+
+
+def _plain_patches_decided(table: np.ndarray, other: np.ndarray, beyond: np.ndarray) -> np.ndarray:
+    """``table`` grown into the undecided pixels (neither ``table`` nor ``other``): each 4-connected patch of
+    them is table when the decided pixels around it are table ``TABLE_VOTE_RATIO`` times as often as not. A
+    plain disc printed on the table is ringed by table pixels; the plain side of a can by the parallax of its
+    edges, but for its bottom edge, which stands on the table and so matches it. A patch that reaches the
+    image's border and lies mostly ``beyond`` the table (rays that miss its plane or land where no neighbour
+    sees) is background too: a plain wall or sky behind the object, which no view can test against the table."""
+    from scipy import ndimage
+
+    undecided = ~(table | other)
+    labels, count = ndimage.label(undecided)
+    if count == 0:
+        return table
+    ring = np.where(undecided, 0, ndimage.maximum_filter(labels, size=3))  # decided pixels next to a patch
+    votes_table = np.bincount(ring[table], minlength=count + 1)
+    votes_other = np.bincount(ring[other], minlength=count + 1)
+    patch_is_table = votes_table >= TABLE_VOTE_RATIO * votes_other
+    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    share_beyond = np.bincount(labels[beyond], minlength=count + 1) / np.maximum(np.bincount(labels.ravel(), minlength=count + 1), 1)
+    patch_is_table[border[share_beyond[border] > 0.5]] = True
+    patch_is_table[0] = False
+    return table | patch_is_table[labels]
+
+
+def _filled_to_table(scores: np.ndarray, grid: VoxelGrid, band: float, table_z_m: float) -> np.ndarray:
+    """The hull's scores with each column whose lowest inside voxel lies within ``band`` (fraction of the
+    hull's height) of the table raised to 1 down to the table (step 4)."""
+    inside = scores >= 0.5
+    if not inside.any():
+        return scores
+    z_index = np.arange(grid.shape[2])
+    top = int(np.nonzero(inside.any(axis=(0, 1)))[0].max())
+    band_voxels = max(2, int(np.ceil(band * (top + 1))))
+    any_in = inside.any(axis=2)
+    lowest = np.where(any_in, np.argmax(inside, axis=2), grid.shape[2])
+    fill = any_in[..., None] & (lowest[..., None] <= band_voxels) & (z_index[None, None] < lowest[..., None])
+    out = scores.copy()
+    out[fill] = 1.0
+    return out
+
+
+def parallax_masks(views: PosedViews, config: ParallaxConfig = ParallaxConfig(),
+                   progress: ProgressFn = null_progress) -> tuple[trimesh.Trimesh, dict]:
+    """The object standing on the table, as a closed mesh (metres, the views' world frame), found from the
+    images and poses of ``views`` alone (their masks are not read); and a record of how. Its silhouettes
+    (:func:`render_silhouettes`) are the masks, at any image size."""
+    config.validate()
+    from scipy.ndimage import binary_dilation
+
+    masks = None
+    for _ in range(2):  # the second round knows, from the first one's object, which table points each view sees
+        occluders = None if masks is None else binary_dilation(masks, np.ones((1, 3, 3), bool))
+        table = table_evidence(views, config, occluders, progress)
+        solid, grid = _standing_hull(views, table, config)
+        masks = render_silhouettes(solid, views.intrinsics, views.c2w_cv, progress)
+    record = {"method": "parallax", "table_z_m": config.table_z_m,
+              "table_pixel_fraction": float(table.mean()),
+              "object_size_m": (solid.bounds[1] - solid.bounds[0]).tolist(),
+              "hull_voxel_mm": 1000.0 * grid.voxel_m}
+    return solid, record
+
+
+def _standing_hull(views: PosedViews, table: np.ndarray, config: ParallaxConfig) -> tuple[trimesh.Trimesh, VoxelGrid]:
+    """The visual hull of what is not table, its columns near the table filled down to it (steps 3-4)."""
+    candidates = PosedViews(views.rgb, (~table).astype(np.float32), views.c2w_cv, views.intrinsics, views.names)
+    try:
+        _, grid, scores = visual_hull_mesh(candidates, longest_side_voxels=config.hull_voxels,
+                                           outlier_fraction=config.outlier_fraction, table_z_m=config.table_z_m)
+    except UserInputError as exc:
+        raise UserInputError(f"parallax masks found no object standing on the table ({exc}); the method needs a "
+                             "textured table around the object and poses accurate to a pixel") from None
+    filled = _filled_to_table(scores, grid, config.bottom_band, config.table_z_m)
+    return largest_parts(surface_from_grid(filled, grid, 0.5, config.table_z_m)), grid
+
+
+def render_silhouettes(mesh: trimesh.Trimesh, intrinsics: CameraIntrinsics, c2w_cv: np.ndarray,
+                       progress: ProgressFn = null_progress) -> np.ndarray:
+    """(N, H, W) bool: the pixels of cameras ``c2w_cv`` (N, 4, 4) whose ray through the pixel centre meets
+    ``mesh`` (metres, world frame)."""
+    k = intrinsics
+    v_px, u_px = np.mgrid[0:k.height, 0:k.width]
+    lo, hi = mesh.bounds
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    w2c = torch.from_numpy(np.linalg.inv(c2w_cv)).float()
+    u, v, depth = project_torch(k, w2c, torch.from_numpy(corners.astype(np.float32)))
+    out = np.zeros((len(c2w_cv), k.height, k.width), dtype=bool)
+    for i in range(len(c2w_cv)):
+        if bool((depth[i] > 0).all()):  # only the pixels inside the projected box are cast (a margin for distortion)
+            box = ((u_px >= float(u[i].min()) - 2) & (u_px <= float(u[i].max()) + 2)
+                   & (v_px >= float(v[i].min()) - 2) & (v_px <= float(v[i].max()) + 2))
+        else:  # the camera is inside the box's extent in depth: cast them all
+            box = np.ones_like(u_px, dtype=bool)
+        if box.any():
+            origin, direction = pixel_rays(k, c2w_cv[i], u_px[box] + 0.5, v_px[box] + 0.5)
+            out[i][box] = mesh.ray.intersects_any(origin, direction)
+        progress("parallax masks: silhouettes", i + 1, len(c2w_cv))
+    return out
