@@ -194,7 +194,7 @@ def test_a_body_floating_one_voxel_up_is_filled_down_but_a_handle_is_not():
     scores = np.zeros(grid.shape, np.float32)
     scores[2:6, 2:6, 1:30] = 1.0  # body, one voxel above the table
     scores[6:9, 3:5, 14:20] = 0.8  # handle, high up
-    out = _filled_to_table(scores, grid, band=0.08, table_z_m=0.0)
+    out = _filled_to_table(scores, band=0.08)
     assert (out[2:6, 2:6, 0] == 1.0).all()
     assert (out[6:9, 3:5, :14] == 0.0).all()
     changed = out != scores
@@ -212,13 +212,13 @@ def test_fill_keeps_to_the_band_and_to_inside_voxels():
     scores = np.zeros(grid.shape, np.float32)
     scores[2:6, 2:6, 6:30] = 1.0  # 30 voxels tall: band = ceil(0.08 * 30) = 3 voxels; lowest at 6
     scores[8:10, 8:10, 1:30] = 0.4  # faint, not inside
-    out = _filled_to_table(scores, grid, band=0.08, table_z_m=0.0)
+    out = _filled_to_table(scores, band=0.08)
     assert np.array_equal(out, scores)
     scores[2:6, 2:6, 3:6] = 1.0  # now its lowest voxel (3) is in the band
-    out = _filled_to_table(scores, grid, band=0.08, table_z_m=0.0)
+    out = _filled_to_table(scores, band=0.08)
     assert (out[2:6, 2:6, :3] == 1.0).all() and (out[8:10, 8:10, 0] == 0.0).all()
     empty = np.zeros(grid.shape, np.float32)
-    assert np.array_equal(_filled_to_table(empty, grid, 0.08, 0.0), empty)
+    assert np.array_equal(_filled_to_table(empty, 0.08), empty)
 
 
 # ----------------------------------------------------------------------------- step 2: half-pixel range

@@ -39,7 +39,7 @@ def make_masks(dataset_dir: Path | str, method: str, cfg=None, *, table_z_m: flo
     config = ParallaxConfig(table_z_m=table_z_m)
     table_frame = _table_frame(ds, seed) if is_model_frame(ds) else ds
     views = load_views(table_frame, need_masks=False, max_side_px=config.max_image_px)
-    solid, _ = parallax_masks(views, config, progress)
+    solid = parallax_masks(views, config, progress)
     masks = render_silhouettes(solid, table_frame.intrinsics, table_frame.poses_c2w_cv(), progress)
     return publish_masks(root, ds, PARALLAX, lambda i, _frame: masks[i], progress)
 
@@ -48,18 +48,14 @@ def _table_frame(ds: Dataset, seed: int) -> Dataset:
     """``ds`` with its poses in a rigid frame whose z = 0 is the table plane fitted to the sparse points near
     the cameras' common point (model units; the scale is not needed for masks)."""
     from real2sim.pipeline import robot_frame as rf
-    from real2sim.pipeline.normalise import NormaliseConfig, read_sparse_points
+    from real2sim.pipeline.normalise import NormaliseConfig, points_near_object, read_sparse_points, table_plane
 
     settings = NormaliseConfig()
     points, _ = read_sparse_points(ds)
     c2w_cv = ds.poses_c2w_cv()
-    look_at = rf.optical_axes_point(c2w_cv)
-    distance = float(np.median(np.linalg.norm(c2w_cv[:, :3, 3] - look_at, axis=1)))
-    near = points[np.linalg.norm(points - look_at, axis=1) <= settings.near_radius * distance]
+    look_at, distance, near = points_near_object(c2w_cv, points, settings)
     # Without masks the object's own points stay in; the table around it outnumbers them in a usual capture.
-    plane = rf.fit_plane_ransac(near, settings.inlier_threshold * distance, seed=seed,
-                                iterations=settings.ransac_iterations, min_inliers=settings.min_table_points)
-    plane = rf.orient_towards_cameras(plane, c2w_cv[:, :3, 3])
+    plane = table_plane(near, c2w_cv, distance, settings, seed)
     poses = rf.transform_poses(rf.table_similarity(plane, centre=look_at), ds.poses_c2w_gl())
     frames = tuple(replace(f, transform_matrix=pose) for f, pose in zip(ds.frames, poses))
     return replace(ds, frames=frames, extra={k: v for k, v in ds.extra.items() if k not in MODEL_FRAME_KEYS})

@@ -219,18 +219,30 @@ def measure_object(ds: Dataset, masks: np.ndarray, table: rf.Similarity, config:
     return float(hi[2]), 0.5 * (lo[:2] + hi[:2])
 
 
+def points_near_object(c2w_cv: np.ndarray, points: np.ndarray, config: NormaliseConfig
+                       ) -> tuple[np.ndarray, float, np.ndarray]:
+    """(the point the cameras look at, the median camera distance from it, the sparse points within
+    ``near_radius`` of those distances of it): step 1 without the masks (model units)."""
+    look_at = rf.optical_axes_point(c2w_cv)
+    distance = float(np.median(np.linalg.norm(c2w_cv[:, :3, 3] - look_at, axis=1)))
+    return look_at, distance, points[np.linalg.norm(points - look_at, axis=1) <= config.near_radius * distance]
+
+
+def table_plane(points: np.ndarray, c2w_cv: np.ndarray, distance: float, config: NormaliseConfig,
+                seed: int) -> rf.Plane:
+    """Step 2's plane: RANSAC on ``points`` (thresholds as fractions of ``distance``), normal towards the cameras."""
+    plane = rf.fit_plane_ransac(points, config.inlier_threshold * distance, seed=seed,
+                                iterations=config.ransac_iterations, min_inliers=config.min_table_points)
+    return rf.orient_towards_cameras(plane, c2w_cv[:, :3, 3])
+
+
 def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config: NormaliseConfig,
                      seed: int) -> tuple[rf.Similarity, dict]:
     """``robot_from_model`` and a JSON-ready record of how it was found (steps 1-4 of the module docstring)."""
     c2w_cv = ds.poses_c2w_cv()
-    centres = c2w_cv[:, :3, 3]
-    look_at = rf.optical_axes_point(c2w_cv)
-    distance = float(np.median(np.linalg.norm(centres - look_at, axis=1)))
-    near = points[np.linalg.norm(points - look_at, axis=1) <= config.near_radius * distance]
+    look_at, distance, near = points_near_object(c2w_cv, points, config)
     on_object = rf.object_point_mask(near, ds.intrinsics, c2w_cv, masks, config.object_vote_fraction)
-    plane = rf.fit_plane_ransac(near[~on_object], config.inlier_threshold * distance, seed=seed,
-                                iterations=config.ransac_iterations, min_inliers=config.min_table_points)
-    plane = rf.orient_towards_cameras(plane, centres)
+    plane = table_plane(near[~on_object], c2w_cv, distance, config, seed)
     table = rf.table_similarity(plane, centre=look_at)
     height, centre_xy = measure_object(ds, masks, table, config)
     if not height > 0:

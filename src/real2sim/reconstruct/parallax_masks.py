@@ -44,7 +44,7 @@ import trimesh
 from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress
-from real2sim.reconstruct.hull import VoxelGrid, largest_parts, surface_from_grid, visual_hull_mesh
+from real2sim.reconstruct.hull import largest_parts, surface_from_grid, visual_hull_mesh
 from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, project_torch
 
 
@@ -101,12 +101,13 @@ def neighbour_views(views: PosedViews, config: ParallaxConfig) -> np.ndarray:
 
 
 def _half_pixel_range(image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """(low, high), each (..., C, H, W): the range of ``image`` (..., C, H, W) over each pixel and the four points half a
-    pixel away (Birchfield and Tomasi's sampling-insensitive range): a sharp edge printed on the table,
+    """(low, high), each (..., C, H, W): the range of ``image`` (..., C, H, W) over each pixel and the four
+    points half a pixel away (Birchfield and Tomasi's sampling-insensitive range): a sharp edge printed on the table,
     resampled a fraction of a pixel off, is no evidence of height. Wider (a whole 3x3 window) and a
     black-and-white pattern on the object would match anything."""
     flat = image.reshape(-1, *image.shape[-3:])
-    padded = torch.nn.functional.pad(flat, (1, 1, 1, 1), mode="replicate").reshape(*image.shape[:-2], *(n + 2 for n in image.shape[-2:]))
+    padded = torch.nn.functional.pad(flat, (1, 1, 1, 1), mode="replicate")
+    padded = padded.reshape(*image.shape[:-2], *(n + 2 for n in image.shape[-2:]))
     h, w = image.shape[-2:]
     halves = [0.5 * (image + padded[..., 1 + dy:1 + dy + h, 1 + dx:1 + dx + w])
               for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1))]
@@ -152,7 +153,8 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, occluders: np.ndar
                      & torch.from_numpy(hits.reshape(1, h, w)))
             hidden = None
             if occluders is not None:  # a table point lies behind the object in a neighbour that sees it inside
-                hidden = torch.nn.functional.grid_sample(occ[near[i]], grid, mode="nearest", align_corners=False)[:, 0] > 0.5
+                hidden = torch.nn.functional.grid_sample(occ[near[i]], grid, mode="nearest",
+                                                         align_corners=False)[:, 0] > 0.5
             own = images[i]
             # exposure: per-channel gain of each neighbour on the pixels both see (medians: the object is a minority)
             for j in range(len(near[i])):
@@ -200,23 +202,25 @@ def _plain_patches_decided(table: np.ndarray, other: np.ndarray, beyond: np.ndar
     votes_other = np.bincount(ring[other], minlength=count + 1)
     patch_is_table = votes_table >= TABLE_VOTE_RATIO * votes_other
     border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-    share_beyond = np.bincount(labels[beyond], minlength=count + 1) / np.maximum(np.bincount(labels.ravel(), minlength=count + 1), 1)
+    size = np.maximum(np.bincount(labels.ravel(), minlength=count + 1), 1)
+    share_beyond = np.bincount(labels[beyond], minlength=count + 1) / size
     patch_is_table[border[share_beyond[border] > 0.5]] = True
     patch_is_table[0] = False
     return table | patch_is_table[labels]
 
 
-def _filled_to_table(scores: np.ndarray, grid: VoxelGrid, band: float, table_z_m: float) -> np.ndarray:
-    """The hull's scores with each column whose lowest inside voxel lies within ``band`` (fraction of the
-    hull's height) of the table raised to 1 down to the table (step 4)."""
+def _filled_to_table(scores: np.ndarray, band: float) -> np.ndarray:
+    """The hull's scores (a grid whose lowest layer stands on the table) with each column whose lowest
+    inside voxel lies within ``band`` (fraction of the hull's height) of the table raised to 1 down to the
+    table (step 4)."""
     inside = scores >= 0.5
     if not inside.any():
         return scores
-    z_index = np.arange(grid.shape[2])
+    z_index = np.arange(scores.shape[2])
     top = int(np.nonzero(inside.any(axis=(0, 1)))[0].max())
     band_voxels = max(2, int(np.ceil(band * (top + 1))))
     any_in = inside.any(axis=2)
-    lowest = np.where(any_in, np.argmax(inside, axis=2), grid.shape[2])
+    lowest = np.where(any_in, np.argmax(inside, axis=2), scores.shape[2])
     fill = any_in[..., None] & (lowest[..., None] <= band_voxels) & (z_index[None, None] < lowest[..., None])
     out = scores.copy()
     out[fill] = 1.0
@@ -224,9 +228,9 @@ def _filled_to_table(scores: np.ndarray, grid: VoxelGrid, band: float, table_z_m
 
 
 def parallax_masks(views: PosedViews, config: ParallaxConfig = ParallaxConfig(),
-                   progress: ProgressFn = null_progress) -> tuple[trimesh.Trimesh, dict]:
+                   progress: ProgressFn = null_progress) -> trimesh.Trimesh:
     """The object standing on the table, as a closed mesh (metres, the views' world frame), found from the
-    images and poses of ``views`` alone (their masks are not read); and a record of how. Its silhouettes
+    images and poses of ``views`` alone (their masks are not read). Its silhouettes
     (:func:`render_silhouettes`) are the masks, at any image size."""
     config.validate()
     from scipy.ndimage import binary_dilation
@@ -235,16 +239,12 @@ def parallax_masks(views: PosedViews, config: ParallaxConfig = ParallaxConfig(),
     for _ in range(2):  # the second round knows, from the first one's object, which table points each view sees
         occluders = None if masks is None else binary_dilation(masks, np.ones((1, 3, 3), bool))
         table = table_evidence(views, config, occluders, progress)
-        solid, grid = _standing_hull(views, table, config)
+        solid = _standing_hull(views, table, config)
         masks = render_silhouettes(solid, views.intrinsics, views.c2w_cv, progress)
-    record = {"method": "parallax", "table_z_m": config.table_z_m,
-              "table_pixel_fraction": float(table.mean()),
-              "object_size_m": (solid.bounds[1] - solid.bounds[0]).tolist(),
-              "hull_voxel_mm": 1000.0 * grid.voxel_m}
-    return solid, record
+    return solid
 
 
-def _standing_hull(views: PosedViews, table: np.ndarray, config: ParallaxConfig) -> tuple[trimesh.Trimesh, VoxelGrid]:
+def _standing_hull(views: PosedViews, table: np.ndarray, config: ParallaxConfig) -> trimesh.Trimesh:
     """The visual hull of what is not table, its columns near the table filled down to it (steps 3-4)."""
     candidates = PosedViews(views.rgb, (~table).astype(np.float32), views.c2w_cv, views.intrinsics, views.names)
     try:
@@ -253,8 +253,8 @@ def _standing_hull(views: PosedViews, table: np.ndarray, config: ParallaxConfig)
     except UserInputError as exc:
         raise UserInputError(f"parallax masks found no object standing on the table ({exc}); the method needs a "
                              "textured table around the object and poses accurate to a pixel") from None
-    filled = _filled_to_table(scores, grid, config.bottom_band, config.table_z_m)
-    return largest_parts(surface_from_grid(filled, grid, 0.5, config.table_z_m)), grid
+    filled = _filled_to_table(scores, config.bottom_band)
+    return largest_parts(surface_from_grid(filled, grid, 0.5, config.table_z_m))
 
 
 def render_silhouettes(mesh: trimesh.Trimesh, intrinsics: CameraIntrinsics, c2w_cv: np.ndarray,
