@@ -14,6 +14,8 @@ true object). Reported, from ASSETDIR/.run/run.json and ASSETDIR/truth.json:
     python benchmarks/bench_run.py --quick         # 60 noise-free views, visual hull, 1 run
     python benchmarks/bench_run.py --objects can
     python benchmarks/bench_run.py --objects can --runs 4 --tag can_runs4   # less noise, own section
+    python benchmarks/bench_run.py --round-can --tag round_can   # the can round, not 72 flats
+    python benchmarks/bench_run.py --objects can --cylinder-flat-depth 1e-5 --tag can_flat10um
 
 Writes docs/benchmarks/run.md (machine and date included), after each object.
 """
@@ -36,8 +38,12 @@ TARGET_INERTIA_REL = 0.05
 TARGET_COM_MM = 2.0
 
 
-def run_object(name: str, work: Path, quick: bool, runs: int | None = None) -> tuple[dict, dict, float]:
-    """(run.json, truth.json, wall seconds) of one object's capture + run."""
+def run_object(name: str, work: Path, quick: bool, runs: int | None = None,
+               rolling_sagitta_m: float | None = None,
+               cylinder_flat_depth_m: float | None = None) -> tuple[dict, dict, float]:
+    """(run.json, truth.json, wall seconds) of one object's capture + run (``rolling_sagitta_m``:
+    see ``make_object``, None: the bundled object; ``cylinder_flat_depth_m``: see
+    ``ContactProperties``)."""
     from real2sim.capture.wrist_camera import capture
     from real2sim.cli.demo import FULL, QUICK, capture_config, run_config
     from real2sim.evaluate.sweep import EvaluationConfig
@@ -48,16 +54,25 @@ def run_object(name: str, work: Path, quick: bool, runs: int | None = None) -> t
     if runs is not None:
         plan = replace(plan, runs=runs)
     config = run_config(plan)
-    config = replace(config, asset=replace(config.asset, mass_kg=OBJECTS[name].mass_kg),
+    contact = replace(config.asset.contact, cylinder_flat_depth_m=cylinder_flat_depth_m)
+    config = replace(config, asset=replace(config.asset, mass_kg=OBJECTS[name].mass_kg, contact=contact),
                      evaluation=EvaluationConfig(tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs))
     start = time.perf_counter()
     dataset = work / f"{name}_capture"
-    capture(make_textured_object(name), dataset, capture_config(plan))
+    capture(make_textured_object(name, rolling_sagitta_m=rolling_sagitta_m), dataset, capture_config(plan))
     asset = work / f"{name}_asset"
     run_pipeline(dataset, asset, config)
     wall = time.perf_counter() - start
     return (json.loads((asset / ".run" / "run.json").read_text()), json.loads((asset / "truth.json").read_text()),
             wall)
+
+
+def sagitta_sections_note() -> str:
+    from real2sim.geometry.objects import ROUND_SAGITTA_M
+    from real2sim.geometry.tessellation import sections_for
+
+    return (f"{sections_for(0.034, ROUND_SAGITTA_M)} sections, flats at most {ROUND_SAGITTA_M * 1e6:g} um inside "
+            "the circle, instead of the bundled can's 72 (32 um)")
 
 
 def _plan(quick: bool):
@@ -78,12 +93,19 @@ def main() -> int:
     parser.add_argument("--runs", type=int, default=None,
                         help="seeded runs per task and contact model (default: the demo's); more runs, less noise")
     parser.add_argument("--tag", default="", help="write docs/benchmarks/run_TAG.md instead of run.md")
+    parser.add_argument("--cylinder-flat-depth", type=float, default=None, metavar="M",
+                        help="`run --cylinder-flat-depth M`: compliant cylinders meshed with flats at most M deep")
+    parser.add_argument("--round-can", action="store_true",
+                        help="capture a round can (flats at most ROUND_SAGITTA_M deep) instead of the bundled "
+                             "72-section one (docs/truth.md)")
     args = parser.parse_args()
     runs = args.runs if args.runs is not None else _plan(args.quick).runs
+    from real2sim.geometry.objects import ROUND_SAGITTA_M
     stage_rows, target_rows, dynamics_rows = [], [], []
     with tempfile.TemporaryDirectory(prefix="bench_run-") as tmp:
         for name in args.objects.split(","):
-            manifest, truth, wall = run_object(name, Path(tmp), args.quick, runs)
+            sagitta = ROUND_SAGITTA_M if args.round_can and name == "can" else None
+            manifest, truth, wall = run_object(name, Path(tmp), args.quick, runs, sagitta, args.cylinder_flat_depth)
             for stage, entry in manifest["stages"].items():
                 stage_rows.append([name, stage, entry["wall_seconds"], entry.get("peak_memory_mb", float("nan"))])
             stage_rows.append([name, "(capture + run, wall)", wall, float("nan")])
@@ -104,6 +126,9 @@ def main() -> int:
                                       *(("n/a" if row[k] is None else row[k])
                                         for k in ("ocae_vs_reconstruction_m", "ocae_vs_truth_m", "ate_vs_truth_m"))])
             body = ((args.note + "\n\n" if args.note else "")
+                    + (f"The can is round: {sagitta_sections_note()}.\n\n" if args.round_can else "")
+                    + (f"Compliant cylinders meshed with flats at most {args.cylinder_flat_depth:g} m deep "
+                       "(`--cylinder-flat-depth`).\n\n" if args.cylinder_flat_depth is not None else "")
                     + (f"Quick settings (60 noise-free views at 160x120, visual hull, {runs} run(s) per task).\n\n"
                        if args.quick else
                        "The demo's settings: 100 views at 320x240 px with 5 mm / 1 deg robot-pose noise, COLMAP "

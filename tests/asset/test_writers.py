@@ -305,3 +305,31 @@ def test_bad_inputs_raise(tmp_path):
         bad = PhysicalProperties(0.0, (0.0, 0.0, 0.0), ((1e-4, 0, 0), (0, 1e-4, 0), (0, 0, 1e-4)))
         write_representation(rep, geometry, bad, CONTACT)
     assert not (rep / "model.urdf").exists()
+
+
+@pytest.mark.parametrize("fmt", ["urdf", "sdf"])
+def test_cylinder_flat_depth_gives_cylinders_their_own_finer_hint(tmp_path, fmt):
+    import dataclasses
+    import math
+
+    from real2sim.geometry.tessellation import sections_for
+
+    rep, geometry = _make_asset(tmp_path / "ASSET")
+    contact = dataclasses.replace(CONTACT, cylinder_flat_depth_m=1e-5)
+    write_representation(rep, geometry, _props(), contact, formats=(fmt,))
+    _, plant, scene_graph = _load(rep / f"model.{fmt}")
+    plant.Finalize()
+    inspector = scene_graph.model_inspector()
+    for k, gid in _collision_by_index(plant, scene_graph).items():
+        hint = inspector.GetProximityProperties(gid).GetProperty("hydroelastic", "resolution_hint")
+        shape = geometry.shapes[k]
+        if shape.kind != "cylinder":
+            assert hint == pytest.approx(0.004)
+            continue
+        radius = shape.size_m[0]
+        # Drake cuts the circle into ceil(2 pi r / hint) sections; their flats must be within 10 um.
+        sections = math.ceil(2 * math.pi * radius / hint)
+        assert sections == sections_for(radius, 1e-5) and radius * (1 - math.cos(math.pi / sections)) <= 1e-5
+        assert hint < 0.004
+    with pytest.raises(ValueError):
+        ContactProperties(cylinder_flat_depth_m=0.0)

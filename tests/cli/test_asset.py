@@ -4,6 +4,7 @@ good input gives an asset folder whose URDFs Drake loads."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -53,11 +54,13 @@ def bad_cases(tmp_path: Path, can_obj: Path):
         "too many": [can_obj, "--mass", "0.3", "--out", tmp_path / "o12", "--collision", "spheres:2001"],
         "malformed mix": [can_obj, "--mass", "0.3", "--out", tmp_path / "o13", "--collision", "boxes:3+"],
         "output exists": [can_obj, "--mass", "0.3", "--out", exists, "--collision", "mesh"],
+        "zero flat depth": [can_obj, "--mass", "0.3", "--out", tmp_path / "o14", "--cylinder-flat-depth", "0"],
     }
 
 
 CASES = ["missing file", "not a mesh", "not a mesh suffix", "empty mesh", "zero mass", "negative mass", "nan mass",
-         "inf mass", "word mass", "unknown spec", "zero count", "too many", "malformed mix", "output exists"]
+         "inf mass", "word mass", "unknown spec", "zero count", "too many", "malformed mix", "output exists",
+         "zero flat depth"]
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -110,8 +113,12 @@ def test_asset_end_to_end_small(tmp_path, can_obj, capsys):
     out = tmp_path / "can_asset"
     code, stdout, err = run_cli(capsys, "asset", can_obj, "--mass", OBJECTS["can"].mass_kg, "--out", out,
                                 "--collision", "mesh", "--collision", "vhacd", "--collision", "cylinders:2",
-                                "--collision", "boxes:1+spheres:2", "--iterations", "150", "--format", "sdf")
+                                "--collision", "boxes:1+spheres:2", "--iterations", "150", "--format", "sdf",
+                                "--cylinder-flat-depth", "1e-5")
     assert code == 0, err
+    sdf = (out / "cylinders_2" / "model.sdf").read_text()
+    hints = {float(h) for h in re.findall(r"mesh_resolution_hint>([0-9.e-]+)<", sdf)}
+    assert hints and max(hints) < 0.002  # 2 pi r / hint sections: flats within 10 um on a 34 mm can
     assert str(out) in stdout
     _check_asset_folder(out, ["mesh", "vhacd", "cylinders_2", "boxes_1_spheres_2"], OBJECTS["can"].mass_kg)
     assert (out / "vhacd" / "model.sdf").exists()

@@ -3,7 +3,8 @@ import pytest
 import trimesh
 
 from real2sim.formats.errors import UserInputError
-from real2sim.geometry.objects import OBJECTS, export_object, make_object, make_textured_object
+from real2sim.geometry.objects import OBJECTS, ROUND_SAGITTA_M, export_object, make_object, make_textured_object
+from real2sim.geometry.tessellation import sections_for
 
 
 @pytest.mark.parametrize("name", list(OBJECTS))
@@ -26,6 +27,36 @@ def test_object_sizes_match_their_descriptions():
     assert OBJECTS["bottle"].mass_kg == pytest.approx(0.6) and OBJECTS["can"].mass_kg == pytest.approx(0.35)
     # the mug is clearly non-convex: its hull holds much more than it does
     assert mug.convex_hull.volume > 2.0 * mug.volume
+
+
+def test_sections_keep_the_flats_within_the_sagitta():
+    for radius_m in (0.005, 0.034, 0.2):
+        for sagitta_m in (1e-6, 2.5e-6, 3e-5):
+            n = sections_for(radius_m, sagitta_m)
+            assert n % 8 == 0 and radius_m * (1 - np.cos(np.pi / n)) <= sagitta_m
+            if n > 8:  # and not many more sections than that takes
+                assert radius_m * (1 - np.cos(np.pi / (n - 8))) > sagitta_m
+    with pytest.raises(ValueError):
+        sections_for(0.01, 0.02)
+
+
+def _side_flat_depth_m(can) -> float:
+    """Deepest point of the can's side faces below the 34 mm circle, m."""
+    side = can.triangles_center[np.abs(can.face_normals[:, 2]) < 1e-6]
+    assert len(side) > 0
+    return float((0.034 - np.hypot(side[:, 0], side[:, 1])).max())
+
+
+def test_a_round_can_is_round_to_the_sagitta_and_the_bundled_one_is_unchanged():
+    # The bundled can keeps the 72 sections every published figure was measured on;
+    # bench_tessellation and bench_run --round-can build it round.
+    assert len(make_object("can").faces) == 576 and _side_flat_depth_m(make_object("can")) > 2e-5
+    round_can = make_object("can", rolling_sagitta_m=ROUND_SAGITTA_M)
+    assert round_can.is_watertight and _side_flat_depth_m(round_can) <= ROUND_SAGITTA_M
+    assert round_can.volume == pytest.approx(make_object("can").volume, rel=2e-3)
+    textured = make_textured_object("can", rolling_sagitta_m=ROUND_SAGITTA_M)
+    assert textured.bounds == pytest.approx(round_can.bounds)
+    assert len(make_object("bottle", rolling_sagitta_m=ROUND_SAGITTA_M).faces) > 4 * len(make_object("bottle").faces)
 
 
 def test_objects_are_deterministic():

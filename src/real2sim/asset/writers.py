@@ -56,6 +56,7 @@ read back gives the same doubles that were written.
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -65,6 +66,7 @@ from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.rotations import quaternion_to_rpy
 from real2sim.formats.physical import PhysicalProperties
+from real2sim.geometry.tessellation import sections_for
 
 
 DRAKE_NS = "http://drake.mit.edu"
@@ -109,6 +111,19 @@ def _hydroelastic_type(shape: CollisionShape, contact: ContactProperties) -> str
     return contact.hydroelastic
 
 
+def resolution_hint_m(shape: CollisionShape, contact: ContactProperties) -> float:
+    """The mesh resolution hint (m) written for ``shape``: ``contact.resolution_hint_m``, or for a
+    cylinder with ``contact.cylinder_flat_depth_m`` set, a hint small enough that Drake's polygon
+    around its circle keeps its flats that shallow (Drake cuts it into ceil(2 pi r / hint) sections)."""
+    depth = contact.cylinder_flat_depth_m
+    if shape.kind != "cylinder" or depth is None or depth >= shape.size_m[0]:
+        return contact.resolution_hint_m
+    radius = float(shape.size_m[0])
+    sections = sections_for(radius, depth)
+    # A hair over 2 pi r / n, so that rounding cannot tip Drake's ceil to n + 1.
+    return min(contact.resolution_hint_m, 2.0 * math.pi * radius / sections * (1.0 + 1e-9))
+
+
 def _check_inputs(geometry: CollisionGeometry, props: PhysicalProperties) -> None:
     if not geometry.shapes:
         raise ValueError(f"collision geometry {geometry.name!r} has no shapes")
@@ -123,15 +138,15 @@ def _check_inputs(geometry: CollisionGeometry, props: PhysicalProperties) -> Non
         raise ValueError("centre of mass must be finite")
 
 
-def _urdf_proximity(parent: ET.Element, hydro: str, contact: ContactProperties) -> None:
+def _urdf_proximity(parent: ET.Element, hydro: str, contact: ContactProperties, hint_m: float) -> None:
     prox = ET.SubElement(parent, _d("proximity_properties"))
     if hydro == "compliant":
         ET.SubElement(prox, _d("compliant_hydroelastic"))
         ET.SubElement(prox, _d("hydroelastic_modulus"), value=_num(contact.hydroelastic_modulus_pa))
-        ET.SubElement(prox, _d("mesh_resolution_hint"), value=_num(contact.resolution_hint_m))
+        ET.SubElement(prox, _d("mesh_resolution_hint"), value=_num(hint_m))
     elif hydro == "rigid":
         ET.SubElement(prox, _d("rigid_hydroelastic"))
-        ET.SubElement(prox, _d("mesh_resolution_hint"), value=_num(contact.resolution_hint_m))
+        ET.SubElement(prox, _d("mesh_resolution_hint"), value=_num(hint_m))
     ET.SubElement(prox, _d("point_contact_stiffness"), value=_num(contact.point_contact_stiffness_n_per_m))
     ET.SubElement(prox, _d("hunt_crossley_dissipation"), value=_num(contact.hunt_crossley_dissipation_s_per_m))
     ET.SubElement(prox, _d("mu_dynamic"), value=_num(contact.mu_dynamic))
@@ -195,7 +210,7 @@ def build_urdf(
         col = ET.SubElement(link, "collision", name=f"collision_{k:04d}")
         _urdf_origin(col, shape.position_m, quaternion_to_rpy(shape.quaternion_wxyz))
         _urdf_geometry(col, shape)
-        _urdf_proximity(col, _hydroelastic_type(shape, contact), contact)
+        _urdf_proximity(col, _hydroelastic_type(shape, contact), contact, resolution_hint_m(shape, contact))
     return robot
 
 
@@ -223,15 +238,15 @@ def _text(parent: ET.Element, tag: str, text: str) -> ET.Element:
     return el
 
 
-def _sdf_proximity(parent: ET.Element, hydro: str, contact: ContactProperties) -> None:
+def _sdf_proximity(parent: ET.Element, hydro: str, contact: ContactProperties, hint_m: float) -> None:
     prox = ET.SubElement(parent, _d("proximity_properties"))
     if hydro == "compliant":
         ET.SubElement(prox, _d("compliant_hydroelastic"))
         _text(prox, _d("hydroelastic_modulus"), _num(contact.hydroelastic_modulus_pa))
-        _text(prox, _d("mesh_resolution_hint"), _num(contact.resolution_hint_m))
+        _text(prox, _d("mesh_resolution_hint"), _num(hint_m))
     elif hydro == "rigid":
         ET.SubElement(prox, _d("rigid_hydroelastic"))
-        _text(prox, _d("mesh_resolution_hint"), _num(contact.resolution_hint_m))
+        _text(prox, _d("mesh_resolution_hint"), _num(hint_m))
     _text(prox, _d("point_contact_stiffness"), _num(contact.point_contact_stiffness_n_per_m))
     _text(prox, _d("hunt_crossley_dissipation"), _num(contact.hunt_crossley_dissipation_s_per_m))
     _text(prox, _d("mu_dynamic"), _num(contact.mu_dynamic))
@@ -289,7 +304,7 @@ def build_sdf(
         col = ET.SubElement(link, "collision", name=f"collision_{k:04d}")
         _text(col, "pose", _nums(tuple(shape.position_m) + quaternion_to_rpy(shape.quaternion_wxyz)))
         _sdf_geometry(col, shape)
-        _sdf_proximity(col, _hydroelastic_type(shape, contact), contact)
+        _sdf_proximity(col, _hydroelastic_type(shape, contact), contact, resolution_hint_m(shape, contact))
     return sdf
 
 

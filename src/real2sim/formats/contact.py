@@ -7,6 +7,7 @@ that rows compare geometry, not material.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 
@@ -31,6 +32,12 @@ class ContactProperties:
     mu_static, mu_dynamic: Coulomb friction coefficients (Drake combines pairs).
     resolution_hint_m: edge length Drake aims for when it meshes curved
         primitives (spheres, cylinders, ellipsoids, capsules) for compliant contact.
+    cylinder_flat_depth_m: None, or how far inside its circle each flat of a compliant
+        cylinder's mesh may lie, m. Drake cuts a cylinder's circle into
+        ceil(2 pi r / hint) sections, so at the default hint a 34 mm cylinder is a
+        22-gon with flats 0.35 mm deep, and a body rolling on it rolls on them
+        (docs/truth.md). When set, each cylinder gets its own hint,
+        the smaller of ``resolution_hint_m`` and one that keeps its flats this shallow.
     """
 
     hydroelastic: str = "compliant"
@@ -40,7 +47,11 @@ class ContactProperties:
     mu_static: float = 0.5
     mu_dynamic: float = 0.5
     resolution_hint_m: float = 0.01
+    cylinder_flat_depth_m: float | None = None
 
     def __post_init__(self) -> None:
         if self.hydroelastic not in ("compliant", "rigid", "none"):
             raise ValueError("hydroelastic must be 'compliant', 'rigid' or 'none'")
+        depth = self.cylinder_flat_depth_m
+        if depth is not None and not (math.isfinite(depth) and depth > 0):
+            raise ValueError("cylinder_flat_depth_m must be a positive number of metres or None")

@@ -24,11 +24,21 @@ from PIL import Image
 
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.mesh_io import export_textured_mesh
+from real2sim.geometry.tessellation import sections_for
 
 _TEXTURE_PX = 512
 # Cylindrical UVs wrap once around; faces crossing the seam get u + 1, so the
 # texture spans u in [0, _U_SPAN] and is drawn periodic in angle over that span.
 _U_SPAN = 1.25
+
+# A body that rolls on its side rolls on the flats of its tessellation, and the ramp task
+# sees them far below what a camera resolves: the bundled 72-section can (flats 32 um inside
+# the circle) and the same can with 1032 sections end about 0.01 m OCAE apart on the ramp
+# (docs/benchmarks/tessellation.md). ``make_object(..., rolling_sagitta_m=...)`` builds the
+# can and the bottle's body round to a given sagitta for measuring that; at ROUND_SAGITTA_M
+# the same comparison gives about 0.001 m. The bundled objects keep their tessellation, the
+# one every published figure was measured on.
+ROUND_SAGITTA_M = 2.5e-6
 
 
 @dataclass(frozen=True)
@@ -38,7 +48,7 @@ class BundledObject:
     name: str
     mass_kg: float
     description: str
-    build: Callable[[], trimesh.Trimesh]
+    build: Callable[[float | None], trimesh.Trimesh]  # rolling sagitta (m), None: as bundled -> mesh
     body_rgb: tuple[int, int, int]
     accent_rgb: tuple[int, int, int]
     accent_above_m: float  # z above which the accent colour (cap, rim) is used
@@ -54,7 +64,7 @@ def _union(meshes: list[trimesh.Trimesh]) -> trimesh.Trimesh:
     return trimesh.boolean.union(meshes, engine="manifold")
 
 
-def _bottle() -> trimesh.Trimesh:
+def _bottle(sagitta_m: float | None) -> trimesh.Trimesh:
     # A squeeze bottle like the YCB mustard bottle: an oval body 0.096 x 0.060 m,
     # bulging low, tapering to a shoulder, with an off-centre cap; 0.19 m tall.
     z_body = np.linspace(0.0, 0.160, 40)
@@ -66,7 +76,8 @@ def _bottle() -> trimesh.Trimesh:
     z_fillet = 0.004 - 0.004 * np.cos(fillet)
     radius = np.concatenate([[0.0], r_fillet, r_body[z_body > 0.004], [0.016, 0.0]])
     height = np.concatenate([[0.0], z_fillet, z_body[z_body > 0.004], [0.163, 0.163]])
-    body = _revolve(radius, height, sections=64)
+    sections = 64 if sagitta_m is None else sections_for(float(radius.max()), sagitta_m)
+    body = _revolve(radius, height, sections=sections)
     body.apply_scale([1.0, 0.64, 1.0])
     cap = trimesh.creation.cylinder(radius=0.0135, height=0.022, sections=32)
     cap.apply_translation([0.008, 0.0, 0.171])
@@ -77,15 +88,16 @@ def _bottle() -> trimesh.Trimesh:
     return mesh
 
 
-def _can() -> trimesh.Trimesh:
+def _can(sagitta_m: float | None) -> trimesh.Trimesh:
     # A soup can: radius 0.034 m, height 0.10 m, with rims 1 mm proud at both ends.
     radius = np.array([0.0, 0.0335, 0.034, 0.034, 0.0335, 0.0])
     height = np.array([0.0, 0.0, 0.002, 0.098, 0.100, 0.100])
-    return _revolve(radius, height, sections=72)
+    return _revolve(radius, height, sections=72 if sagitta_m is None else sections_for(0.034, sagitta_m))
 
 
-def _mug() -> trimesh.Trimesh:
+def _mug(sagitta_m: float | None) -> trimesh.Trimesh:
     # A mug: outer radius 0.04 m, height 0.095 m, 3 mm wall, 6 mm floor, a ring handle.
+    # The handle keeps it from rolling, so ``sagitta_m`` is not used.
     outer = trimesh.creation.cylinder(radius=0.040, height=0.095, sections=64)
     outer.apply_translation([0, 0, 0.0475])
     cavity = trimesh.creation.cylinder(radius=0.037, height=0.095, sections=64)
@@ -120,9 +132,14 @@ def _lookup(name: str) -> BundledObject:
     return OBJECTS[name]
 
 
-def make_object(name: str) -> trimesh.Trimesh:
-    """Watertight geometry of a bundled object, metres, standing on z = 0, no texture."""
-    mesh = _lookup(name).build()
+def make_object(name: str, rolling_sagitta_m: float | None = None) -> trimesh.Trimesh:
+    """Watertight geometry of a bundled object, metres, standing on z = 0, no texture.
+
+    ``rolling_sagitta_m``: None for the bundled object; a value tessellates the bottle's body
+    or the can so that their flats lie at most that far inside the round surface they stand
+    for (``benchmarks/bench_tessellation.py`` measures what that does). The mug's handle
+    keeps it from rolling; it is not changed."""
+    mesh = _lookup(name).build(rolling_sagitta_m)
     mesh = trimesh.Trimesh(mesh.vertices, mesh.faces, process=True)
     mesh.fix_normals()
     assert mesh.is_watertight, f"bundled object {name} is not watertight"
@@ -159,14 +176,15 @@ def _texture(obj: BundledObject, height_m: float, seed: int) -> Image.Image:
     return Image.fromarray(img.astype(np.uint8))
 
 
-def make_textured_object(name: str, seed: int = 0) -> trimesh.Trimesh:
-    """The bundled object with a cylindrical UV map and procedural texture.
+def make_textured_object(name: str, seed: int = 0, rolling_sagitta_m: float | None = None) -> trimesh.Trimesh:
+    """The bundled object with a cylindrical UV map and procedural texture (``rolling_sagitta_m``:
+    as in :func:`make_object`).
 
     Vertices are split where the UV map has a seam (as any textured mesh), so use
     :func:`make_object` where a merged, watertight vertex set matters.
     """
     obj = _lookup(name)
-    solid = make_object(name)
+    solid = make_object(name, rolling_sagitta_m)
     normals = solid.vertex_normals.copy()
     corners = solid.vertices[solid.faces]  # (F, 3, 3)
     u = (np.arctan2(corners[..., 1], corners[..., 0]) / (2 * np.pi)) % 1.0
