@@ -30,8 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import markdown_table, write_section  # noqa: E402
 
 
-def _variants(name: str, sagittas_m: list[float]) -> dict[str, "object"]:
-    """Label -> watertight mesh of each candidate description of object ``name``."""
+def _variants(name: str, sagittas_m: list[float]) -> dict:
+    """Label -> watertight trimesh of each candidate description of object ``name``."""
     from real2sim.geometry.objects import ROUND_SAGITTA_M, make_object
 
     out = {"as bundled": make_object(name)}
