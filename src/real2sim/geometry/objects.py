@@ -92,7 +92,7 @@ def _can(sagitta_m: float | None) -> trimesh.Trimesh:
     # A soup can: radius 0.034 m, height 0.10 m, with rims 1 mm proud at both ends.
     radius = np.array([0.0, 0.0335, 0.034, 0.034, 0.0335, 0.0])
     height = np.array([0.0, 0.0, 0.002, 0.098, 0.100, 0.100])
-    return _revolve(radius, height, sections=72 if sagitta_m is None else sections_for(0.034, sagitta_m))
+    return _revolve(radius, height, sections=72 if sagitta_m is None else sections_for(float(radius.max()), sagitta_m))
 
 
 def _mug(sagitta_m: float | None) -> trimesh.Trimesh:
