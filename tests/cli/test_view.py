@@ -108,3 +108,63 @@ def test_model_drake_cannot_load_is_one_line(case, text, can_asset, tmp_path, ca
     code, out, err = run_cli(capsys, "view", asset, "--seconds", "0")
     assert_one_line(code, err, text)
     assert "http://" not in out, "no server for a model that does not load"
+
+
+# ------------------------------------------------------------------------- issue 33: hangs and addresses
+
+
+def test_unresolvable_host_is_one_line_at_once(can_asset):
+    """Issue 33 #4: a name that does not resolve made Drake's server stall ~200 s (and ignore SIGTERM)
+    before saying anything; now it is one line and exit 2 (the subprocess timeout catches a stall)."""
+    import subprocess
+    import sys
+
+    for name in ("no.such.host.invalid", "nosuchhost"):
+        proc = subprocess.run([sys.executable, "-m", "real2sim", "view", str(can_asset), "--host", name,
+                               "--seconds", "1"], capture_output=True, text=True, timeout=60)
+        assert_one_line(proc.returncode, proc.stderr, f"--host {name}: no such host")
+        assert "http://" not in proc.stdout
+
+
+def test_stalled_resolver_is_bounded_and_sigterm_stops_the_wait(can_asset):
+    """A resolver that never answers: the wait ends after the timeout with one line; SIGTERM during the
+    wait stops the command at once (exit 143), since the main thread only waits on a daemon thread."""
+    import signal
+    import subprocess
+    import sys
+    import threading
+
+    from real2sim.cli.view import resolve_host
+    from real2sim.formats.errors import UserInputError
+
+    never = threading.Event()
+    with pytest.raises(UserInputError, match="did not resolve within 0.2 s"):
+        resolve_host("stalled.example", timeout_s=0.2, resolve=lambda *a, **k: never.wait())
+    script = ("import sys, threading, socket\n"
+              "def stalled(*args, **kwargs):\n"
+              "    print('resolving', flush=True)\n"
+              "    threading.Event().wait()\n"
+              "socket.getaddrinfo = stalled\n"
+              "import real2sim.cli.view as view\n"
+              "view.RESOLVE_TIMEOUT_S = 600.0\n"
+              "from real2sim.cli import main\n"
+              "sys.exit(main(['view', sys.argv[1], '--host', 'stalled.example']))\n")
+    proc = subprocess.Popen([sys.executable, "-c", script, str(can_asset)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "resolving"
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert err.strip().splitlines()[-1] == "real2sim: terminated" and "Traceback" not in err, err
+
+
+def test_every_interface_prints_an_address_a_browser_can_open(can_asset, capsys):
+    """Issue 33 #10: --host 0.0.0.0 (or '*') printed http://0.0.0.0:7000, which no browser opens."""
+    for host in ("0.0.0.0", "*"):
+        capsys.readouterr()
+        assert main(["view", str(can_asset), "--host", host, "--seconds", "0.1"]) == 0
+        out = capsys.readouterr().out
+        assert "0.0.0.0:" not in out and "http://localhost:" in out and "all interfaces" in out, out

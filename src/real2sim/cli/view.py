@@ -69,15 +69,81 @@ def load_model(urdf: Path):
     return builder, scene_graph
 
 
-def start_meshcat(host: str, port: int | None):
+#: How long a --host name may take to resolve, s: a name the resolver cannot answer otherwise
+#: stalls Drake's server for minutes before it says anything.
+RESOLVE_TIMEOUT_S = 5.0
+#: Addresses that mean "every interface": a browser cannot open them.
+_ANY_ADDRESS = ("*", "0.0.0.0", "::")
+
+
+def resolve_host(host: str, timeout_s: float = RESOLVE_TIMEOUT_S, resolve=None) -> str:
+    """The numeric address to listen on for ``host`` (``*`` stays ``*``); UserInputError (one line)
+    when the name does not resolve, or not within ``timeout_s``.
+
+    The resolver runs in a daemon thread that the main thread waits for with a timeout: a system
+    resolver that never answers cannot stall the command, and SIGTERM or Ctrl-C (handled in the
+    main thread) still stop it while it waits. ``resolve``: the resolver, ``socket.getaddrinfo`` by
+    default (a parameter so that a stalled one can be tried).
+    """
+    import ipaddress
+    import socket
+    import threading
+
+    from real2sim.formats.errors import UserInputError
+
+    if host == "*":
+        return host
+    try:
+        return str(ipaddress.ip_address(host))
+    except ValueError:
+        pass
+    resolve = resolve or socket.getaddrinfo
+    found: list = []
+
+    def work() -> None:
+        try:
+            found.append(resolve(host, None, type=socket.SOCK_STREAM))
+        except (OSError, UnicodeError) as exc:  # socket.gaierror is an OSError
+            found.append(exc)
+
+    worker = threading.Thread(target=work, name="real2sim-resolve-host", daemon=True)
+    worker.start()
+    worker.join(timeout_s)
+    if not found:
+        raise UserInputError(f"--host {host}: the name did not resolve within {timeout_s:g} s; "
+                             "pass an IP address (127.0.0.1: this machine only)")
+    if isinstance(found[0], BaseException) or not found[0]:
+        raise UserInputError(f"--host {host}: no such host (the name does not resolve); pass an IP address "
+                             "or a name of this machine")
+    # IPv4 first: Drake's server and most browsers' "localhost" meet there.
+    addresses = sorted({info[4][0] for info in found[0]}, key=lambda a: ":" in a)
+    return addresses[0]
+
+
+def browser_urls(host: str, port: int) -> tuple[str, str | None]:
+    """(the URL to open on this machine, a note for other machines or None) for a server on
+    ``host`` (as the user gave it) and ``port``. An every-interface address is not a place a
+    browser can go: point at localhost and name this machine for the others."""
+    import socket
+
+    if host in _ANY_ADDRESS:
+        return (f"http://localhost:{port}",
+                f"listening on all interfaces; from another machine open http://{socket.gethostname()}:{port}")
+    shown = f"[{host}]" if ":" in host else host
+    return f"http://{shown}:{port}", None
+
+
+def start_meshcat(host: str, port: int | None, address: str | None = None):
     """Drake's Meshcat on ``host`` (``port`` None: the first free of 7000..7099); UserInputError
-    when it cannot listen there (port in use, not allowed, or no such interface)."""
+    when it cannot listen there (port in use, not allowed, or no such interface). ``address``:
+    ``host`` already resolved; None resolves it here, with a bounded wait (:func:`resolve_host`)."""
     from pydrake.geometry import Meshcat, MeshcatParams
 
     from real2sim.formats.errors import UserInputError
 
+    address = address or resolve_host(host)
     try:
-        return Meshcat(MeshcatParams(host=host, port=port))
+        return Meshcat(MeshcatParams(host=address, port=port))
     except RuntimeError:
         if port is None:
             raise UserInputError(f"cannot listen on {host}, ports 7000..7099 (all in use, or no such interface); "
@@ -99,8 +165,9 @@ def run(args: argparse.Namespace) -> int:
         if not urdfs:
             raise UserInputError(f"no representation {args.representation!r} in {args.asset}")
     urdf = urdfs[0]
+    address = resolve_host(args.host)  # before the model: a name that does not resolve fails at once
     builder, scene_graph = load_model(urdf)  # a model Drake cannot load fails here, before a port is opened
-    meshcat = start_meshcat(args.host, args.port)
+    meshcat = start_meshcat(args.host, args.port, address)
     for role, prefix in ((Role.kIllustration, "visual"), (Role.kProximity, "collision")):
         MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, MeshcatVisualizerParams(role=role, prefix=prefix))
     diagram = builder.Build()
@@ -108,7 +175,10 @@ def run(args: argparse.Namespace) -> int:
         diagram.ForcedPublish(diagram.CreateDefaultContext())
     except RuntimeError as exc:
         raise UserInputError(f"cannot show {urdf}: {_first_line(exc)}") from None
-    print(f"showing {urdf} at {meshcat.web_url()}  (Ctrl-C to stop)", flush=True)
+    url, note = browser_urls(args.host, meshcat.port())
+    print(f"showing {urdf} at {url}  (Ctrl-C to stop)", flush=True)
+    if note:
+        print(note, flush=True)
     deadline = None if args.seconds is None else time.monotonic() + args.seconds
     try:
         while deadline is None or time.monotonic() < deadline:
