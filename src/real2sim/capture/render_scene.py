@@ -1,5 +1,6 @@
-"""The capture's scene in Drake: the textured table and object under a ring of lights, rendered
-by the VTK engine (colour, depth along the optical axis, labels)."""
+"""The capture's scene in Drake: the textured table (or a thin stand against a dark background) and
+the object under a ring of lights, rendered by the VTK engine (colour, depth along the optical axis,
+labels)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,10 @@ from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics
 
 OBJECT_LABEL = 1
 TABLE_LABEL = 2
+STAND_LABEL = 3
+
+#: Background of a capture without a table: near black, like the dark drapes of real turntable rigs.
+DARK_BACKGROUND = (0.04, 0.04, 0.045)
 
 
 def _lights():
@@ -35,14 +40,20 @@ def _lights():
 
 
 class RenderScene:
-    """A SceneGraph with the textured table and object, and a VTK renderer."""
+    """A SceneGraph with the textured table and object, and a VTK renderer.
 
-    def __init__(self, obj_path: Path, world_from_mesh: np.ndarray, table_texture: Path,
-                 table_size_m: float, cam: CameraIntrinsics):
+    ``table_texture`` None: no table; instead ``stand_m`` (radius, length) is a plain grey post
+    under the object, its top at z = 0, labelled ``STAND_LABEL``, against a dark background.
+    ``far_m``: the far clipping distance (depth is measured to 0.9 of it)."""
+
+    def __init__(self, obj_path: Path, world_from_mesh: np.ndarray, table_texture: Path | None,
+                 table_size_m: float, cam: CameraIntrinsics, stand_m: tuple[float, float] | None = None,
+                 far_m: float = 10.0):
         from pydrake.geometry import (
             Box,
             ClippingRange,
             ColorRenderCamera,
+            Cylinder,
             DepthRange,
             DepthRenderCamera,
             GeometryInstance,
@@ -53,7 +64,7 @@ class RenderScene:
             RenderEngineVtkParams,
             SceneGraph,
         )
-        from pydrake.geometry import RenderLabel
+        from pydrake.geometry import RenderLabel, Rgba
         from pydrake.math import RigidTransform
         from pydrake.systems.framework import DiagramBuilder
         from pydrake.systems.sensors import CameraInfo
@@ -61,19 +72,28 @@ class RenderScene:
         builder = DiagramBuilder()
         self.sg = builder.AddSystem(SceneGraph())
         params = RenderEngineVtkParams()
-        params.default_clear_color = [0.25, 0.25, 0.27]
+        params.default_clear_color = [0.25, 0.25, 0.27] if table_texture is not None else list(DARK_BACKGROUND)
         params.lights = _lights()
         self.sg.AddRenderer("vtk", MakeRenderEngineVtk(params))
         self.source = self.sg.RegisterSource("capture")
 
-        table_thickness = 0.04
-        table = GeometryInstance(RigidTransform([0, 0, -table_thickness / 2]),
-                                 Box(table_size_m, table_size_m, table_thickness), "table")
-        props = PerceptionProperties()
-        props.AddProperty("label", "id", RenderLabel(TABLE_LABEL))
-        props.AddProperty("phong", "diffuse_map", str(table_texture))
-        table.set_perception_properties(props)
-        self.table_id = self.sg.RegisterAnchoredGeometry(self.source, table)
+        if table_texture is not None:
+            table_thickness = 0.04
+            table = GeometryInstance(RigidTransform([0, 0, -table_thickness / 2]),
+                                     Box(table_size_m, table_size_m, table_thickness), "table")
+            props = PerceptionProperties()
+            props.AddProperty("label", "id", RenderLabel(TABLE_LABEL))
+            props.AddProperty("phong", "diffuse_map", str(table_texture))
+            table.set_perception_properties(props)
+            self.table_id = self.sg.RegisterAnchoredGeometry(self.source, table)
+        elif stand_m is not None:
+            radius_m, length_m = stand_m
+            stand = GeometryInstance(RigidTransform([0, 0, -length_m / 2]), Cylinder(radius_m, length_m), "stand")
+            props = PerceptionProperties()
+            props.AddProperty("label", "id", RenderLabel(STAND_LABEL))
+            props.AddProperty("phong", "diffuse", Rgba(0.35, 0.35, 0.35, 1.0))
+            stand.set_perception_properties(props)
+            self.sg.RegisterAnchoredGeometry(self.source, stand)
 
         obj = GeometryInstance(RigidTransform(world_from_mesh), Mesh(str(obj_path)), "object")
         props = PerceptionProperties()
@@ -85,9 +105,9 @@ class RenderScene:
         self.context = self.diagram.CreateDefaultContext()
         self.sg_context = self.sg.GetMyContextFromRoot(self.context)
         info = CameraInfo(cam.width, cam.height, cam.fl_x, cam.fl_y, cam.cx, cam.cy)
-        core = RenderCameraCore("vtk", info, ClippingRange(0.01, 10.0), RigidTransform())
+        core = RenderCameraCore("vtk", info, ClippingRange(0.01, far_m), RigidTransform())
         self.color_cam = ColorRenderCamera(core, False)
-        self.depth_cam = DepthRenderCamera(core, DepthRange(0.02, 9.0))
+        self.depth_cam = DepthRenderCamera(core, DepthRange(0.02, 0.9 * far_m))
         self._RigidTransform = RigidTransform
 
     def remove_object(self) -> None:

@@ -4,13 +4,16 @@ World frame (metres): the table top is the plane z = 0, the object stands on it
 with the centre of its footprint at the origin; z is up. The robot arm's base
 sits at one side of the table (``ReachabilityModel.base_xy_m``), so its wrist
 camera reaches the far side of the object only from high elevations -- the
-uneven coverage of the paper's Fig. 4.
+uneven coverage of the paper's Fig. 4. Captures like real rigs' (a turntable ring, a long lens,
+views cut by the image border, a thin stand instead of the table, exposure jitter, JPEG) are
+``CaptureConfig`` options (:mod:`real2sim.capture.hard_rigs`); without a table the object's lowest
+point is still z = 0.
 
 Output (a nerfstudio dataset, see ``docs/capture.md``)::
 
     OUT/
       transforms.json           poses as the robot reports them (exact poses + calibration noise)
-      images/frame_00000.png    colour, 8-bit RGB
+      images/frame_00000.png    colour, 8-bit RGB (frame_00000.jpg with ``jpeg_quality``)
       masks/frame_00000.png     rendered object mask, 255 = object
       background/frame_00000.png  (with_background) the empty table from the same poses
       ground_truth/
@@ -28,22 +31,19 @@ import json
 import shutil
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
-from real2sim.capture.render_scene import OBJECT_LABEL, TABLE_LABEL, RenderScene  # noqa: F401 (labels: public here)
+from real2sim.capture.capture_output import render_views, save_png, write_transforms_files
+from real2sim.capture.hard_rigs import colour_gains, cut_off_poses, ring_poses, stand_size_m
+from real2sim.capture.render_scene import (OBJECT_LABEL, STAND_LABEL, TABLE_LABEL,  # noqa: F401 (labels: public here)
+                                           RenderScene)
 from real2sim.capture.textures import (export_textured_obj, has_texture, procedural_texture,  # noqa: F401
                                        with_procedural_texture)
-from real2sim.formats.dataset import (
-    CameraIntrinsics,
-    Dataset,
-    Frame,
-    realsense_d435_intrinsics,
-    write_transforms,
-)
+from real2sim.formats.dataset import CameraIntrinsics, realsense_d435_intrinsics
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import atomic_output_dir
 from real2sim.formats.progress import ProgressFn, null_progress
@@ -87,6 +87,18 @@ class CaptureConfig:
     ``distance_factors`` scale the camera distance at which the object's bounding
     sphere fills ``fill_fraction`` of the vertical field of view.
     ``elevations_deg``: the rings of the camera path, seen from the look-at point.
+
+    Hard rigs (issue #28; the defaults leave the capture as it was, byte for byte):
+    ``ring_elevation_deg``: a turntable ring -- ``views`` cameras evenly around one horizontal ring
+    at this elevation (degrees) seen from the object's middle (0 = level with it), not the arm's
+    hemisphere. ``focal_px`` (pixels of the written images) or ``fov_deg`` (horizontal field of
+    view, degrees): a lens other than the D435's (square pixels, centred principal point); the
+    cameras stand back until the object fills ``fill_fraction`` of the view, on a tripod (the arm's
+    distance limits are lifted, its elevation limits kept). ``cut_off_fraction``: that fraction of
+    the views turned so that the image border cuts the object. ``no_table``: the object on a thin
+    post against a dark background; its lowest point stays at z = 0. ``exposure_jitter_stops``,
+    ``white_balance_jitter``: per-view gains (RMS stops; RMS relative gain of red and blue).
+    ``jpeg_quality``: images/*.jpg at that quality (masks stay PNG); None = PNG.
     """
 
     views: int = 200
@@ -103,8 +115,20 @@ class CaptureConfig:
     reach: ReachabilityModel = field(default_factory=ReachabilityModel)
     table_size_m: float = 1.6
     texture_seed: int = 7
+    ring_elevation_deg: float | None = None
+    focal_px: float | None = None
+    fov_deg: float | None = None
+    cut_off_fraction: float = 0.0
+    no_table: bool = False
+    exposure_jitter_stops: float = 0.0
+    white_balance_jitter: float = 0.0
+    jpeg_quality: int | None = None
 
     def camera(self) -> CameraIntrinsics:
+        if self.focal_px is not None or self.fov_deg is not None:
+            fl = self.focal_px if self.focal_px is not None else 0.5 * self.width / np.tan(np.radians(self.fov_deg) / 2)
+            return CameraIntrinsics(width=self.width, height=self.height, fl_x=float(fl), fl_y=float(fl),
+                                    cx=self.width / 2.0, cy=self.height / 2.0)
         if self.intrinsics is not None:
             if (self.intrinsics.width, self.intrinsics.height) != (self.width, self.height):
                 return self.intrinsics.scaled(self.width, self.height)
@@ -120,6 +144,20 @@ class CaptureConfig:
             v = getattr(self, name)
             if not np.isfinite(v) or v < 0:
                 raise UserInputError(f"--{name.replace('_', '-')} must be >= 0 (got {v})")
+        _validate_hard_rig(self)
+
+
+def _validate_hard_rig(c: CaptureConfig) -> None:
+    """UserInputError (naming the flag) for hard-rig settings out of range; the CLI's types say the same."""
+    checks = [("--ring-elevation-deg", c.ring_elevation_deg, -85.0, 85.0), ("--focal-px", c.focal_px, 1.0, 1e5),
+              ("--fov-deg", c.fov_deg, 1.0, 170.0), ("--cut-off-fraction", c.cut_off_fraction, 0.0, 1.0),
+              ("--exposure-jitter", c.exposure_jitter_stops, 0.0, 3.0),
+              ("--white-balance-jitter", c.white_balance_jitter, 0.0, 1.0), ("--jpeg-quality", c.jpeg_quality, 1, 100)]
+    for flag, value, lo, hi in checks:
+        if value is not None and not (np.isfinite(value) and lo <= value <= hi):
+            raise UserInputError(f"{flag} must be in {lo:g}..{hi:g} (got {value})")
+    if c.focal_px is not None and c.fov_deg is not None:
+        raise UserInputError("give --focal-px or --fov-deg, not both")
 
 
 @dataclass(frozen=True)
@@ -181,6 +219,12 @@ def camera_poses(config: CaptureConfig, target_m: np.ndarray, radius_m: float) -
     cam = config.camera()
     half_fov_y = np.arctan(0.5 * cam.height / cam.fl_y)
     base_dist = radius_m / np.tan(config.fill_fraction * half_fov_y)
+    if config.ring_elevation_deg is not None:
+        return ring_poses(config.views, config.ring_elevation_deg, base_dist * config.distance_factors[0], target_m)
+    reach = config.reach
+    if config.focal_px is not None or config.fov_deg is not None:
+        # Another lens puts the camera nearer or farther than the wrist can: a tripod, not the arm.
+        reach = replace(reach, r_min_m=0.0, r_max_m=np.inf)
     dists = base_dist * np.asarray(config.distance_factors, dtype=float)
     elevs = np.radians(np.asarray(config.elevations_deg, dtype=float))
     per_unit = max(config.views / (len(dists) * len(elevs)), 1.0)
@@ -194,7 +238,7 @@ def camera_poses(config: CaptureConfig, target_m: np.ndarray, radius_m: float) -
                 pos = np.c_[d * np.cos(e) * np.cos(az), d * np.cos(e) * np.sin(az), np.full(n_az, d * np.sin(e))]
                 cands.append(target_m + pos)
         cands = np.concatenate(cands)
-        ok = config.reach.reachable(cands, target_m)
+        ok = reach.reachable(cands, target_m)
         if ok.sum() >= config.views:
             break
         if len(cands) > max(20000, 50 * config.views) or (ok.sum() == 0 and len(cands) > 2000):
@@ -225,14 +269,33 @@ def perturb_poses(c2w: np.ndarray, noise_mm: float, noise_deg: float, seed: int)
     return out
 
 
-def _save_png(path: Path, array: np.ndarray) -> None:
-    from PIL import Image
+#: Farther than this, a camera is refused: depth is written in whole millimetres as 16 bits.
+MAX_CAMERA_DISTANCE_M = 25.0
+#: With a table, every camera must stand at least this far above its top (else it looks at its edge or under it).
+MIN_CAMERA_HEIGHT_M = 0.005
 
-    Image.fromarray(array).save(path, compress_level=1)
 
+def rig_poses(config: CaptureConfig, mesh: trimesh.Trimesh, world_from_mesh: np.ndarray, target_m: np.ndarray,
+              radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """(exact camera-to-world poses (views, 4, 4), OpenGL; indices of the views cut by the image border).
 
-def _frame_name(i: int) -> str:
-    return f"frame_{i:05d}.png"
+    The arm's hemisphere (:func:`camera_poses`), or a turntable ring around the object's middle,
+    then the cut-off views turned (:func:`~real2sim.capture.hard_rigs.cut_off_poses`)."""
+    if config.ring_elevation_deg is not None:
+        target_m = np.array([0.0, 0.0, 0.5 * float(np.ptp(mesh.bounds[:, 2]))])  # elevation 0: level with the middle
+    exact = camera_poses(config, target_m, radius_m)
+    dist_m = float(np.linalg.norm(exact[:, :3, 3] - target_m, axis=1).max())
+    if dist_m > MAX_CAMERA_DISTANCE_M:
+        raise UserInputError(f"with this lens the cameras would stand {dist_m:.1f} m from the object to see it whole "
+                             f"(at most {MAX_CAMERA_DISTANCE_M:g} m): use a shorter --focal-px or a wider --fov-deg")
+    if not config.no_table and exact[:, 2, 3].min() < MIN_CAMERA_HEIGHT_M:
+        raise UserInputError(f"--ring-elevation-deg {config.ring_elevation_deg:g} puts the cameras below the table top "
+                             f"(z = {exact[:, 2, 3].min():.3f} m); raise it, or capture with --no-table")
+    cut = np.zeros(0, dtype=int)
+    if config.cut_off_fraction > 0:
+        points_w = trimesh.transform_points(mesh.vertices, world_from_mesh)
+        exact, cut = cut_off_poses(exact, config.camera(), points_w, config.cut_off_fraction, config.seed)
+    return exact, cut
 
 
 def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: CaptureConfig = CaptureConfig(),
@@ -242,7 +305,8 @@ def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: Cap
     ``mesh``: a trimesh (metres; textured or not -- untextured meshes get a
     procedural texture so feature matching has something to hold on to) or a
     mesh file path. The folder appears whole or not at all. ``progress("rendering", done, total)``
-    is called after each rendered view.
+    is called after each rendered view. ``config.no_table``: on a thin stand instead, and the
+    dataset's transforms.json says ``"table_plane": false`` (``formats.dataset.TABLE_PLANE_KEY``).
     """
     from real2sim.formats.mesh_io import check_object_size, load_mesh, validate_mesh
 
@@ -256,8 +320,12 @@ def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: Cap
         mesh = with_procedural_texture(mesh, seed=config.texture_seed + 1)
     cam = config.camera()
     world_from_mesh, target, radius = object_frame(mesh)
-    exact = camera_poses(config, target, radius)
+    exact, cut = rig_poses(config, mesh, world_from_mesh, target, radius)
     noisy = perturb_poses(exact, config.pose_noise_mm, config.pose_noise_deg, config.seed)
+    jitter = config.exposure_jitter_stops > 0 or config.white_balance_jitter > 0
+    gains = colour_gains(len(exact), config.exposure_jitter_stops, config.white_balance_jitter,
+                         config.seed) if jitter else None
+    far_m = max(10.0, 2.0 * float(np.linalg.norm(exact[:, :3, 3], axis=1).max()))
 
     with atomic_output_dir(Path(out_dir), overwrite=overwrite) as tmp:
         gt = tmp / "ground_truth"
@@ -266,64 +334,27 @@ def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: Cap
         if config.with_background:
             (tmp / "background").mkdir()
         export_textured_obj(mesh, gt / "mesh.obj")
+        where = "the object's lowest point z=0, no table" if config.no_table else "table top z=0"
         (gt / "object_pose.json").write_text(json.dumps({
             "world_from_mesh": world_from_mesh.tolist(),
-            "note": "4x4 placing ground_truth/mesh.obj in the world frame (table top z=0), metres"}, indent=2))
+            "note": f"4x4 placing ground_truth/mesh.obj in the world frame ({where}), metres"}, indent=2))
         # The rendered copy splits vertices at sharp edges (30 deg) so that caps do not darken
         # the sides through averaged normals; the ground-truth mesh.obj stays as given.
         render_dir = Path(tempfile.mkdtemp(prefix="render-", dir=tmp))
         export_textured_obj(trimesh.graph.smooth_shade(mesh, angle=np.radians(30)), render_dir / "object.obj")
-        table_tex = render_dir / "table_texture.png"
-        _save_png(table_tex, procedural_texture(2048, config.texture_seed))
-
-        scene = RenderScene(render_dir / "object.obj", world_from_mesh, table_tex, config.table_size_m, cam)
+        table_tex = None
+        if not config.no_table:
+            table_tex = render_dir / "table_texture.png"
+            save_png(table_tex, procedural_texture(2048, config.texture_seed))
+        stand = stand_size_m(mesh.bounds) if config.no_table else None
+        scene = RenderScene(render_dir / "object.obj", world_from_mesh, table_tex, config.table_size_m, cam,
+                            stand_m=stand, far_m=far_m)
         n = len(exact)
         t_render = time.perf_counter()
-        frames_noisy, frames_exact = _render_views(scene, tmp, exact, noisy, config.with_background,
-                                                   progress or null_progress)
+        frames_noisy, frames_exact = render_views(scene, tmp, exact, noisy, config, gains, progress or null_progress)
         render_s = time.perf_counter() - t_render
         del scene
         shutil.rmtree(render_dir)
-
-        cfg = asdict(config)
-        cfg["intrinsics"] = asdict(cam)
-        extra = {"real2sim": {"source": "simulated capture (Drake VTK)", "pose_noise_mm": config.pose_noise_mm,
-                              "pose_noise_deg": config.pose_noise_deg, "seed": config.seed,
-                              "world_frame": "table top z=0, z up, metres"}}
-        write_transforms(tmp / "transforms.json", Dataset(tmp, cam, tuple(frames_noisy), extra))
-        # Same file_paths as the top level: they are relative to the dataset folder, not to ground_truth/.
-        write_transforms(gt / "transforms.json", Dataset(tmp, cam, tuple(frames_exact), {"real2sim": {
-            "source": "exact poses of the simulated capture", "paths_relative_to": ".."}}))
-        (gt / "capture_config.json").write_text(json.dumps(cfg, indent=2, default=list))
+        write_transforms_files(tmp, config, cam, frames_noisy, frames_exact, cut, gains)
     return CaptureResult(out_dir=Path(out_dir).resolve(), num_views=n, render_seconds=render_s,
                          total_seconds=time.perf_counter() - t_start)
-
-
-def _render_views(scene: RenderScene, tmp: Path, exact: np.ndarray, noisy: np.ndarray, with_background: bool,
-                  progress: ProgressFn) -> tuple[list[Frame], list[Frame]]:
-    """Every view's image, mask and depth (and the empty table's, ``with_background``) into ``tmp``;
-    the frames with the reported (``noisy``) poses and with the ``exact`` ones."""
-    gt = tmp / "ground_truth"
-    n = len(exact)
-    total = n * (2 if with_background else 1)
-    frames_noisy, frames_exact = [], []
-    for i in range(n):
-        name = _frame_name(i)
-        rgb, depth_m, label = scene.render(exact[i])
-        mask = np.where(label == OBJECT_LABEL, 255, 0).astype(np.uint8)
-        _save_png(tmp / "images" / name, rgb)
-        _save_png(tmp / "masks" / name, mask)
-        shutil.copyfile(tmp / "masks" / name, gt / "masks" / name)
-        depth_mm = np.where(np.isfinite(depth_m), np.round(depth_m * 1000.0), 0)
-        _save_png(gt / "depth" / name, np.clip(depth_mm, 0, 65535).astype(np.uint16))
-        fp, mp = f"images/{name}", f"masks/{name}"
-        frames_noisy.append(Frame(file_path=fp, transform_matrix=noisy[i], mask_path=mp))
-        frames_exact.append(Frame(file_path=fp, transform_matrix=exact[i], mask_path=mp))
-        progress("rendering", i + 1, total)
-    if with_background:
-        scene.remove_object()
-        for i in range(n):
-            rgb, _, _ = scene.render(exact[i], depth=False, label=False)
-            _save_png(tmp / "background" / _frame_name(i), rgb)
-            progress("rendering", n + i + 1, total)
-    return frames_noisy, frames_exact

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from real2sim.cli import options
 from real2sim.cli.asset import add_mesh_units_argument
-from real2sim.cli.options import COLMAP_SEED_MAX, device, integer, nonnegative, seed
+from real2sim.cli.options import COLMAP_SEED_MAX, device, integer, nonnegative, number, seed
 from real2sim.cli.reconstruct import TABLE_Z_M
 
 #: Image sides, px (the capture's renderer and COLMAP work within this).
@@ -15,6 +15,17 @@ IMAGE_PX = integer(16, 8192)
 #: RMS calibration noise of robot camera poses: position, mm, and orientation, degrees.
 NOISE_MM = nonnegative(100.0)
 NOISE_DEG = nonnegative(30.0)
+#: Hard-rig settings (see CaptureConfig): ring elevation, degrees; focal length, px; horizontal field
+#: of view, degrees; fractions; exposure, stops; JPEG quality.
+RING_ELEVATION_DEG = number(-85.0, 85.0)
+FOCAL_PX = number(1.0, 1e5)
+FOV_DEG = number(1.0, 170.0)
+FRACTION = number(0.0, 1.0)
+EXPOSURE_STOPS = nonnegative(3.0)
+WHITE_BALANCE = nonnegative(1.0)
+JPEG_QUALITY = integer(1, 100)
+#: --jpeg without --jpeg-quality.
+DEFAULT_JPEG_QUALITY = 90
 
 
 def register(sub) -> None:
@@ -25,7 +36,9 @@ def register(sub) -> None:
         "wrist camera (RealSense D435-like, fx = fy = 615 px at 640x480) looks at it from rings of poses the arm "
         "can reach (its base at one side of the table, so the far side is seen only from above). Writes a "
         "nerfstudio dataset: transforms.json (poses with calibration noise), images/, masks/, and ground_truth/ "
-        "(exact poses, depth in mm, the mesh and its pose).",
+        "(exact poses, depth in mm, the mesh and its pose). The 'hard rigs' flags make captures like real "
+        "photographs: a turntable ring, a long lens, views cut by the image border, no table, exposure and white-"
+        "balance jitter, JPEG.",
         epilog="example: real2sim capture bottle --out bottle_ds --views 120   (a bundled object name or a mesh file)",
     )
     p.add_argument("mesh", help="object mesh in metres or --mesh-units (standing on z = 0 is not required), or a "
@@ -43,6 +56,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=seed(), default=0, help="seed of the pose noise (default 0)")
     p.add_argument("--with-background", action="store_true",
                    help="also render the empty table from the same poses into background/ (for mask --method background)")
+    _add_hard_rig_arguments(p)
     options.finish(p)
     p.set_defaults(func=run_capture)
 
@@ -103,6 +117,36 @@ def register(sub) -> None:
     p.set_defaults(func=run_mask)
 
 
+def _add_hard_rig_arguments(p: argparse.ArgumentParser) -> None:
+    """What real capture rigs do (issue #28): each flag alone or together; none given, the capture is as before."""
+    g = p.add_argument_group("hard rigs", "captures like real photographs; masks and ground_truth/ stay exact")
+    g.add_argument("--ring-elevation-deg", type=RING_ELEVATION_DEG, default=None, metavar="DEG",
+                   help="a turntable ring instead of the arm's hemisphere: all views evenly around one horizontal "
+                   "ring at this elevation, degrees, seen from the object's middle (0 = level with it, cameras "
+                   "below its top; negative = from below, needs --no-table)")
+    lens = g.add_mutually_exclusive_group()
+    lens.add_argument("--focal-px", type=FOCAL_PX, default=None, metavar="PX",
+                      help="focal length, pixels of the written images (fx = fy; default D435-like, 615 px at 640 "
+                      "wide; real turntable rigs: > 3000 px at 640x480); the cameras stand back until the object "
+                      "fills 75%% of the view, on a tripod (beyond the arm's reach)")
+    lens.add_argument("--fov-deg", type=FOV_DEG, default=None, metavar="DEG",
+                      help="horizontal field of view, degrees, instead of --focal-px (fx = fy = w / 2 / tan(fov / 2))")
+    g.add_argument("--cut-off-fraction", type=FRACTION, default=0.0, metavar="P",
+                   help="fraction of the views, 0-1, aimed off the object so that the image border cuts 20-40%% "
+                   "of its extent (default 0)")
+    g.add_argument("--no-table", action="store_true",
+                   help="no table: the object on a thin grey post (not in the masks) against a dark background, its "
+                   "lowest point at z = 0; transforms.json says \"table_plane\": false")
+    g.add_argument("--exposure-jitter", type=EXPOSURE_STOPS, default=0.0, metavar="STOPS",
+                   help="RMS per-view exposure change, stops (factors of 2 in linear light; default 0)")
+    g.add_argument("--white-balance-jitter", type=WHITE_BALANCE, default=0.0, metavar="FRACTION",
+                   help="RMS per-view change of the red and blue gains against green, as a fraction "
+                   "(0.1 = about 10%%; default 0)")
+    g.add_argument("--jpeg", action="store_true", help="write images/*.jpg instead of PNG (masks and depth stay PNG)")
+    g.add_argument("--jpeg-quality", type=JPEG_QUALITY, default=None, metavar="Q",
+                   help="JPEG quality, 1-100, with --jpeg (default 90)")
+
+
 def _resolve_mesh(text: str):
     """A mesh file path, or the textured bundled object of that name when no such file exists."""
     path = Path(text)
@@ -119,8 +163,16 @@ def run_capture(args: argparse.Namespace) -> int:
     from real2sim.cli.progress import progress_display
     from real2sim.formats.outputs import check_output_dir
 
+    from real2sim.formats.errors import UserInputError
+
+    if args.jpeg_quality is not None and not args.jpeg:
+        raise UserInputError("--jpeg-quality needs --jpeg")
     cfg = CaptureConfig(views=args.views, width=args.width, height=args.height, pose_noise_mm=args.pose_noise_mm,
-                        pose_noise_deg=args.pose_noise_deg, seed=args.seed, with_background=args.with_background)
+                        pose_noise_deg=args.pose_noise_deg, seed=args.seed, with_background=args.with_background,
+                        ring_elevation_deg=args.ring_elevation_deg, focal_px=args.focal_px, fov_deg=args.fov_deg,
+                        cut_off_fraction=args.cut_off_fraction, no_table=args.no_table,
+                        exposure_jitter_stops=args.exposure_jitter, white_balance_jitter=args.white_balance_jitter,
+                        jpeg_quality=(args.jpeg_quality or DEFAULT_JPEG_QUALITY) if args.jpeg else None)
     cfg.validate()
     check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
     mesh = _resolve_mesh(args.mesh)

@@ -84,6 +84,16 @@ def realsense_d435_intrinsics(width: int = 640, height: int = 480) -> CameraIntr
 MODEL_FRAME_KEYS = ("source", "model_frame", "applied_transform", "ply_file_path")
 
 
+#: Top-level transforms.json key: ``false`` when the images show no table plane (``capture --no-table``:
+#: the object on a thin stand, its lowest point at z = 0). Absent: the table top is the plane z = 0.
+TABLE_PLANE_KEY = "table_plane"
+
+
+def has_table_plane(ds: "Dataset") -> bool:
+    """False when ``ds`` says its images show no table plane (:data:`TABLE_PLANE_KEY`)."""
+    return ds.extra.get(TABLE_PLANE_KEY) is not False
+
+
 #: Per-frame transforms.json key written by ``refine-poses``: whether COLMAP refined that frame's pose
 #: (a frame it could not register keeps the robot's pose, with the robot's noise).
 POSE_REFINED_KEY = "real2sim_pose_refined"
