@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from real2sim.asset.reuse import file_sha256, reuse_collision, reusable_representations
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
 from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.contact import ContactProperties
@@ -251,11 +252,16 @@ def build_asset(
     *,
     overwrite: bool = False,
     progress: ProgressFn | None = None,
+    reuse_from: Path | str | None = None,
 ) -> AssetResult:
     """Build the asset folder ``out_dir`` from the mesh at ``mesh_path`` (metres).
 
     The folder appears whole or not at all. ``progress`` receives one message per step
-    (``total`` 0) and the counted work of each primitive fit.
+    (``total`` 0) and the counted work of each primitive fit. ``reuse_from``: an earlier asset
+    folder; a representation of the same SPEC whose geometry settings are unchanged there (the
+    same mesh bytes and every setting but mass, contact, formats and the list of SPECs, see
+    :func:`reusable_representations`) is copied instead of refitted, its model files rewritten
+    with this build's mass properties, contact and formats.
     """
     say = progress or null_progress
     out_dir = Path(out_dir)
@@ -268,7 +274,9 @@ def build_asset(
     from real2sim.asset.inertia import estimate_physical_properties
 
     with atomic_output_dir(out_dir, overwrite=overwrite, inputs=[mesh_path], made_by="real2sim asset") as tmp:
-        write_asset_config(config_record(config), tmp / ASSET_CONFIG_NAME)
+        write_asset_config({**config_record(config), "input_mesh_sha256": file_sha256(Path(mesh_path))},
+                           tmp / ASSET_CONFIG_NAME)
+        reusable = reusable_representations(reuse_from, tmp / ASSET_CONFIG_NAME) if reuse_from else {}
         if config.flat_bottom:
             from real2sim.asset.bottom import close_flat_bottom
 
@@ -304,14 +312,16 @@ def build_asset(
         say(f"estimating inertia for {config.mass_kg} kg (uniform density)", 0, 0)
         props = estimate_physical_properties(solid, config.mass_kg, seed=config.seed)
         write_physical_properties(props, tmp / "physical_properties.json")
-        results = _write_representations(solid, props, tmp, out_dir, config, say)
+        results = _write_representations(solid, props, tmp, out_dir, config, say, reusable)
 
     return AssetResult(Path(out_dir), props, transform, tuple(results))
 
 
 def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tmp: Path, out_dir: Path,
-                           config: AssetConfig, say: ProgressFn) -> list[RepresentationResult]:
-    """Each SPEC's folder in ``tmp``: collision.json, the model files, fit_report.json."""
+                           config: AssetConfig, say: ProgressFn, reusable: dict[str, Path] | None = None
+                           ) -> list[RepresentationResult]:
+    """Each SPEC's folder in ``tmp``: collision.json, the model files, fit_report.json; a SPEC in
+    ``reusable`` is copied from there (:func:`reusable_representations`) instead of fitted."""
     from real2sim.asset.writers import write_representation
     from real2sim.geometry.fidelity import measure_fidelity
 
@@ -321,21 +331,26 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
     for spec in config.specs:
         rep_dir = tmp / spec.name
         rep_dir.mkdir()
-        say(f"collision {spec.text}: fitting", 0, 0)
-        geometry, report = build_collision(solid, spec, rep_dir, config, sdf_cache,
-                                           progress=prefixed(say, f"collision {spec.text}"))
-        write_collision_json(geometry, rep_dir / "collision.json")
+        if spec.text in (reusable or {}):
+            say(f"collision {spec.text}: unchanged, reused", 0, 0)
+            geometry, report = reuse_collision(reusable[spec.text], rep_dir)
+        else:
+            say(f"collision {spec.text}: fitting", 0, 0)
+            geometry, report = build_collision(solid, spec, rep_dir, config, sdf_cache,
+                                               progress=prefixed(say, f"collision {spec.text}"))
+            write_collision_json(geometry, rep_dir / "collision.json")
         write_representation(
             rep_dir, geometry, props, config.contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}",
             formats=config.formats, model_name=spec.name,
         )
-        fidelity = measure_fidelity(solid, geometry, rep_dir, seed=config.seed)
-        report = {
-            "spec": spec.text,
-            "num_primitives": len(geometry.shapes),
-            **fidelity,
-            **report,
-        }
+        if "reused" not in report:
+            fidelity = measure_fidelity(solid, geometry, rep_dir, seed=config.seed)
+            report = {
+                "spec": spec.text,
+                "num_primitives": len(geometry.shapes),
+                **fidelity,
+                **report,
+            }
         if "mjcf" in config.formats:
             from real2sim.asset.mjcf import mjcf_notes
 
@@ -345,9 +360,10 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
             for note in notes:
                 say(f"warning: {note}", 0, 0)
         (rep_dir / "fit_report.json").write_text(json.dumps(report, indent=1, default=float))
+        took = "fitted by an earlier build" if "reused" in report else f"{report['fit_seconds']:.1f} s"
         say(
             f"collision {spec.text}: {len(geometry.shapes)} pieces, IoU {report.get('iou', float('nan')):.3f}, "
-            f"Chamfer {report.get('chamfer_mm', float('nan')):.2f} mm, {report['fit_seconds']:.1f} s", 0, 0
+            f"Chamfer {report.get('chamfer_mm', float('nan')):.2f} mm, {took}", 0, 0
         )
         results.append(RepresentationResult(spec.name, out_dir / spec.name / "model.urdf", report))
     shutil.rmtree(build_cache, ignore_errors=True)

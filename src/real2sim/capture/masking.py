@@ -15,7 +15,8 @@ convention). Methods:
   (``background/<image name>``), thresholded, cleaned with morphology, holes filled.
 
 Computed masks are written to ``masks_<method>/`` and the frames are pointed to
-them; when ``ground_truth/masks/`` exists the IoU against it is reported.
+them; when ``ground_truth/masks/`` exists the IoU against it is reported. A rerun replaces
+that folder only when `mask` made it and it holds nothing else (:mod:`real2sim.capture.mask_folder`).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 
+from real2sim.capture.mask_folder import check_mask_folder, write_mask_marker
 from real2sim.formats.dataset import (Dataset, Frame, check_dataset_outputs, load_image_rgb, load_mask, read_dataset,
                                       write_transforms)
 from real2sim.formats.errors import UserInputError
@@ -258,12 +260,13 @@ def _provided_masks(root: Path, ds: Dataset, progress: ProgressFn) -> MaskResult
 
 
 def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskConfig(),
-                  progress: ProgressFn | None = None) -> MaskResult:
+                  progress: ProgressFn | None = None, replace_any: bool = False) -> MaskResult:
     """Make (or check) the object masks of a dataset and point its frames to them.
 
     ``provided`` writes nothing but ``transforms.json`` (when frames gain a mask_path);
-    the other methods write ``masks_<method>/`` (replacing an earlier one whole) and
-    rewrite ``transforms.json`` atomically.
+    the other methods write ``masks_<method>/`` (replacing one that `mask` made earlier, whole:
+    see :func:`~real2sim.capture.mask_folder.check_mask_folder`; ``replace_any``: whatever is
+    there, for a private copy of a dataset) and rewrite ``transforms.json`` atomically.
     """
     if method not in METHODS:
         raise UserInputError(f"unknown mask method {method!r} (use one of {', '.join(METHODS)})")
@@ -273,6 +276,8 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
         raise UserInputError(f"{root} has no transforms.json; masks need one to point to them")
     if method != "provided":  # `provided` writes transforms.json only when a frame gains its mask
         check_dataset_outputs(root, files=("transforms.json",), folders=(f"masks_{method}",), what="mask output")
+        if not replace_any:
+            check_mask_folder(root, ds, method)
     progress = progress or null_progress
     if method == "provided":
         return _provided_masks(root, ds, progress)
@@ -294,14 +299,16 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
             return background_difference_mask(img, load_image_rgb(root / "background" / Path(f.file_path).name), cfg)
         return maskrcnn_mask(model, img, cfg)
 
-    return publish_masks(root, ds, method, mask_of, progress)
+    return publish_masks(root, ds, method, mask_of, progress, replace_any=replace_any)
 
 
 def publish_masks(root: Path, ds: Dataset, method: str, mask_of: Callable[[int, Frame], np.ndarray],
-                  progress: ProgressFn = null_progress) -> MaskResult:
+                  progress: ProgressFn = null_progress, replace_any: bool = False) -> MaskResult:
     """Write ``mask_of(i, frame)`` ((H, W) bool) of every frame to ``root/masks_<method>/`` and point the
     frames of ``root/transforms.json`` to them, the folder replaced whole or not at all; IoU against
-    ``ground_truth/masks`` when present. For methods whose masks come from elsewhere (another stage)."""
+    ``ground_truth/masks`` when present. For methods whose masks come from elsewhere (another stage).
+    An existing folder is replaced only under :func:`~real2sim.capture.mask_folder.check_mask_folder`'s
+    rules (checked again here, just before the swap), unless ``replace_any``."""
     from PIL import Image
 
     n = len(ds.frames)
@@ -321,6 +328,9 @@ def publish_masks(root: Path, ds: Dataset, method: str, mask_of: Callable[[int, 
                 ious.append(iou(m, load_mask(gt)))
             new_frames.append(replace(f, mask_path=f"{out_name}/{name}"))
             progress(f"masks ({method})", i + 1, n)
+        write_mask_marker(tmp, method, [Path(f.mask_path).name for f in new_frames])
+        if not replace_any:
+            check_mask_folder(root, ds, method)
         # Swap the folder in, then the transforms.json pointing to it.
         old = None
         if target.exists():

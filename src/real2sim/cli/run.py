@@ -149,20 +149,20 @@ def config_from_args(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from real2sim.cli.progress import progress_display
-    from real2sim.pipeline.run import StageFailed, run_pipeline
+    from real2sim.pipeline.run import StageFailed, kept_note, run_pipeline
 
     config = config_from_args(args)
     try:
         with progress_display() as progress:  # one display for the whole run (pipeline.run.RunProgress)
             result = run_pipeline(args.dataset, args.out, config, overwrite=args.overwrite, progress=progress)
     except StageFailed as exc:
-        print(f"real2sim run: error: {exc}; finished stages are kept in {Path(args.out) / '.run'}: "
-              "fix the cause and run the same command again to resume", file=sys.stderr)
+        print(f"real2sim run: error: {exc}; {kept_note(args.out)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"real2sim run: interrupted; finished stages are kept in {Path(args.out) / '.run'}: "
-              "run the same command again to resume", file=sys.stderr)
+        print(f"real2sim run: interrupted; {kept_note(args.out)}", file=sys.stderr)
         return 130
+    for warning in result.warnings:
+        print(f"WARNING: {warning}", file=sys.stderr)
     ran = [s for s, status in result.statuses.items() if status == "ran"]
     print(f"asset: {result.asset_dir} (stages run: {', '.join(ran) or 'none, all unchanged'})")
     for urdf in result.urdf_paths:

@@ -23,6 +23,12 @@ are in ``children_peak_memory_mb``.
 A stage is recorded only after its outputs are in place (each is written to a
 temporary name and renamed), and run.json itself is replaced atomically, so a
 Ctrl-C or a killed process leaves the finished stages recorded and nothing else.
+
+Ownership: ``owned`` maps each entry of ASSETDIR that `run` wrote (outside ``.run/``) to the
+stage that wrote it and, for a folder, the files in it as written. A rerun replaces or removes
+only these entries, and refuses to replace a folder holding files it did not write
+(:meth:`Manifest.foreign_files`): everything else in ASSETDIR is the user's. The record
+outlives a forgotten stage entry, so an interrupted rerun still knows what it made.
 """
 
 from __future__ import annotations
@@ -95,6 +101,12 @@ def tree_files(root: Path) -> list[str]:
             if p.is_file() and ".tmp-" not in p.as_posix()]
 
 
+def all_files(root: Path) -> list[str]:
+    """Every regular file below ``root`` (relative paths), hidden ones included."""
+    root = Path(root)
+    return [p.relative_to(root).as_posix() for p in sorted(root.rglob("*")) if p.is_file()]
+
+
 def stage_key(inputs: dict, settings: Any, upstream: str | None) -> str:
     blob = json.dumps({"inputs": inputs, "settings": settings_record(settings), "upstream": upstream},
                       sort_keys=True, default=str)
@@ -142,8 +154,12 @@ class Manifest:
         self.path = self.asset_dir / RUN_DIRNAME / MANIFEST_NAME
         # Relative to ASSETDIR: written files hold no absolute paths (they name people's home folders),
         # and a project folder holding both can be moved.
-        self.data = data or {"version": MANIFEST_VERSION, "stages": {},
+        self.data = data or {"version": MANIFEST_VERSION, "stages": {}, "owned": {},
                              "dataset": os.path.relpath(Path(dataset).resolve(), self.asset_dir.resolve())}
+        if "owned" not in self.data:  # written before ownership was recorded: the stages' outputs, files unknown
+            self.data["owned"] = {out.split("/")[0]: {"stage": stage, "files": None}
+                                  for stage, entry in self.data["stages"].items()
+                                  for out in entry.get("outputs", []) if out.split("/")[0] != RUN_DIRNAME}
 
     @classmethod
     def load(cls, asset_dir: Path) -> "Manifest | None":
@@ -197,8 +213,59 @@ class Manifest:
         self.save()
 
     def forget(self, stage: str) -> None:
+        """Drop ``stage``'s record (it runs again); what it wrote stays owned (see the module docstring)."""
         if self.data["stages"].pop(stage, None) is not None:
             self.save()
+
+    # ------------------------------------------------------------------ ownership
+
+    def owned(self, stage: str | None = None) -> dict[str, dict]:
+        """``{name: {"stage": ..., "files": [...] | None}}``: the ASSETDIR entries `run` wrote
+        (``stage``: only those of that stage). ``files`` is None for a file or when unknown."""
+        return {name: record for name, record in self.data["owned"].items()
+                if stage is None or record["stage"] == stage}
+
+    def own(self, stage: str, names: Iterable[str]) -> None:
+        """Record the ASSETDIR entries ``names`` as written by ``stage``, with the files now in each folder."""
+        for name in names:
+            path = self.asset_dir / name
+            self.data["owned"][name] = {"stage": stage, "files": all_files(path) if path.is_dir() else None}
+        self.save()
+
+    def claim(self, stage: str, files: dict[str, list[str] | None]) -> None:
+        """Before ``stage`` moves new entries into ASSETDIR: ``{name: files of the new folder (None: a
+        file)}`` are owned from now on, each folder's files added to those recorded before, so that a
+        kill halfway through the swap leaves the old and the new entry both known as the run's."""
+        for name, new in files.items():
+            before = self.data["owned"].get(name, {}).get("files")
+            merged = None if new is None else sorted(set(new) | set(before or []))
+            self.data["owned"][name] = {"stage": stage, "files": merged}
+        self.save()
+
+    def add_owned_files(self, name: str, files: Iterable[str]) -> None:
+        """Files a later stage wrote into the owned folder ``name`` (reports rewritten by ``truth``)."""
+        record = self.data["owned"].get(name)
+        if record is not None and record["files"] is not None:
+            record["files"] = sorted(set(record["files"]) | set(files))
+            self.save()
+
+    def disown(self, names: Iterable[str]) -> None:
+        for name in names:
+            self.data["owned"].pop(name, None)
+        self.save()
+
+    def foreign_files(self, names: Iterable[str]) -> list[str]:
+        """Files (relative to ASSETDIR) inside the owned folders ``names`` that `run` did not write:
+        the user's, which replacing the folder would delete. Folders whose files are unknown
+        (a run.json from before they were recorded) are taken as they are."""
+        foreign = []
+        for name in names:
+            record, path = self.data["owned"].get(name), self.asset_dir / name
+            if record is None or record["files"] is None or not path.is_dir():
+                continue
+            known = set(record["files"])
+            foreign += [f"{name}/{rel}" for rel in all_files(path) if rel not in known and ".tmp-" not in rel]
+        return foreign
 
 
 @contextmanager

@@ -36,7 +36,8 @@ from real2sim.pipeline import manifest as mf
 from real2sim.pipeline.masks import PARALLAX
 from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, sparse_point_files
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
-                                      _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine, _robot_frame)
+                                      _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine, _robot_frame,
+                                      check_evaluations)
 from real2sim.pipeline.truth import build_truth, has_ground_truth
 
 if TYPE_CHECKING:
@@ -127,6 +128,18 @@ class RunResult:
     manifest_path: Path
     truth: dict | None = None
     urdf_paths: list[Path] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # plain sentences, for "WARNING: ..." lines
+
+
+def kept_note(asset_dir: Path | str) -> str:
+    """What a run that stopped leaves in ``asset_dir``, for its one-line message: the finished stages
+    kept for a resume (a deliberate cache, docs/reliability.md), or that nothing was kept."""
+    manifest = mf.Manifest.load(Path(asset_dir))
+    stages = list(manifest.data["stages"]) if manifest is not None else []
+    if not stages:
+        return f"nothing was kept in {asset_dir}" if Path(asset_dir).is_dir() else "nothing was written"
+    return (f"the finished stages ({', '.join(stages)}) are kept in {Path(asset_dir) / mf.RUN_DIRNAME}: fix the "
+            "cause and run the same command again to resume from them")
 
 
 def _dataset_files(root: Path) -> list[str]:
@@ -230,6 +243,7 @@ class _Runner:
         self.manifest.record(name, key=key, inputs=inputs, settings=settings, outputs=outputs,
                              wall_seconds=clock[0], stage_peak=mf.stage_peak_mb() if measured else None,
                              extra=extra)
+        self.manifest.own(name, sorted({out.split("/")[0] for out in outputs} - {mf.RUN_DIRNAME}))
         self.statuses[name] = "ran"
         self.progress.stage(name, self.index, self.count, "done")
         return key
@@ -277,7 +291,9 @@ def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: 
     robot_frame = config.robot_frame()
     # A COLMAP dataset's ground truth is usable only when it says how the model frame relates to it.
     truth = has_ground_truth(dataset) and (robot_frame is None or (dataset / "ground_truth" / MODEL_FROM_WORLD).is_file())
-    if truth and config.evaluation is not None and not any(s.name == "mesh" for s in asset_cfg.specs):
+    evaluation_mesh = truth and not any(s.name == "mesh" for s in asset_cfg.specs) and (
+        config.evaluation is not None or _kept_evaluation_mesh(manifest))
+    if evaluation_mesh:
         from real2sim.formats.spec import parse_spec
 
         # The reconstruction itself as a representation: its own dynamics against the truth.
@@ -286,12 +302,26 @@ def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: 
              + (truth and config.evaluation is not None))
     runner = _Runner(manifest, progress, count)
     try:
-        result = _run_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg, truth)
-    except BaseException:
+        result = _run_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg, truth, evaluation_mesh)
+    except BaseException as exc:
         if created and not manifest.data["stages"]:
             shutil.rmtree(asset_dir, ignore_errors=True)  # nothing finished: leave nothing behind
+        elif isinstance(exc, UserInputError):  # the folder stays, deliberately: say so on the one line
+            raise UserInputError(f"{exc}; {kept_note(asset_dir)}") from exc
         raise
     return result
+
+
+def _kept_evaluation_mesh(manifest: mf.Manifest) -> bool:
+    """Whether the asset of an earlier evaluated run has the ``mesh`` representation `run` added for
+    the evaluation, and that evaluation is kept: a run without --evaluate keeps the representation,
+    so that an unchanged asset stays unchanged and its evaluation valid."""
+    entry = manifest.entry("asset")
+    if not entry or not manifest.entry("evaluate"):
+        return False
+    # run.json from before the flag was recorded: a `mesh` the user does not ask for now was run's
+    specs = entry.get("settings", {}).get("specs", [])
+    return bool(entry.get("evaluation_mesh", any(isinstance(s, dict) and s.get("text") == "mesh" for s in specs)))
 
 
 def _prepare_dataset(runner: _Runner, dataset: Path, run_dir: Path, config: RunConfig, table_z_m: float
@@ -350,7 +380,7 @@ def _prepare_dataset(runner: _Runner, dataset: Path, run_dir: Path, config: RunC
 
 
 def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConfig, recon_cfg, asset_cfg,
-                with_truth: bool) -> RunResult:
+                with_truth: bool, evaluation_mesh: bool) -> RunResult:
     run_dir = asset_dir / mf.RUN_DIRNAME
     manifest, progress = runner.manifest, runner.progress
     used, truth_root, upstream = _prepare_dataset(runner, dataset, run_dir, config, recon_cfg.table_z_m)
@@ -364,27 +394,40 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
 
     mesh_files = [f for f in mf.tree_files(recon_dir) if f != "report.json"]
     asset_key = runner.stage("asset", {"mesh": mf.files_digest(recon_dir, mesh_files)}, asset_cfg, upstream, None,
-                             lambda: _asset(recon_dir / "mesh.obj", asset_dir, asset_cfg, manifest, progress))
+                             lambda: {**_asset(recon_dir / "mesh.obj", asset_dir, asset_cfg, manifest, progress),
+                                      "evaluation_mesh": evaluation_mesh})
     asset_outputs = manifest.entry("asset")["outputs"]
 
     gt_files = [f for f in _dataset_files(truth_root) if f.startswith("ground_truth/")] if with_truth else []
+    files = [f"{top}/{rel}" for top in asset_outputs if (asset_dir / top).is_dir()
+             for rel in mf.tree_files(asset_dir / top)]
+    files += [top for top in asset_outputs if (asset_dir / top).is_file()]
+    asset_digest = mf.files_digest(asset_dir, files)
+    inputs_now = {"evaluate": {"asset": asset_digest}}
+    if with_truth:
+        inputs_now["evaluate_truth"] = {"asset": asset_digest, "ground_truth": mf.files_digest(truth_root, gt_files)}
+    # An earlier evaluation is never deleted: kept while its asset is unchanged, else marked stale.
+    valid, warnings = check_evaluations(asset_dir, manifest, inputs_now)
+    warnings = [] if config.evaluation is not None else warnings  # simulated again just below
     eval_key = None
     if config.evaluation is not None:
-        files = [f"{top}/{rel}" for top in asset_outputs if (asset_dir / top).is_dir()
-                 for rel in mf.tree_files(asset_dir / top)]
-        files += [top for top in asset_outputs if (asset_dir / top).is_file()]
         settings = {k: v for k, v in mf.settings_record(config.evaluation).items() if k not in _EVAL_SCHEDULING}
-        asset_digest = mf.files_digest(asset_dir, files)
         # The reconstruction added as `mesh` for the truth sweep is, under hydroelastic contact, the
         # paper protocol's reference itself (OCAE 0) and the slowest simulation: not simulated there.
         skip = () if any(s.name == "mesh" for s in config.asset.specs) else ("mesh",)
-        eval_key = runner.stage("evaluate", {"asset": asset_digest}, {**settings, "skip": list(skip)}, asset_key,
-                                [RESULTS_DIRNAME], lambda: _evaluate(asset_dir, config.evaluation, progress, skip))
+        eval_key = runner.stage("evaluate", inputs_now["evaluate"], {**settings, "skip": list(skip)}, asset_key,
+                                [RESULTS_DIRNAME],
+                                lambda: _evaluate(asset_dir, config.evaluation, manifest, progress, skip))
         if with_truth:
             eval_key = runner.stage(
-                "evaluate_truth", {"asset": asset_digest, "ground_truth": mf.files_digest(truth_root, gt_files)},
+                "evaluate_truth", inputs_now["evaluate_truth"],
                 {**settings, "seed_properties": asset_cfg.seed}, eval_key, [TRUTH_RESULTS_DIRNAME],
-                lambda: _evaluate_truth(truth_root, asset_dir, config.evaluation, asset_cfg.seed, progress))
+                lambda: _evaluate_truth(truth_root, asset_dir, config.evaluation, asset_cfg.seed, manifest, progress))
+    else:  # no --evaluate: an evaluation of this very asset still holds, and truth.json keeps its dynamics
+        for stage in ("evaluate", "evaluate_truth") if with_truth else ("evaluate",):
+            if valid.get(stage):
+                eval_key = manifest.entry(stage)["key"]
+    dynamics = config.evaluation is not None or (with_truth and valid.get("evaluate_truth", False))
 
     truth = None
     if with_truth:
@@ -392,25 +435,26 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
                   "asset": mf.files_digest(asset_dir, ["physical_properties.json", "canonical_transform.json"]),
                   "reconstruct_report": mf.files_digest(recon_dir, ["report.json"])}
         runner.stage("truth", inputs, {"seed": asset_cfg.seed, "refined": config.refine is not None,
-                                       "dynamics": config.evaluation is not None}, eval_key or asset_key,
-                     ["truth.json"], lambda: _truth(truth_root, used, asset_dir, recon_dir, config, asset_cfg.seed, manifest))
+                                       "dynamics": dynamics}, eval_key or asset_key, ["truth.json"],
+                     lambda: _truth(truth_root, used, asset_dir, recon_dir, config, asset_cfg.seed, manifest, dynamics))
         truth = json.loads((asset_dir / "truth.json").read_text())
     elif manifest.entry("truth"):  # the dataset lost its ground_truth/: a stale truth.json would mislead
         manifest.forget("truth")
         (asset_dir / "truth.json").unlink(missing_ok=True)
 
     urdfs = sorted(asset_dir.glob("*/model.urdf"))
-    return RunResult(asset_dir, runner.statuses, manifest.path, truth, urdfs)
+    return RunResult(asset_dir, runner.statuses, manifest.path, truth, urdfs, warnings)
 
 
 def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, config: RunConfig, seed: int,
-           manifest: mf.Manifest) -> None:
+           manifest: mf.Manifest, dynamics: bool) -> None:
+    """truth.json; ``dynamics``: with the evaluations' comparison (run now, or kept and still valid)."""
     report = json.loads((recon_dir / "report.json").read_text())
     refine_entry = manifest.entry("refine_poses") if config.refine is not None else None
     refinement = refine_entry.get("result", {}) if refine_entry else None
     frame_entry = manifest.entry("robot_frame") if config.robot_frame() is not None else None
     true_properties = None
-    if config.evaluation is not None:
+    if dynamics:
         # the truth evaluation, redone whenever the asset changes, wrote the same mass properties
         from real2sim.formats.physical import read_physical_properties
         from real2sim.pipeline.truth_dynamics import TRUE_PROPERTIES_NAME
@@ -421,14 +465,16 @@ def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, config: 
                          robot_frame=frame_entry.get("result") if frame_entry else None,
                          true_properties=true_properties)
     results, results_truth = asset_dir / RESULTS_DIRNAME, asset_dir / TRUTH_RESULTS_DIRNAME
-    if config.evaluation is not None and (results_truth / "summary.csv").is_file():
+    if dynamics and (results_truth / "summary.csv").is_file():
         from real2sim.pipeline.truth_dynamics import dynamics_record
 
         record["dynamics"] = dynamics_record(results, results_truth)
     mf.write_json_atomic(asset_dir / "truth.json", record)
-    if config.evaluation is not None:
+    if dynamics:
         from real2sim.report.html import write_report
 
         for folder in (results, results_truth):  # their reports show the truth now
             if (folder / "runs.csv").is_file():
+                before = set(mf.all_files(folder))
                 write_report(folder)
+                manifest.add_owned_files(folder.name, set(mf.all_files(folder)) - before)

@@ -13,6 +13,7 @@ import tempfile
 from pathlib import Path
 from typing import Callable
 
+from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import MARKER_NAME, publish_dir
 from real2sim.formats.progress import ProgressFn
 from real2sim.pipeline import manifest as mf
@@ -46,7 +47,9 @@ def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: Progre
             from real2sim.pipeline.normalise import write_model_transforms
 
             write_model_transforms(copy)
-        result = make_masks(copy, method, mask_cfg, table_z_m=table_z_m, seed=seed, progress=progress)
+        # the copy is run's own: a masks_<method>/ copied from the dataset is replaced there, not in the dataset
+        result = make_masks(copy, method, mask_cfg, table_z_m=table_z_m, seed=seed, progress=progress,
+                            replace_any=True)
         return {"result": {"num_frames": result.num_frames, "mean_object_fraction": result.mean_object_fraction,
                            "mean_iou": result.mean_iou, "min_iou": result.min_iou}}
 
@@ -102,36 +105,71 @@ def check_reaches_table(mesh: Path, table_z_m: float) -> None:
             "table's height with --table-z")
 
 
+#: What the asset stage writes into ASSETDIR besides one folder per SPEC (real2sim.asset.build).
+ASSET_FILES = ("asset_config.json", "physical_properties.json", "canonical_transform.json", "visual")
+
+
+def refuse_foreign(asset_dir: Path, manifest: mf.Manifest, names) -> None:
+    """UserInputError (one line) before ``names`` in ASSETDIR are replaced or removed: an entry there
+    that `run` did not write (a folder or file of the user's under a name the stage writes), or a
+    folder of the run's holding files the run did not write. Nothing of the user's is ever deleted."""
+    owned = manifest.owned()
+    theirs = sorted(n for n in names if n not in owned and (asset_dir / n).exists())
+    if theirs:
+        raise UserInputError(f"{asset_dir / theirs[0]} was not written by run, and run writes that name; "
+                             "move it out of the folder and run again")
+    extra = manifest.foreign_files(n for n in names if n in owned)
+    if extra:
+        more = f" (and {len(extra) - 1} more files)" if len(extra) > 1 else ""
+        folder = extra[0].split("/")[0]
+        raise UserInputError(f"{asset_dir / extra[0]}{more} was not written by run, and this rerun replaces "
+                             f"{folder}/: move your files out of it and run again (files beside run's folders are kept)")
+
+
 def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: ProgressFn) -> dict:
-    """build_asset into ``.run/asset`` (whole or not at all), then move its entries into ASSETDIR."""
+    """build_asset into ``.run/asset`` (whole or not at all), then swap its entries into ASSETDIR.
+
+    Only what the previous asset stage wrote (the manifest's ``owned`` record) is replaced or
+    removed; the user's own files and folders in ASSETDIR are left alone. A representation whose
+    geometry settings are unchanged is reused instead of refitted (``build_asset(reuse_from=)``)."""
     from real2sim.asset.build import build_asset
 
     check_reaches_table(mesh, cfg.support_height_m)
+    previous = set(manifest.owned("asset"))
+    planned = set(ASSET_FILES) | {spec.name for spec in cfg.specs}
+    refuse_foreign(asset_dir, manifest, sorted(planned | previous))
     built = asset_dir / mf.RUN_DIRNAME / "asset"
-    build_asset(mesh, built, cfg, overwrite=True, progress=progress)
-    # Downstream outputs of the previous asset are stale now.
-    for stage, path in (("truth", asset_dir / "truth.json"), ("evaluate", asset_dir / RESULTS_DIRNAME),
-                        ("evaluate_truth", asset_dir / TRUTH_RESULTS_DIRNAME)):
-        manifest.forget(stage)
-        shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
-    for name in (RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME):
-        shutil.rmtree(asset_dir / f".{name}.partial", ignore_errors=True)
-    for entry in asset_dir.iterdir():
-        if entry.name not in RESERVED and not entry.name.startswith("."):
-            shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+    reuse = asset_dir if "asset_config.json" in previous else None
+    build_asset(mesh, built, cfg, overwrite=True, progress=progress, reuse_from=reuse)
     (built / MARKER_NAME).unlink(missing_ok=True)  # ASSETDIR has its own
     outputs = sorted(entry.name for entry in built.iterdir())
-    for name in outputs:
-        os.replace(built / name, asset_dir / name)
+    refuse_foreign(asset_dir, manifest, outputs)  # a name the plan did not foresee
+    for name in (RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME):  # the evaluation's resume folders: for the old asset
+        shutil.rmtree(asset_dir / f".{name}.partial", ignore_errors=True)
+    # Swap: the old entries aside (a hidden '.old-' name, cleared by the next run if this one is
+    # killed), the new ones in. Ownership is recorded first, as the union of both, so that a kill
+    # halfway leaves every entry of the run's known as the run's.
+    aside = Path(tempfile.mkdtemp(prefix=".asset.old-", dir=asset_dir / mf.RUN_DIRNAME))
+    manifest.claim("asset", {n: mf.all_files(built / n) if (built / n).is_dir() else None for n in outputs})
+    for name in sorted(previous | set(outputs)):
+        if (asset_dir / name).exists() or (asset_dir / name).is_symlink():
+            os.replace(asset_dir / name, aside / name)
+        if name in outputs:
+            os.replace(built / name, asset_dir / name)
+    manifest.disown(previous - set(outputs))
+    manifest.own("asset", outputs)
+    shutil.rmtree(aside, ignore_errors=True)
     built.rmdir()
     return {"outputs": outputs}
 
 
-def _evaluate_truth(dataset: Path, asset_dir: Path, cfg, seed: int, progress: ProgressFn) -> dict:
+def _evaluate_truth(dataset: Path, asset_dir: Path, cfg, seed: int, manifest: mf.Manifest,
+                    progress: ProgressFn) -> dict:
     """The sweep again, against the true mesh with the true mass properties (see truth_dynamics)."""
     from real2sim.evaluate.sweep import evaluate
     from real2sim.pipeline.truth_dynamics import write_true_reference
 
+    refuse_foreign(asset_dir, manifest, [TRUTH_RESULTS_DIRNAME])
     mesh, properties = write_true_reference(dataset, asset_dir, asset_dir / mf.RUN_DIRNAME / "truth", seed)
     shutil.rmtree(asset_dir / f".{TRUTH_RESULTS_DIRNAME}.partial", ignore_errors=True)
     result = evaluate([asset_dir], asset_dir / TRUTH_RESULTS_DIRNAME, cfg, reference_mesh=mesh,
@@ -139,9 +177,47 @@ def _evaluate_truth(dataset: Path, asset_dir: Path, cfg, seed: int, progress: Pr
     return {"summary": {"simulated": result.simulated, "failed": result.failed}}
 
 
-def _evaluate(asset_dir: Path, cfg, progress: ProgressFn, skip: tuple[str, ...] = ()) -> dict:
+def _evaluate(asset_dir: Path, cfg, manifest: mf.Manifest, progress: ProgressFn, skip: tuple[str, ...] = ()) -> dict:
     from real2sim.evaluate.sweep import evaluate
 
+    refuse_foreign(asset_dir, manifest, [RESULTS_DIRNAME])
     result = evaluate([asset_dir], asset_dir / RESULTS_DIRNAME, cfg, progress=progress, overwrite=True,
                       animations=True, skip_representations=skip)
     return {"summary": {"simulated": result.simulated, "failed": result.failed}}
+
+
+#: The evaluation stages and their folders in ASSETDIR.
+EVALUATIONS = (("evaluate", RESULTS_DIRNAME), ("evaluate_truth", TRUTH_RESULTS_DIRNAME))
+#: The note put into an evaluation's folder once the asset it simulated has changed.
+STALE_NAME = "STALE.txt"
+
+
+def check_evaluations(asset_dir: Path, manifest: mf.Manifest, inputs_now: dict[str, dict]) -> tuple[dict, list]:
+    """Which earlier evaluations still hold: ``({stage: True | False}, warnings)`` for each evaluation
+    stage run.json records. One holds while the asset (and ground truth) it simulated are the ones
+    ``inputs_now`` gives and its folder is there. One that no longer holds is kept, never deleted:
+    marked ``"stale"`` in run.json, with a :data:`STALE_NAME` note in its folder and one warning."""
+    valid, warnings = {}, []
+    for stage, folder in EVALUATIONS:
+        entry = manifest.entry(stage)
+        if entry is None:
+            continue
+        valid[stage] = entry.get("inputs") == inputs_now.get(stage) and (asset_dir / folder).is_dir()
+        if valid[stage]:  # the asset it simulated is back (a setting changed, then changed back)
+            if entry.pop("stale", None):
+                manifest.save()
+                (asset_dir / folder / STALE_NAME).unlink(missing_ok=True)
+            continue
+        if entry.get("stale"):
+            continue
+        entry["stale"] = True
+        manifest.save()
+        if (asset_dir / folder).is_dir():
+            (asset_dir / folder / STALE_NAME).write_text(
+                f"The results in this folder were simulated for an earlier asset of {asset_dir.name}/, which has "
+                "changed since (run.json marks the stage stale). They are kept, not deleted: run the same "
+                "`real2sim run` command with --evaluate to simulate the current asset.\n")
+            manifest.add_owned_files(folder, [STALE_NAME])
+            warnings.append(f"{folder}/ holds the evaluation of an earlier asset: kept, marked stale "
+                            f"({folder}/{STALE_NAME}); add --evaluate to simulate the current one")
+    return valid, warnings
