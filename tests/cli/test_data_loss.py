@@ -218,3 +218,86 @@ def test_sigterm_during_capture_leaves_no_temporary_folder(tmp_path):
     assert proc.returncode == 128 + signal.SIGTERM, err
     assert "Traceback" not in err
     assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# `mask` (issue 33 item 2): masks_<method>/ is replaced only when `mask` made it and holds nothing else
+
+
+@pytest.fixture(scope="module")
+def background_ds(tmp_path_factory) -> Path:
+    """A tiny capture with the empty scene for --method background (8 views at 64x48, about 2 s)."""
+    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.geometry.objects import make_textured_object
+
+    out = tmp_path_factory.mktemp("mask_ds") / "ds"
+    capture(make_textured_object("can"), out, CaptureConfig(views=8, width=64, height=48, with_background=True))
+    return out
+
+
+@pytest.fixture()
+def dataset(background_ds, tmp_path) -> Path:
+    import shutil
+
+    copy = tmp_path / "ds"
+    shutil.copytree(background_ds, copy)
+    return copy
+
+
+@pytest.mark.parametrize("method", ["background", "parallax"])
+def test_mask_never_replaces_a_folder_it_did_not_make(dataset, capsys, method):
+    theirs = dataset / f"masks_{method}"
+    theirs.mkdir()
+    (theirs / "README_MINE.txt").write_text("mine")
+    transforms = (dataset / "transforms.json").read_bytes()
+    code, _, err = run_cli(capsys, "mask", dataset, "--method", method)
+    assert_refused(code, err)
+    assert MARKER_NAME in err and "never replaced" in err
+    assert snapshot(theirs) == {"README_MINE.txt": b"mine"}
+    assert (dataset / "transforms.json").read_bytes() == transforms
+
+
+def test_mask_rerun_keeps_files_it_did_not_write(dataset, capsys):
+    assert run_cli(capsys, "mask", dataset, "--method", "background")[0] == 0
+    ours = dataset / "masks_background"
+    assert (ours / MARKER_NAME).is_file()
+    (ours / "README_MINE.txt").write_text("mine")
+    for extra in ([], ["--overwrite"]):  # files mask did not write: never deleted, --overwrite or not
+        code, _, err = run_cli(capsys, "mask", dataset, "--method", "background", *extra)
+        assert_refused(code, err)
+        assert "README_MINE.txt" in err
+        assert (ours / "README_MINE.txt").read_text() == "mine"
+    (ours / "README_MINE.txt").unlink()
+    # a mask edited by hand is the user's work too: replaced only with --overwrite
+    first, second = sorted(ours.glob("*.png"))[:2]
+    first.write_bytes(second.read_bytes())
+    edited = first.read_bytes()
+    code, _, err = run_cli(capsys, "mask", dataset, "--method", "background", "--threshold", "20")
+    assert_refused(code, err)
+    assert first.name in err and "--overwrite" in err and first.read_bytes() == edited
+    code, _, err = run_cli(capsys, "mask", dataset, "--method", "background", "--threshold", "20", "--overwrite")
+    assert code == 0, err
+    assert first.read_bytes() != edited and not (ours / "README_MINE.txt").exists()
+    # nothing but its own masks, as written: a plain rerun replaces the folder
+    assert run_cli(capsys, "mask", dataset, "--method", "background")[0] == 0
+
+
+def test_mask_replaces_its_own_folder_from_before_the_marker(dataset, capsys):
+    """A masks_<method>/ that holds only the masks the frames point to was made by an older `mask`."""
+    assert run_cli(capsys, "mask", dataset, "--method", "background")[0] == 0
+    (dataset / "masks_background" / MARKER_NAME).unlink()
+    assert run_cli(capsys, "mask", dataset, "--method", "background")[0] == 0
+    assert (dataset / "masks_background" / MARKER_NAME).is_file()
+
+
+def test_run_masks_a_copy_whatever_masks_folder_the_dataset_has(dataset, tmp_path, capsys):
+    """`run --mask background` masks its private copy: a user's masks_background/ in the dataset is
+    neither a reason to refuse nor touched."""
+    theirs = dataset / "masks_background"
+    theirs.mkdir()
+    (theirs / "README_MINE.txt").write_text("mine")
+    code, _, err = run_cli(capsys, "run", dataset, "--mass", "0.35", "--out", tmp_path / "A", "--mask", "background",
+                           "--backend", "hull", "--voxels", "32", "--max-faces", "1000", "--texture-px", "64",
+                           "--collision", "mesh")
+    assert code == 0, err
+    assert snapshot(theirs) == {"README_MINE.txt": b"mine"}

@@ -3,9 +3,9 @@ when every file in it is one it wrote, unchanged.
 
 The folder's marker (:data:`~real2sim.formats.outputs.MARKER_NAME`) lists the masks `mask` wrote
 with their SHA-256. On a rerun the folder is replaced whole when it holds exactly those files, as
-written; anything else in it -- a file the user added, a mask edited by hand -- stops the rerun
-with one line naming it, before any work (nothing is deleted; the user moves the file and runs
-again). A folder without the marker is the user's unless it holds nothing but masks the frames of
+written; anything else in it stops the rerun with one line naming it, before any work: a file the
+user added (never deleted: the user moves it and runs again), or a mask edited by hand (replaced
+only with ``mask --overwrite``). A folder without the marker is the user's unless it holds nothing but masks the frames of
 transforms.json point to (one made by `mask` before the marker existed), and is never replaced.
 """
 
@@ -42,10 +42,16 @@ def _name_them(folder: Path, names: list[str]) -> str:
     return f"{folder / names[0]}{more}"
 
 
-def check_mask_folder(root: Path, ds: Dataset, method: str) -> None:
-    """UserInputError (one line) when ``root/masks_<method>/`` may not be replaced (module docstring)."""
+#: What may be replaced: "unchanged" (the masks `mask` wrote, as written), "edited" (also masks
+#: edited since: ``mask --overwrite``), "any" (anything: `run`'s private copy of a dataset).
+REPLACE_POLICIES = ("unchanged", "edited", "any")
+
+
+def check_mask_folder(root: Path, ds: Dataset, method: str, may_replace: str = "unchanged") -> None:
+    """UserInputError (one line) when ``root/masks_<method>/`` may not be replaced under ``may_replace``
+    (:data:`REPLACE_POLICIES`, module docstring)."""
     folder = Path(root) / f"masks_{method}"
-    if not folder.is_dir():
+    if may_replace == "any" or not folder.is_dir():
         return  # absent, or a file: check_dataset_outputs names that one
     present = [name for name in _listing(folder) if ".tmp-" not in name]
     if not present:
@@ -70,6 +76,6 @@ def check_mask_folder(root: Path, ds: Dataset, method: str) -> None:
         raise UserInputError(f"{_name_them(folder, extra)} was not written by `real2sim mask`, and a rerun replaces "
                              f"{folder.name}/ whole: move your files out of it, then run again")
     edited = [name for name in sorted(written) if (folder / name).is_file() and _sha256(folder / name) != written[name]]
-    if edited:
-        raise UserInputError(f"{_name_them(folder, edited)} changed after `real2sim mask` wrote it (edited by hand?), "
-                             f"and a rerun replaces {folder.name}/ whole: move the edited masks elsewhere, then run again")
+    if edited and may_replace != "edited":
+        raise UserInputError(f"{_name_them(folder, edited)} changed after `real2sim mask` wrote it (edited by hand?); "
+                             "copy what you want to keep, then pass --overwrite to replace it with new masks")

@@ -24,6 +24,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
@@ -178,9 +179,13 @@ def load_maskrcnn(weights: Path | str | None, device: str = "cpu", min_size_px: 
     import torch
 
     try:
-        state = torch.load(weights, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many kinds on a bad file
-        raise UserInputError(f"cannot read Mask R-CNN weights {weights}: {str(exc).splitlines()[0]}") from None
+        with warnings.catch_warnings():  # torch warns about the pickle of a file it then refuses anyway
+            warnings.simplefilter("ignore")
+            state = torch.load(weights, map_location="cpu", weights_only=True)
+    except Exception:  # torch raises many kinds on a bad file
+        # torch's own message suggests weights_only=False, i.e. running the file's code: not advice to relay
+        raise UserInputError(f"{weights} is not a Mask R-CNN weights file (torch cannot load it as a saved "
+                             "state dict of tensors)") from None
     if isinstance(state, dict) and "model" in state and isinstance(state["model"], dict):
         state = state["model"]
     key = "roi_heads.box_predictor.cls_score.weight"
@@ -260,13 +265,13 @@ def _provided_masks(root: Path, ds: Dataset, progress: ProgressFn) -> MaskResult
 
 
 def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskConfig(),
-                  progress: ProgressFn | None = None, replace_any: bool = False) -> MaskResult:
+                  progress: ProgressFn | None = None, may_replace: str = "unchanged") -> MaskResult:
     """Make (or check) the object masks of a dataset and point its frames to them.
 
     ``provided`` writes nothing but ``transforms.json`` (when frames gain a mask_path);
     the other methods write ``masks_<method>/`` (replacing one that `mask` made earlier, whole:
-    see :func:`~real2sim.capture.mask_folder.check_mask_folder`; ``replace_any``: whatever is
-    there, for a private copy of a dataset) and rewrite ``transforms.json`` atomically.
+    see :func:`~real2sim.capture.mask_folder.check_mask_folder`, whose ``may_replace`` policy this takes)
+    and rewrite ``transforms.json`` atomically.
     """
     if method not in METHODS:
         raise UserInputError(f"unknown mask method {method!r} (use one of {', '.join(METHODS)})")
@@ -276,8 +281,7 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
         raise UserInputError(f"{root} has no transforms.json; masks need one to point to them")
     if method != "provided":  # `provided` writes transforms.json only when a frame gains its mask
         check_dataset_outputs(root, files=("transforms.json",), folders=(f"masks_{method}",), what="mask output")
-        if not replace_any:
-            check_mask_folder(root, ds, method)
+        check_mask_folder(root, ds, method, may_replace)
     progress = progress or null_progress
     if method == "provided":
         return _provided_masks(root, ds, progress)
@@ -299,16 +303,16 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
             return background_difference_mask(img, load_image_rgb(root / "background" / Path(f.file_path).name), cfg)
         return maskrcnn_mask(model, img, cfg)
 
-    return publish_masks(root, ds, method, mask_of, progress, replace_any=replace_any)
+    return publish_masks(root, ds, method, mask_of, progress, may_replace=may_replace)
 
 
 def publish_masks(root: Path, ds: Dataset, method: str, mask_of: Callable[[int, Frame], np.ndarray],
-                  progress: ProgressFn = null_progress, replace_any: bool = False) -> MaskResult:
+                  progress: ProgressFn = null_progress, may_replace: str = "unchanged") -> MaskResult:
     """Write ``mask_of(i, frame)`` ((H, W) bool) of every frame to ``root/masks_<method>/`` and point the
     frames of ``root/transforms.json`` to them, the folder replaced whole or not at all; IoU against
     ``ground_truth/masks`` when present. For methods whose masks come from elsewhere (another stage).
     An existing folder is replaced only under :func:`~real2sim.capture.mask_folder.check_mask_folder`'s
-    rules (checked again here, just before the swap), unless ``replace_any``."""
+    rules under the ``may_replace`` policy (checked again here, just before the swap)."""
     from PIL import Image
 
     n = len(ds.frames)
@@ -329,8 +333,7 @@ def publish_masks(root: Path, ds: Dataset, method: str, mask_of: Callable[[int, 
             new_frames.append(replace(f, mask_path=f"{out_name}/{name}"))
             progress(f"masks ({method})", i + 1, n)
         write_mask_marker(tmp, method, [Path(f.mask_path).name for f in new_frames])
-        if not replace_any:
-            check_mask_folder(root, ds, method)
+        check_mask_folder(root, ds, method, may_replace)
         # Swap the folder in, then the transforms.json pointing to it.
         old = None
         if target.exists():

@@ -98,6 +98,9 @@ def register(sub) -> None:
     )
     p.add_argument("dataset", type=Path, help="dataset folder with transforms.json")
     p.add_argument("--method", choices=["provided", "maskrcnn", "background", "parallax"], required=True)
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace masks_<method>/ even where you edited masks `mask` wrote earlier; a folder `mask` "
+                   "did not make, and files in it that `mask` did not write, are never replaced")
     p.add_argument("--table-z", type=TABLE_Z_M, default=0.0, metavar="M",
                    help="--method parallax: height of the table top in the dataset's frame, m (default 0; a COLMAP "
                    "model's table is fitted to its sparse points)")
@@ -231,7 +234,8 @@ def run_mask(args: argparse.Namespace) -> int:
                      maskrcnn_min_size_px=args.maskrcnn_min_size, maskrcnn_max_size_px=args.maskrcnn_max_size,
                      maskrcnn_max_instances=args.maskrcnn_max_instances)
     with output_lock(args.dataset, inside=True), progress_display() as progress:  # masks are written into the dataset
-        result = make_masks(args.dataset, args.method, cfg, table_z_m=args.table_z, progress=progress)
+        result = make_masks(args.dataset, args.method, cfg, table_z_m=args.table_z, progress=progress,
+                            may_replace="edited" if args.overwrite else "unchanged")
     line = f"masks: {result.num_frames} frames in {result.mask_dir}/, object covers {100 * result.mean_object_fraction:.1f}% of pixels"
     if result.mean_iou is not None:
         line += f"; IoU vs ground truth mean {result.mean_iou:.4f}, min {result.min_iou:.4f}"

@@ -21,16 +21,16 @@ PARALLAX = "parallax"
 
 
 def make_masks(dataset_dir: Path | str, method: str, cfg=None, *, table_z_m: float = 0.0, seed: int = 0,
-               progress: ProgressFn = null_progress, replace_any: bool = False):
+               progress: ProgressFn = null_progress, may_replace: str = "unchanged"):
     """:func:`real2sim.capture.compute_masks` for its methods (``cfg``: its MaskConfig), or parallax masks;
     a :class:`~real2sim.capture.masking.MaskResult` either way. ``masks_<method>/`` is replaced only
-    when `mask` made it and holds nothing else (:mod:`real2sim.capture.mask_folder`), unless
-    ``replace_any`` (`run`'s private copy of a dataset)."""
+    when `mask` made it and holds nothing else (:mod:`real2sim.capture.mask_folder`; ``may_replace``: its
+    policy, "edited" for ``mask --overwrite``, "any" for `run`'s private copy of a dataset)."""
     from real2sim.capture.mask_folder import check_mask_folder
     from real2sim.capture.masking import MaskConfig, compute_masks, publish_masks
 
     if method != PARALLAX:
-        return compute_masks(dataset_dir, method, cfg or MaskConfig(), progress=progress, replace_any=replace_any)
+        return compute_masks(dataset_dir, method, cfg or MaskConfig(), progress=progress, may_replace=may_replace)
     from real2sim.reconstruct.parallax_masks import ParallaxConfig, parallax_masks, render_silhouettes
     from real2sim.reconstruct.views import load_views
 
@@ -39,14 +39,13 @@ def make_masks(dataset_dir: Path | str, method: str, cfg=None, *, table_z_m: flo
     if ds.extra.get("source") == "colmap":
         raise UserInputError(f"{root} has no transforms.json; masks need one to point to them")
     check_dataset_outputs(root, files=("transforms.json",), folders=(f"masks_{PARALLAX}",), what="mask output")
-    if not replace_any:
-        check_mask_folder(root, ds, PARALLAX)
+    check_mask_folder(root, ds, PARALLAX, may_replace)
     config = ParallaxConfig(table_z_m=table_z_m)
     table_frame = _table_frame(ds, seed) if is_model_frame(ds) else ds
     views = load_views(table_frame, need_masks=False, max_side_px=config.max_image_px)
     solid = parallax_masks(views, config, progress)
     masks = render_silhouettes(solid, table_frame.intrinsics, table_frame.poses_c2w_cv(), progress)
-    return publish_masks(root, ds, PARALLAX, lambda i, _frame: masks[i], progress, replace_any=replace_any)
+    return publish_masks(root, ds, PARALLAX, lambda i, _frame: masks[i], progress, may_replace=may_replace)
 
 
 def _table_frame(ds: Dataset, seed: int) -> Dataset:

@@ -49,7 +49,7 @@ def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: Progre
             write_model_transforms(copy)
         # the copy is run's own: a masks_<method>/ copied from the dataset is replaced there, not in the dataset
         result = make_masks(copy, method, mask_cfg, table_z_m=table_z_m, seed=seed, progress=progress,
-                            replace_any=True)
+                            may_replace="any")
         return {"result": {"num_frames": result.num_frames, "mean_object_fraction": result.mean_object_fraction,
                            "mean_iou": result.mean_iou, "min_iou": result.min_iou}}
 
