@@ -69,6 +69,18 @@ def test_dataset_layout_and_schema(bottle_capture):
     assert depth.dtype == np.uint16 and depth.shape == (H, W)
 
 
+def test_default_capture_has_no_hard_rig_marks(bottle_capture):
+    """Without hard-rig flags the capture is as before (issue #28 keeps it byte for byte): PNG images,
+    a table (no ``table_plane`` key), no hard_rig record, no per-frame extras, the D435 lens."""
+    data = json.loads((bottle_capture / "transforms.json").read_text())
+    gt = json.loads((bottle_capture / "ground_truth/transforms.json").read_text())
+    assert "table_plane" not in data and "table_plane" not in gt and "hard_rig" not in data["real2sim"]
+    assert data["real2sim"]["world_frame"] == "table top z=0, z up, metres"
+    assert all(set(fr) == {"file_path", "transform_matrix", "mask_path"} for fr in data["frames"] + gt["frames"])
+    assert all(fr["file_path"].endswith(".png") for fr in data["frames"])
+    assert read_dataset(bottle_capture).extra.get("table_plane", True) is True
+
+
 def test_object_centre_projects_onto_mask(bottle_capture):
     """OpenGL camera-to-world + intrinsics: the object's centre lands inside its rendered mask."""
     root = bottle_capture

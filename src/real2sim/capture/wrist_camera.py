@@ -14,11 +14,11 @@ Output (a nerfstudio dataset, see ``docs/capture.md``)::
     OUT/
       transforms.json           poses as the robot reports them (exact poses + calibration noise)
       images/frame_00000.png    colour, 8-bit RGB (frame_00000.jpg with ``jpeg_quality``)
-      masks/frame_00000.png     rendered object mask, 255 = object
+      masks/frame_00000.png     rendered object mask, 255 = object (never the table or a stand)
       background/frame_00000.png  (with_background) the empty table from the same poses
       ground_truth/
         transforms.json         the exact poses, same file_paths (relative to OUT, not to ground_truth/)
-        depth/frame_00000.png   16-bit depth in millimetres along the optical axis, 0 = no return
+        depth/frame_00000.png   16-bit depth in millimetres along the optical axis (object, table or stand), 0 = none
         masks/frame_00000.png   copy of the rendered masks (reference for other maskers)
         mesh.obj (+ .mtl, .png) the object in its own frame
         object_pose.json        4x4 world_from_mesh placing mesh.obj in the world frame
