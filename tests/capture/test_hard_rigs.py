@@ -260,9 +260,9 @@ def test_cli_help_units_and_bad_values(tmp_path, capsys, monkeypatch):
                        ("--white-balance-jitter", "fraction"), ("--jpeg-quality", "1-100"), ("--no-table", "z = 0")]:
         assert unit in lines[flag], flag
     base = ["capture", "can", "--out", str(tmp_path / "o"), "--views", "8", "--width", "64", "--height", "48"]
-    for bad in (["--ring-elevation-deg", "95"], ["--focal-px", "0"], ["--fov-deg", "180"], ["--cut-off-fraction", "1.5"],
-                ["--exposure-jitter", "-1"], ["--white-balance-jitter", "nan"], ["--jpeg", "--jpeg-quality", "0"],
-                ["--focal-px", "500", "--fov-deg", "40"]):
+    for bad in (["--ring-elevation-deg", "95"], ["--focal-px", "0"], ["--fov-deg", "180"],
+                ["--cut-off-fraction", "1.5"], ["--exposure-jitter", "-1"], ["--white-balance-jitter", "nan"],
+                ["--jpeg", "--jpeg-quality", "0"], ["--focal-px", "500", "--fov-deg", "40"]):
         with pytest.raises(SystemExit) as exc:
             main(base + bad)
         assert exc.value.code == 2, bad
