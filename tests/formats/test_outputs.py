@@ -1,7 +1,10 @@
+import os
+from pathlib import Path
+
 import pytest
 
 from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import atomic_output_dir
+from real2sim.formats.outputs import atomic_output_dir, check_output_path
 
 
 def test_success_moves_folder_into_place(tmp_path):
@@ -83,3 +86,99 @@ def test_publish_refuses_a_foreign_folder_that_appeared_meanwhile(tmp_path):
     with pytest.raises(UserInputError, match="kept in"):
         publish_dir(finished, target)
     assert (target / "theirs.txt").read_text() == "keep" and (finished / "a.txt").exists()
+
+
+# ------------------------------------------------------------------------- issue 33: paths that cannot be written
+
+
+def _nothing_can_be_made_in(folder: Path) -> bool:
+    try:
+        (folder / "real2sim-test-probe").mkdir()
+    except OSError:
+        return True
+    (folder / "real2sim-test-probe").rmdir()
+    return False
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir() or not _nothing_can_be_made_in(Path("/proc")), reason="needs /proc")
+def test_output_under_proc_is_refused_up_front():
+    """Issue 33 #7: root "may write" /proc by os.access, so the check passed and the lock failed later
+    with an internal FileNotFoundError; the check now tries to make something there."""
+    from real2sim.formats.outputs import check_output_dir, output_lock
+
+    with pytest.raises(UserInputError, match=r"cannot write in /proc"):
+        check_output_path("/proc/real2sim-out")
+    with pytest.raises(UserInputError, match=r"cannot write in /proc"):
+        check_output_dir("/proc/real2sim-out", overwrite=False)
+    with pytest.raises(UserInputError, match="cannot write /proc/real2sim-out"):
+        with output_lock("/proc/real2sim-out"):
+            pass
+
+
+def test_probe_leaves_nothing_and_empty_path_is_refused(tmp_path):
+    assert check_output_path(tmp_path / "out") == tmp_path / "out"
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(UserInputError, match="path is empty"):
+        check_output_path("")
+
+
+def test_symbolic_link_loop_is_named(tmp_path):
+    """Issue 33 #10: a link loop was "not found" (or an internal RuntimeError from Path.resolve)."""
+    from real2sim.formats.outputs import check_output_dir, output_lock
+    from real2sim.formats.paths import missing
+
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    (tmp_path / "file").write_text("x")
+    assert "symbolic link loop" in missing(tmp_path / "a", "dataset")
+    assert "which does not exist" in missing(tmp_path / "dangling", "dataset")
+    assert "a file stands where a folder is" in missing(tmp_path / "file" / "x", "dataset")
+    assert missing(tmp_path / "nothing", "dataset") == f"dataset not found: {tmp_path / 'nothing'}"
+    with pytest.raises(UserInputError, match="symbolic link loop"):
+        check_output_dir(tmp_path / "a" / "out", overwrite=False)
+    with pytest.raises(UserInputError, match="symbolic link loop"):
+        check_output_dir(tmp_path / "out", overwrite=False, inputs=[tmp_path / "a"])
+    with pytest.raises(UserInputError, match="symbolic link loop"):
+        with output_lock(tmp_path / "a", inside=True):
+            pass
+
+
+def test_check_replaceable(tmp_path):
+    """Issue 33 #7: refine-poses did all its work before finding that transforms.json could not be replaced."""
+    import subprocess
+
+    from real2sim.formats.outputs import check_replaceable
+
+    target = tmp_path / "transforms.json"
+    check_replaceable(target)  # not there yet: fine
+    target.write_text("{}")
+    check_replaceable(target)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["transforms.json"] and target.read_text() == "{}"
+    if os.geteuid() == 0:  # root ignores permission bits; an immutable file stops even root
+        if subprocess.run(["chattr", "+i", str(target)], capture_output=True).returncode != 0:
+            pytest.skip("chattr +i not available here")
+    else:
+        target.chmod(0o444)
+    try:
+        with pytest.raises(UserInputError, match="cannot be replaced"):
+            check_replaceable(target)
+    finally:
+        if os.geteuid() == 0:
+            subprocess.run(["chattr", "-i", str(target)], check=True)
+        target.chmod(0o644)
+
+
+def test_public_paths_name_the_output_not_a_removed_temporary(tmp_path):
+    """Issue 33 #10: a failed write named `.out.tmp-abcd1234/mesh.obj`, a folder removed on the way out."""
+    from real2sim.formats.outputs import public_paths
+
+    gone = f"{tmp_path}/.model.tmp-k2j4_x9q/mesh.obj"
+    assert public_paths(f"cannot write {gone}: no space") == f"cannot write {tmp_path}/model/mesh.obj: no space"
+    assert public_paths(f"'{tmp_path}/.transforms.json.tmp-ab12cd34.json' -> 'x'") == \
+        f"'{tmp_path}/transforms.json' -> 'x'"
+    kept = tmp_path / ".asset.tmp-zz99yy88"
+    kept.mkdir()
+    text = f"the finished result is kept in {kept}"
+    assert public_paths(text) == text  # one kept on purpose still exists and is named as it is
+    assert public_paths("nothing temporary here") == "nothing temporary here"

@@ -29,22 +29,45 @@ def _camera_spec(ds: Dataset) -> tuple[str, str]:
     return "PINHOLE", ",".join(str(v) for v in (k.fl_x, k.fl_y, k.cx, k.cy))
 
 
-def _write_feature_masks(ds: Dataset, mask_root: Path, dilation_px: int) -> None:
-    """COLMAP masks: ``mask_root/<image name>.png``, features kept where the mask is non-zero."""
+def _write_feature_masks(ds: Dataset, names: list[str], mask_root: Path, dilation_px: int) -> None:
+    """COLMAP masks: ``mask_root/<COLMAP image name>.png``, features kept where the mask is non-zero."""
     from PIL import Image
     from scipy import ndimage
 
     from real2sim.formats.dataset import load_mask
 
-    for f in ds.frames:
+    mask_root.mkdir(parents=True, exist_ok=True)
+    for f, name in zip(ds.frames, names):
         if f.mask_path is None:
-            raise UserInputError(f"feature_region 'object' needs masks, but frame {f.file_path} has no mask_path")
+            raise UserInputError(f"--features object needs masks, but frame {f.file_path} has no mask_path")
         m = load_mask(ds.root / f.mask_path)
         if dilation_px > 0:
             m = ndimage.binary_dilation(m, iterations=dilation_px)
-        out = mask_root / f"{f.file_path}.png"
-        out.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray((m * 255).astype(np.uint8)).save(out)
+        Image.fromarray((m * 255).astype(np.uint8)).save(mask_root / f"{name}.png")
+
+
+def link_images(ds: Dataset, folder: Path) -> list[str]:
+    """COLMAP's names of the dataset's images: ``folder/00000.png``, ... linked to each frame's image
+    (copied where the file system has no symbolic links), in the dataset's order.
+
+    COLMAP's list of image pairs is a text file with one space-separated pair per line, so an image
+    whose name holds a space (or other characters that file cannot carry) was silently unmatched:
+    every pair failed and 0 frames were refined. Plain numbered names carry anything."""
+    import os
+    import shutil
+
+    folder.mkdir(parents=True, exist_ok=True)
+    names = []
+    for i, f in enumerate(ds.frames):
+        suffix = Path(f.file_path).suffix
+        name = f"{i:05d}{suffix if suffix[1:].isalnum() else ''}"
+        source = (ds.root / f.file_path).resolve()
+        try:
+            os.symlink(source, folder / name)
+        except OSError:
+            shutil.copyfile(source, folder / name)
+        names.append(name)
+    return names
 
 
 def refine_steps(cfg: "RefineConfig") -> int:
@@ -60,29 +83,33 @@ def run_colmap(ds: Dataset, cfg: "RefineConfig", work: Path, pairs: list[tuple[i
     reprojection error, timings. :class:`ColmapFailure` when too little is found."""
     progress = progress or null_progress
     timings: dict[str, float] = {}
-    db_path = _features_and_matches(ds, cfg, work, pairs, progress, timings)
-    rec = _seeded_reconstruction(ds, db_path, len(pairs))
-    rec = _triangulate_and_adjust(ds, cfg, work, db_path, rec, progress, timings)
+    image_dir = work / "images"
+    names = link_images(ds, image_dir)
+    db_path = _features_and_matches(ds, cfg, work, image_dir, names, pairs, progress, timings)
+    c2w_cv = {name: f.transform_matrix @ CV_FROM_GL for name, f in zip(names, ds.frames)}
+    rec = _seeded_reconstruction(c2w_cv, db_path, len(pairs))
+    rec = _triangulate_and_adjust(ds, cfg, work, image_dir, db_path, rec, progress, timings)
+    file_path = {name: f.file_path for name, f in zip(names, ds.frames)}
     refined, counts = {}, {}
     for image_id, img in rec.images.items():
-        counts[img.name] = int(img.num_points3D)
+        counts[file_path[img.name]] = int(img.num_points3D)
         if img.has_pose:
-            refined[img.name] = np.asarray(img.cam_from_world().matrix())
+            refined[file_path[img.name]] = np.asarray(img.cam_from_world().matrix())
     return (refined, counts, len(pairs), rec.num_points3D(),
             float(rec.compute_mean_reprojection_error()), timings)
 
 
-def _features_and_matches(ds: Dataset, cfg: "RefineConfig", work: Path, pairs: list[tuple[int, int]],
-                          progress: ProgressFn, timings: dict) -> Path:
-    """SIFT features of every image and verified matches of ``pairs``: COLMAP's database in ``work``."""
+def _features_and_matches(ds: Dataset, cfg: "RefineConfig", work: Path, image_dir: Path, names: list[str],
+                          pairs: list[tuple[int, int]], progress: ProgressFn, timings: dict) -> Path:
+    """SIFT features of every image (``image_dir/names``, in the dataset's order) and verified matches
+    of ``pairs``: COLMAP's database in ``work``."""
     import pycolmap
 
-    names = [f.file_path for f in ds.frames]
     db_path = work / "database.db"
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model, reader.camera_params = _camera_spec(ds)
     if cfg.feature_region == "object":
-        _write_feature_masks(ds, work / "feature_masks", cfg.mask_dilation_px)
+        _write_feature_masks(ds, names, work / "feature_masks", cfg.mask_dilation_px)
         reader.mask_path = str(work / "feature_masks")
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = cfg.num_threads
@@ -95,7 +122,7 @@ def _features_and_matches(ds: Dataset, cfg: "RefineConfig", work: Path, pairs: l
     extraction.use_gpu = False
     t0 = time.perf_counter()
     progress("extracting features", 0, refine_steps(cfg))
-    pycolmap.extract_features(db_path, ds.root, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
+    pycolmap.extract_features(db_path, image_dir, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
                               reader_options=reader, extraction_options=extraction, device=pycolmap.Device.cpu)
     timings["features_s"] = time.perf_counter() - t0
 
@@ -116,8 +143,9 @@ def _features_and_matches(ds: Dataset, cfg: "RefineConfig", work: Path, pairs: l
     return db_path
 
 
-def _seeded_reconstruction(ds: Dataset, db_path: Path, num_pairs: int):
-    """A reconstruction with the database's ids and the given poses as initialisation."""
+def _seeded_reconstruction(c2w_cv: dict[str, np.ndarray], db_path: Path, num_pairs: int):
+    """A reconstruction with the database's ids and the given poses (camera-to-world, OpenCV axes, by
+    COLMAP image name) as initialisation."""
     import pycolmap
 
     rec = pycolmap.Reconstruction()
@@ -129,7 +157,6 @@ def _seeded_reconstruction(ds: Dataset, db_path: Path, num_pairs: int):
         raise ColmapFailure(f"no image pair passed geometric verification ({num_pairs} pairs tried)")
     for cam in cameras:
         rec.add_camera_with_trivial_rig(cam)
-    c2w_cv = {f.file_path: f.transform_matrix @ CV_FROM_GL for f in ds.frames}
     for img in images:
         cfw = np.linalg.inv(c2w_cv[img.name])[:3, :]
         rec.add_image_with_trivial_frame(pycolmap.Image(name=img.name, camera_id=img.camera_id,
@@ -137,8 +164,8 @@ def _seeded_reconstruction(ds: Dataset, db_path: Path, num_pairs: int):
     return rec
 
 
-def _triangulate_and_adjust(ds: Dataset, cfg: "RefineConfig", work: Path, db_path: Path, rec, progress: ProgressFn,
-                            timings: dict):
+def _triangulate_and_adjust(ds: Dataset, cfg: "RefineConfig", work: Path, image_dir: Path, db_path: Path, rec,
+                            progress: ProgressFn, timings: dict):
     """Rounds of triangulation (the poses fixed) and bundle adjustment (poses and points)."""
     import pycolmap
 
@@ -174,7 +201,7 @@ def _triangulate_and_adjust(ds: Dataset, cfg: "RefineConfig", work: Path, db_pat
         progress(f"triangulating + bundle adjustment (round {rnd + 1}/{cfg.ba_rounds})", 2 + rnd, refine_steps(cfg))
         out = work / f"tri_{rnd}"
         out.mkdir()
-        rec = pycolmap.triangulate_points(rec, db_path, ds.root, out, clear_points=True, options=tri_opts)
+        rec = pycolmap.triangulate_points(rec, db_path, image_dir, out, clear_points=True, options=tri_opts)
         if rec.num_points3D() < 10:
             raise ColmapFailure(f"triangulation produced only {rec.num_points3D()} points")
         _bundle_adjust(rec, ba)
@@ -210,14 +237,17 @@ def colmap_logging(quiet: bool) -> Iterator[None]:
     """COLMAP's (glog's) logging for the block: to stderr only, never to a file.
 
     glog otherwise leaves a log file in /tmp at the first warning of every run. COLMAP's INFO
-    log is hundreds of lines, and its warnings (gauge fixing) are about its internals: ``quiet``
-    keeps errors only. The previous settings are restored.
+    log is hundreds of lines, its warnings (gauge fixing) are about its internals, and its errors
+    are native ``file.cc:LINE]`` lines that the refinement turns into its own outcome (too few
+    pairs, points or frames: a plain warning with the reason); one of them ("Stopping thread...")
+    is printed at every Ctrl-C or SIGTERM. ``quiet`` keeps only fatal ones. The previous settings
+    are restored.
     """
     import pycolmap
 
     log = pycolmap.logging
     saved = log.minloglevel, log.logtostderr
-    log.minloglevel = max(saved[0], 2) if quiet else saved[0]
+    log.minloglevel = max(saved[0], 3) if quiet else saved[0]
     log.logtostderr = True
     try:
         yield

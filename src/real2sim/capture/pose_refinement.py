@@ -48,6 +48,7 @@ from real2sim.formats.dataset import (
     write_transforms,
 )
 from real2sim.formats.errors import UserInputError
+from real2sim.formats.outputs import check_replaceable
 from real2sim.formats.progress import ProgressFn
 
 
@@ -233,6 +234,12 @@ def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progre
         base["seconds"] = time.perf_counter() - t_start
         return given.copy(), RefineResult(**base)
 
+    if cfg.feature_region == "object":
+        # asked for explicitly: without masks there is nothing to honour it with, so say so before any work
+        unmasked = [f.file_path for f in ds.frames if f.mask_path is None]
+        if unmasked:
+            raise UserInputError(f"--features object needs a mask for every frame, but {len(unmasked)} of {n} "
+                                 f"have none (first: {unmasked[0]}); run `real2sim mask` first, or use --features all")
     if n < 3:
         return fallback(f"only {n} frames (need at least 3)")
     try:
@@ -248,6 +255,8 @@ def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progre
                 refined_cfw, counts, num_pairs, num_pts, reproj, timings = run_colmap(ds, cfg, work, pairs, progress)
             except ColmapFailure as exc:
                 return fallback(str(exc))
+            except UserInputError:
+                raise
             except Exception as exc:  # COLMAP raises plain RuntimeErrors/ValueErrors on degenerate input
                 return fallback(f"COLMAP failed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
     finally:
@@ -317,6 +326,8 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
         raise UserInputError(f"{root} has no transforms.json (its poses come from COLMAP already)")
     check_dataset_outputs(root, files=("transforms.json", "transforms_unrefined.json", "refine_report.json"),
                           what="refine-poses output")
+    # the end of the work replaces transforms.json: find out now, not after COLMAP, that it cannot be
+    check_replaceable(root / "transforms.json", what="refine-poses output")
     poses, result = refine_dataset_poses(ds, cfg, progress)
     names = [f.file_path for f in ds.frames]
     result = _with_errors(result, read_ground_truth(root), names, ds.poses_c2w_gl(), poses)

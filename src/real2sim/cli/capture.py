@@ -191,9 +191,8 @@ def run_capture(args: argparse.Namespace) -> int:
 
 
 def run_refine(args: argparse.Namespace) -> int:
+    import sys
     import warnings
-
-    from rich.console import Console
 
     from real2sim.capture.pose_refinement import RefineConfig, refine_poses
     from real2sim.cli.progress import progress_display
@@ -208,14 +207,13 @@ def run_refine(args: argparse.Namespace) -> int:
     cfg = RefineConfig(k_neighbors=args.neighbors, feature_region=args.features, max_num_features=args.max_features,
                        align=args.align, prior_noise_mm=args.pose_noise_mm, prior_noise_deg=args.pose_noise_deg,
                        seed=args.seed)
-    console = Console(stderr=True)
     # refine-poses edits the dataset in place: one writer at a time.
     with output_lock(args.dataset, inside=True), warnings.catch_warnings(record=True) as caught, \
             progress_display() as progress:
         warnings.simplefilter("always", RuntimeWarning)
         result = refine_poses(args.dataset, cfg, progress=prefixed(progress, "refine-poses"))
-    for w in caught:
-        console.print(f"warning: {w.message}")
+    for w in caught:  # one plain line each, never wrapped (rich would wrap at the terminal's width)
+        print(f"WARNING: {' '.join(str(w.message).split())}", file=sys.stderr)
     print(f"refined {result.num_refined_frames}/{result.num_frames} frames ({result.reason}); "
           f"{result.num_pairs} pairs, {result.num_points3d} points, {result.seconds:.1f} s")
     if result.rot_error_before_deg is not None:

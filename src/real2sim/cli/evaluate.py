@@ -179,7 +179,10 @@ def run(args: argparse.Namespace) -> int:
 
     config = config_from_args(args)
     if args.reference is not None and not args.reference.is_file():
-        raise UserInputError(f"reference mesh not found: {args.reference}")
+        from real2sim.formats.paths import missing
+
+        raise UserInputError(f"reference mesh {args.reference} is not a file" if args.reference.exists()
+                             else missing(args.reference, "reference mesh"))
     # SIGTERM unwinds as Ctrl-C does (real2sim.cli.main): the sweep ends its workers, keeps its rows.
     # The sweep's messages go to stdout, as they always have; the count of simulations to stderr.
     with _reference_properties(args) as reference_properties, \

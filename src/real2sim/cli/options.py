@@ -182,7 +182,9 @@ def existing_file(text: str) -> Path:
         raise argparse.ArgumentTypeError("expected a file path, got ''")
     path = Path(text).expanduser()
     if not path.exists():
-        raise argparse.ArgumentTypeError(f"file not found: {text}")
+        from real2sim.formats.paths import missing
+
+        raise argparse.ArgumentTypeError(missing(text, "file"))
     if not path.is_file():
         raise argparse.ArgumentTypeError(f"{text} is not a file")
     if not os.access(path, os.R_OK):
@@ -196,7 +198,9 @@ def existing_dir(text: str) -> Path:
         raise argparse.ArgumentTypeError("expected a folder path, got ''")
     path = Path(text).expanduser()
     if not path.exists():
-        raise argparse.ArgumentTypeError(f"folder not found: {text}")
+        from real2sim.formats.paths import missing
+
+        raise argparse.ArgumentTypeError(missing(text, "folder"))
     if not path.is_dir():
         raise argparse.ArgumentTypeError(f"{text} is not a folder")
     if not os.access(path, os.R_OK | os.X_OK):
@@ -238,12 +242,25 @@ class _OneValueStore(argparse._StoreAction):
         super().__call__(parser, namespace, values, option_string)
 
 
+def path(text: str) -> Path:
+    """argparse type: a path, never empty. ``Path('')`` is ``Path('.')``: ``--out ''`` (an unset shell
+    variable) would otherwise write into, or read, the working folder."""
+    if not text:
+        raise argparse.ArgumentTypeError("expected a path, got '' (an empty path)")
+    if "\0" in text:
+        raise argparse.ArgumentTypeError(f"a path cannot hold a NUL character, got {text!r}")
+    return Path(text)
+
+
 def finish(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Call at the end of a verb's ``register()``: append each numeric option's accepted values to
-    its help text (``[allowed: 1..2000]``), and make every single-value option refuse ``--opt=--``."""
+    its help text (``[allowed: 1..2000]``), make every single-value option refuse ``--opt=--``,
+    and every path argument (``type=Path``) refuse an empty path."""
     for action in parser._actions:  # argparse has no public list of a parser's actions
         if type(action) is argparse._StoreAction:
             action.__class__ = _OneValueStore
+        if action.type is Path:
+            action.type = path
         if isinstance(action.type, Number) and action.help is not argparse.SUPPRESS and "[allowed:" not in (action.help or ""):
             action.help = f"{action.help or ''} [allowed: {action.type.describe()}]".strip()
     return parser

@@ -34,7 +34,11 @@ def representation_urdfs(asset_dir: Path) -> list[Path]:
     from real2sim.formats.errors import UserInputError
 
     if not asset_dir.is_dir():
-        raise UserInputError(f"asset folder not found: {asset_dir}")
+        from real2sim.formats.paths import missing
+
+        if asset_dir.exists():
+            raise UserInputError(f"{asset_dir} is a file, not an asset folder")
+        raise UserInputError(missing(asset_dir, "asset folder"))
     urdfs = sorted(asset_dir.glob("*/model.urdf"))
     if not urdfs:
         raise UserInputError(f"{asset_dir} holds no representation (no */model.urdf)")
@@ -183,6 +187,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         while deadline is None or time.monotonic() < deadline:
             time.sleep(0.2)
-    except KeyboardInterrupt:
-        pass
+    except KeyboardInterrupt as exc:  # Ctrl-C is how a user stops the server: a normal end
+        from real2sim.cli import Terminated
+
+        if isinstance(exc, Terminated):  # SIGTERM is not: exit 143, as every verb does
+            raise
     return 0

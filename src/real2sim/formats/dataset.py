@@ -221,7 +221,9 @@ def read_transforms(path: Path, root: Path | None = None, check_files: bool = Tr
     try:
         data = json.loads(path.read_text())
     except FileNotFoundError:
-        raise UserInputError(f"dataset file not found: {path}") from None
+        from real2sim.formats.paths import missing
+
+        raise UserInputError(missing(path, "dataset file")) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise UserInputError(f"{label} is not readable JSON: {str(exc).splitlines()[0]}") from None
     if not isinstance(data, dict):
@@ -348,7 +350,9 @@ def read_dataset(path: Path | str, check_files: bool = True) -> Dataset:
     if path.is_file() and path.suffix == ".json":
         return read_transforms(path, check_files=check_files)
     if not path.exists():
-        raise UserInputError(f"dataset not found: {path}")
+        from real2sim.formats.paths import missing
+
+        raise UserInputError(missing(path, "dataset"))
     if not path.is_dir():
         raise UserInputError(f"dataset {path} is not a folder or a transforms.json")
     if (path / "transforms.json").exists():

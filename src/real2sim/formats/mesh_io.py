@@ -28,7 +28,9 @@ def load_mesh(path: Path | str, units: str = "m") -> trimesh.Trimesh:
         raise UserInputError(f"unknown mesh units {units!r} (choose from {', '.join(MESH_UNITS_M)})")
     path = Path(path)
     if not path.exists():
-        raise UserInputError(f"mesh file not found: {path}")
+        from real2sim.formats.paths import missing
+
+        raise UserInputError(missing(path, "mesh file"))
     if not path.is_file():
         raise UserInputError(f"not a file: {path}")
     if path.suffix.lower() not in MESH_SUFFIXES:

@@ -22,6 +22,7 @@ import errno
 import fcntl
 import json
 import os
+import re
 import shutil
 import tempfile
 import threading
@@ -61,10 +62,43 @@ def _first_existing(path: Path) -> Path:
     return probe
 
 
+def _probe_writable(folder: Path) -> str | None:
+    """None when a new entry can be made in ``folder`` (tried: a folder made and removed at once),
+    else why not. ``os.access`` is not enough: root "may write" /proc, where nothing can be made."""
+    probe = folder / f".real2sim-probe-{os.getpid()}-{threading.get_ident()}"
+    try:
+        probe.mkdir()
+    except FileExistsError:
+        return None
+    except OSError as exc:
+        if exc.errno in (errno.EACCES, errno.EPERM):
+            return "permission denied"
+        if exc.errno == errno.EROFS:
+            return "read-only file system"
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            return os.strerror(exc.errno).lower()
+        return f"it takes no new files: {os.strerror(exc.errno).lower()}"
+    probe.rmdir()
+    return None
+
+
+def resolve_path(path: Path | str, *, what: str = "path") -> Path:
+    """``path`` absolute with symbolic links resolved; UserInputError (one line) for a link loop,
+    which ``Path.resolve`` reports as a RuntimeError (Python 3.11) or an OSError."""
+    try:
+        return Path(path).expanduser().resolve()
+    except (RuntimeError, OSError):
+        raise UserInputError(f"{what} {path}: a symbolic link loop (a link that points back to itself)") from None
+
+
 def check_output_path(target: Path | str, *, what: str = "output") -> Path:
-    """Check that ``target`` can be created: every name short enough, no regular file on the way,
-    a writable folder to create it in. Return the absolute path (symlinks resolved)."""
+    """Check that ``target`` can be created: not empty, every name short enough, no regular file or
+    link loop on the way, a folder to create it in where something can really be made (tried, not
+    guessed from permissions). Return the absolute path (symlinks resolved)."""
+    if str(target) == "":
+        raise UserInputError(f"{what} path is empty")
     target = Path(os.path.abspath(Path(target).expanduser()))
+    resolve_path(target, what=f"{what} path")
     anchor = _first_existing(target.parent)
     try:
         name_max = os.pathconf(anchor if anchor.is_dir() else anchor.parent, "PC_NAME_MAX")
@@ -78,7 +112,29 @@ def check_output_path(target: Path | str, *, what: str = "output") -> Path:
         raise UserInputError(f"{what} path {target} lies under {anchor}, which is a file, not a folder")
     if not os.access(anchor, os.W_OK | os.X_OK):
         raise UserInputError(f"{what} path {target}: cannot write in {anchor} (permission denied)")
+    problem = _probe_writable(anchor)
+    if problem:
+        raise UserInputError(f"{what} path {target}: cannot write in {anchor} ({problem})")
     return target.resolve()
+
+
+def check_replaceable(path: Path | str, *, what: str = "file") -> None:
+    """Before work whose end replaces the existing file ``path`` (write beside it, then rename):
+    UserInputError (one line) when that rename will fail, so that no work is done for nothing.
+
+    Its folder must take a new file (:func:`check_output_path`), and the file itself must be open
+    for writing: a read-only, immutable (``chattr +i``) or unwritable file is refused. The file is
+    opened for appending and closed, never written."""
+    path = Path(path)
+    check_output_path(path, what=what)
+    if not path.exists():
+        return
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+    except OSError as exc:
+        why = "read-only or protected" if exc.errno in (errno.EACCES, errno.EPERM) else os.strerror(exc.errno).lower()
+        raise UserInputError(f"{what} {path} cannot be replaced ({why}); make it writable first") from None
+    os.close(fd)
 
 
 def _is_within(child: Path, parent: Path) -> bool:
@@ -104,7 +160,7 @@ def check_output_dir(target: Path | str, overwrite: bool, *, inputs: Iterable[Pa
     if _is_within(cwd, target):
         raise UserInputError(f"{what} {target} is or contains the working folder; choose a new folder")
     for item in inputs:
-        source = Path(item).expanduser().resolve()
+        source = resolve_path(item, what="input")
         if _is_within(source, target) or _is_within(target, source):
             relation = "is" if source == target else ("contains" if _is_within(source, target) else "lies inside")
             raise UserInputError(f"{what} {target} {relation} the input {source}; choose another folder")
@@ -170,16 +226,23 @@ def output_lock(target: Path | str, *, inside: bool = False) -> Iterator[None]:
                 held[1] -= 1
         return
     if inside and not target.is_dir():
-        raise UserInputError(f"{target} is not a folder" if target.exists() else f"folder not found: {target}")
+        from real2sim.formats.paths import missing
+
+        raise UserInputError(f"{target} is not a folder" if target.exists() else missing(target, "folder"))
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError):
         raise UserInputError(f"cannot write {target}: {path.parent} is not a folder") from None
+    except OSError as exc:
+        raise UserInputError(f"cannot write {target}: {os.strerror(exc.errno).lower()}") from None
     while True:
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
         except PermissionError:
             raise UserInputError(f"cannot write {target}: {path.parent} is read-only for you") from None
+        except OSError as exc:  # /proc and the like: the folder exists, but nothing can be made in it
+            raise UserInputError(f"cannot write {target}: nothing can be made in {path.parent} "
+                                 f"({os.strerror(exc.errno).lower()})") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
@@ -257,6 +320,29 @@ def publish_dir(finished: Path, target: Path, made_by: str = "real2sim") -> None
         shutil.rmtree(old, ignore_errors=True)
     else:
         finished.rename(target)
+
+
+# ---------------------------------------------------------------------------------------------
+# temporary names in messages
+
+
+#: A temporary name made here (``.NAME.tmp-XXXXXXXX`` and, for a file, its suffix again): group 1 is NAME.
+_TEMPORARY_NAME = re.compile(r"\.([^/\s'\"]+?)\.tmp-[a-z0-9_]{8}(?:\.[A-Za-z0-9]{1,8})?(?=$|[/\s'\":,;)])")
+
+
+def public_paths(text: str) -> str:
+    """``text`` with each temporary name (``.NAME.tmp-XXXXXXXX``) that no longer exists replaced by
+    the NAME it was going to become: a message about a failed write names the output the user asked
+    for, not a temporary path that was removed on the way out. Temporary paths that still exist
+    (a result kept on purpose) stay as they are."""
+    def public(match: re.Match) -> str:
+        start = text.rfind(" ", 0, match.start()) + 1
+        prefix = text[start:match.start()].lstrip("'\"(")
+        if Path(prefix + match.group(0)).exists():
+            return match.group(0)
+        return match.group(1)
+
+    return _TEMPORARY_NAME.sub(public, text)
 
 
 # ---------------------------------------------------------------------------------------------

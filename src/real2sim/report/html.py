@@ -118,7 +118,12 @@ def write_report(results_dir: Path | str, log=None) -> Path:
 
     results_dir = Path(results_dir)
     if not results_dir.is_dir():
-        raise UserInputError(f"results folder not found: {results_dir}")
+        from real2sim.formats.paths import missing
+
+        if results_dir.exists():
+            raise UserInputError(f"{results_dir} is a file, not a results folder (give the folder that "
+                                 "`real2sim evaluate --out` made)")
+        raise UserInputError(missing(results_dir, "results folder"))
     runs = results_dir / "runs.csv"
     if not runs.exists():
         raise UserInputError(f"{results_dir} holds no runs.csv (run `real2sim evaluate` first)")
