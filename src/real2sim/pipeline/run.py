@@ -37,8 +37,8 @@ from real2sim.pipeline.masks import PARALLAX
 from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, sparse_point_files
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
                                       _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine, _robot_frame,
-                                      check_evaluations)
-from real2sim.pipeline.truth import build_truth, has_ground_truth
+                                      _truth, check_evaluations)
+from real2sim.pipeline.truth import has_ground_truth
 
 if TYPE_CHECKING:
     from real2sim.asset.build import AssetConfig
@@ -436,7 +436,8 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
                   "reconstruct_report": mf.files_digest(recon_dir, ["report.json"])}
         runner.stage("truth", inputs, {"seed": asset_cfg.seed, "refined": config.refine is not None,
                                        "dynamics": dynamics}, eval_key or asset_key, ["truth.json"],
-                     lambda: _truth(truth_root, used, asset_dir, recon_dir, config, asset_cfg.seed, manifest, dynamics))
+                     lambda: _truth(truth_root, used, asset_dir, recon_dir, manifest, asset_cfg.seed, dynamics,
+                                    refined=config.refine is not None, robot_frame=config.robot_frame() is not None))
         truth = json.loads((asset_dir / "truth.json").read_text())
     elif manifest.entry("truth"):  # the dataset lost its ground_truth/: a stale truth.json would mislead
         manifest.forget("truth")
@@ -444,37 +445,3 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
 
     urdfs = sorted(asset_dir.glob("*/model.urdf"))
     return RunResult(asset_dir, runner.statuses, manifest.path, truth, urdfs, warnings)
-
-
-def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, config: RunConfig, seed: int,
-           manifest: mf.Manifest, dynamics: bool) -> None:
-    """truth.json; ``dynamics``: with the evaluations' comparison (run now, or kept and still valid)."""
-    report = json.loads((recon_dir / "report.json").read_text())
-    refine_entry = manifest.entry("refine_poses") if config.refine is not None else None
-    refinement = refine_entry.get("result", {}) if refine_entry else None
-    frame_entry = manifest.entry("robot_frame") if config.robot_frame() is not None else None
-    true_properties = None
-    if dynamics:
-        # the truth evaluation, redone whenever the asset changes, wrote the same mass properties
-        from real2sim.formats.physical import read_physical_properties
-        from real2sim.pipeline.truth_dynamics import TRUE_PROPERTIES_NAME
-
-        written = asset_dir / mf.RUN_DIRNAME / "truth" / TRUE_PROPERTIES_NAME
-        true_properties = read_physical_properties(written) if written.is_file() else None
-    record = build_truth(dataset, used, asset_dir, report, refinement=refinement, seed=seed,
-                         robot_frame=frame_entry.get("result") if frame_entry else None,
-                         true_properties=true_properties)
-    results, results_truth = asset_dir / RESULTS_DIRNAME, asset_dir / TRUTH_RESULTS_DIRNAME
-    if dynamics and (results_truth / "summary.csv").is_file():
-        from real2sim.pipeline.truth_dynamics import dynamics_record
-
-        record["dynamics"] = dynamics_record(results, results_truth)
-    mf.write_json_atomic(asset_dir / "truth.json", record)
-    if dynamics:
-        from real2sim.report.html import write_report
-
-        for folder in (results, results_truth):  # their reports show the truth now
-            if (folder / "runs.csv").is_file():
-                before = set(mf.all_files(folder))
-                write_report(folder)
-                manifest.add_owned_files(folder.name, set(mf.all_files(folder)) - before)

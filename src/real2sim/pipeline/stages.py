@@ -221,3 +221,42 @@ def check_evaluations(asset_dir: Path, manifest: mf.Manifest, inputs_now: dict[s
             warnings.append(f"{folder}/ holds the evaluation of an earlier asset: kept, marked stale "
                             f"({folder}/{STALE_NAME}); add --evaluate to simulate the current one")
     return valid, warnings
+
+
+def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, manifest: mf.Manifest, seed: int,
+           dynamics: bool, *, refined: bool, robot_frame: bool) -> None:
+    """truth.json; ``dynamics``: with the evaluations' comparison (run now, or kept and still valid);
+    ``refined`` / ``robot_frame``: whether those stages are part of this run."""
+    import json
+
+    from real2sim.pipeline.truth import build_truth
+
+    report = json.loads((recon_dir / "report.json").read_text())
+    refine_entry = manifest.entry("refine_poses") if refined else None
+    refinement = refine_entry.get("result", {}) if refine_entry else None
+    frame_entry = manifest.entry("robot_frame") if robot_frame else None
+    true_properties = None
+    if dynamics:
+        # the truth evaluation, redone whenever the asset changes, wrote the same mass properties
+        from real2sim.formats.physical import read_physical_properties
+        from real2sim.pipeline.truth_dynamics import TRUE_PROPERTIES_NAME
+
+        written = asset_dir / mf.RUN_DIRNAME / "truth" / TRUE_PROPERTIES_NAME
+        true_properties = read_physical_properties(written) if written.is_file() else None
+    record = build_truth(dataset, used, asset_dir, report, refinement=refinement, seed=seed,
+                         robot_frame=frame_entry.get("result") if frame_entry else None,
+                         true_properties=true_properties)
+    results, results_truth = asset_dir / RESULTS_DIRNAME, asset_dir / TRUTH_RESULTS_DIRNAME
+    if dynamics and (results_truth / "summary.csv").is_file():
+        from real2sim.pipeline.truth_dynamics import dynamics_record
+
+        record["dynamics"] = dynamics_record(results, results_truth)
+    mf.write_json_atomic(asset_dir / "truth.json", record)
+    if dynamics:
+        from real2sim.report.html import write_report
+
+        for folder in (results, results_truth):  # their reports show the truth now
+            if (folder / "runs.csv").is_file():
+                before = set(mf.all_files(folder))
+                write_report(folder)
+                manifest.add_owned_files(folder.name, set(mf.all_files(folder)) - before)
