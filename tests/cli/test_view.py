@@ -168,3 +168,24 @@ def test_every_interface_prints_an_address_a_browser_can_open(can_asset, capsys)
         assert main(["view", str(can_asset), "--host", host, "--seconds", "0.1"]) == 0
         out = capsys.readouterr().out
         assert "0.0.0.0:" not in out and "http://localhost:" in out and "all interfaces" in out, out
+
+
+def test_sigterm_while_serving_exits_143(can_asset):
+    """Ctrl-C is how a user stops the server (exit 0); SIGTERM was swallowed the same way (exit 0),
+    where every other verb exits 143."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "real2sim", "view", str(can_asset), "--seconds", "600"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().startswith("showing ")
+        time.sleep(1.0)  # into the serving loop (the URL is printed just before it)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert err.strip().splitlines()[-1] == "real2sim: terminated", err

@@ -1,0 +1,157 @@
+"""Issue 33 (#5, #7, #10): what a user sees when a path, a file or a signal is not what the verb expects:
+exit 2 and one line naming the problem (a link loop is not "not found", /proc is not writable, '' is not
+the working folder), plain WARNING lines, and SIGTERM exiting 143 even where a verb catches it as Ctrl-C."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import pytest
+
+from real2sim.cli import main
+from tests.cli_helpers import run_cli
+
+
+@pytest.fixture(scope="module")
+def tiny_dataset(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("messages") / "ds"
+    assert main(["capture", "can", "--out", str(out), "--views", "8", "--width", "64", "--height", "48"]) == 0
+    return out
+
+
+def assert_one_line(code, err: str, text: str) -> None:
+    lines = [line for line in err.splitlines() if line.strip() and not line.startswith("INFO:drake:")]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err and "internal error" not in err, err
+    assert text in lines[0], err
+
+
+def _proc_takes_nothing() -> bool:
+    try:
+        os.mkdir("/proc/real2sim-test-probe")
+    except OSError:
+        return True
+    os.rmdir("/proc/real2sim-test-probe")
+    return False
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir() or not _proc_takes_nothing(), reason="needs Linux's /proc")
+@pytest.mark.parametrize("argv", [
+    ["demo", "--out", "/proc/d"],
+    ["reconstruct", "{ds}", "--out", "/proc/m"],
+    ["run", "{ds}", "--mass", "0.35", "--out", "/proc/a"],
+    ["capture", "can", "--out", "/proc/c", "--views", "2"],
+])
+def test_output_under_proc_is_one_line(argv, tiny_dataset, capsys):
+    """Was exit 1, "internal error: FileNotFoundError ... .lock" (root passes os.access on /proc)."""
+    code, _, err = run_cli(capsys, *[a.format(ds=tiny_dataset) for a in argv])
+    assert_one_line(code, err, "cannot write in /proc")
+    assert not Path(argv[argv.index("--out") + 1]).exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ["capture", "can", "--out", "", "--views", "2"],
+    ["reconstruct", "", "--out", "{tmp}/m"],
+    ["reconstruct", "{ds}", "--out", ""],
+    ["refine-poses", ""],
+    ["report", ""],
+    ["view", ""],
+])
+def test_empty_path_is_refused(argv, tiny_dataset, tmp_path, capsys):
+    """`--out ''` (an unset shell variable) was taken as the working folder."""
+    before = sorted(Path.cwd().iterdir())
+    code, _, err = run_cli(capsys, *[a.format(ds=tiny_dataset, tmp=tmp_path) for a in argv])
+    assert_one_line(code, err, "empty path")
+    assert sorted(Path.cwd().iterdir()) == before
+
+
+@pytest.mark.parametrize("argv", [
+    ["reconstruct", "{loop}", "--out", "{tmp}/m"],
+    ["reconstruct", "{ds}", "--out", "{loop}/m"],
+    ["asset", "{loop}", "--mass", "1", "--out", "{tmp}/a"],
+    ["capture", "{loop}", "--out", "{tmp}/c", "--views", "2"],
+    ["capture", "can", "--out", "{loop}", "--views", "2"],
+    ["refine-poses", "{loop}"],
+    ["mask", "{loop}", "--method", "parallax"],
+    ["run", "{loop}", "--mass", "1", "--out", "{tmp}/r"],
+    ["report", "{loop}"],
+    ["view", "{loop}"],
+])
+def test_symbolic_link_loop_is_named(argv, tiny_dataset, tmp_path, capsys):
+    """A link loop was "not found", or an internal RuntimeError from Path.resolve."""
+    loop = tmp_path / "loop"
+    loop.symlink_to(tmp_path / "loop2")
+    (tmp_path / "loop2").symlink_to(loop)
+    code, _, err = run_cli(capsys, *[a.format(ds=tiny_dataset, tmp=tmp_path, loop=loop) for a in argv])
+    assert_one_line(code, err, "symbolic link loop")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["loop", "loop2"]
+
+
+def test_report_given_a_file(tiny_dataset, capsys):
+    """A file given to `report` was "results folder not found"."""
+    code, _, err = run_cli(capsys, "report", tiny_dataset / "transforms.json")
+    assert_one_line(code, err, "is a file, not a results folder")
+
+
+def test_garbage_weights_file_is_named_plainly(tiny_dataset, tmp_path, capsys):
+    """torch's message suggested `torch.load(weights_only=False)`: running the file's code."""
+    from real2sim.capture.torchvision_compat import import_maskrcnn_builder
+    from real2sim.formats.errors import UserInputError
+
+    try:
+        import_maskrcnn_builder()
+    except UserInputError:
+        pytest.skip("torchvision is not installed")
+    garbage = tmp_path / "garbage.bin"
+    garbage.write_bytes(bytes(range(256)) * 20)
+    code, _, err = run_cli(capsys, "mask", tiny_dataset, "--method", "maskrcnn", "--weights", garbage)
+    assert_one_line(code, err, "is not a Mask R-CNN weights file")
+    assert "weights_only" not in err
+
+
+def test_python_warnings_are_plain_lines(monkeypatch, capsys):
+    """A warning that reaches the terminal is one `WARNING: ...` line, no source file and line; trimesh's
+    expected NaN centre of a zero-volume part (parallax masks, hulls) is not shown at all."""
+    import trimesh
+
+    import real2sim.cli.view as view
+
+    def verb(args) -> int:
+        flat = trimesh.Trimesh(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0]], faces=[[0, 1, 2]], process=False)
+        assert flat.volume == 0.0  # trimesh divides by it for the centre of mass
+        warnings.warn("the fallback was used:\n  here is why", RuntimeWarning)
+        return 0
+
+    monkeypatch.setattr(view, "run", verb)
+    code, _, err = run_cli(capsys, "view", "anything")
+    assert code == 0
+    assert err.strip().splitlines() == ["WARNING: the fallback was used: here is why"], err
+
+
+def test_sigterm_in_a_verb_that_catches_ctrl_c_exits_143(tmp_path):
+    """`run` catches Ctrl-C to say what it kept, and returned 130 for SIGTERM too (Terminated is a
+    KeyboardInterrupt so that the same clean-up runs); a SIGTERM now exits 143."""
+    ds = tmp_path / "ds"
+    assert main(["capture", "can", "--out", str(ds), "--views", "16", "--width", "160", "--height", "120"]) == 0
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    proc = subprocess.Popen([sys.executable, "-m", "real2sim", "run", str(ds), "--mass", "0.35", "--out",
+                             str(tmp_path / "A"), "--refine-poses", "--backend", "hull"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "TMPDIR": str(temp)})
+    seen = []
+    try:
+        for line in proc.stderr:
+            seen.append(line)
+            if "extracting features" in line:
+                proc.send_signal(signal.SIGTERM)
+                break
+        _, rest = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, "".join(seen) + rest
+    assert "Traceback" not in rest and "Aborted" not in rest, rest
+    assert list(temp.iterdir()) == []
