@@ -1,14 +1,29 @@
 """Visual hull: the region every mask agrees is object, on a voxel grid, and its surface.
 
 A voxel's *silhouette score* is the mask value (bilinear, so the surface falls
-between pixels) at its projection in each view; views it projects outside of, or
-lies behind, cast no vote. The score kept is a low order statistic of the votes
+between pixels) at its projection in each view. A view it projects outside of votes 0
+when its mask stays clear of that image edge (the view holds the object's whole
+outline there: a long lens's narrow view of a ring is bounded this way), and not at all
+when the mask reaches that edge (the object is cut by the border: the view cannot tell)
+or the point lies behind it. The score kept is a low order statistic of the votes
 rather than their minimum, so that a few bad masks or pose errors
 (``outlier_fraction`` of the views that see the voxel) cannot cut the object. The
 fraction is of the voxels' own voters, not of all views: counted over all views, a
 point only a few cameras see kept the non-voters' "inside" whatever those few said,
 and a wide bowl's search box never closed (its corners, seen by three close-up views,
 all counted as object). The hull is where the score is >= 0.5.
+
+A point is *constrained* only when at least ``MIN_VOTES`` views see it from directions
+at least ``MIN_SPREAD_DEG`` apart (:func:`view_spread_deg`). A few neighbouring
+cameras of a ring, or of a long lens, see a thin, long cone together: their masks
+cannot say where along it the object is, and counting such points as inside let a
+real capture's region run off a metre past a 9 cm object. Points not constrained
+score 0, whatever their masks say; the same rule bounds the region the views see
+together (:func:`seen_together`), which no result may leave.
+
+No view is trusted alone: a point is carved by one mask only when too few views see
+it for a second to agree (``MIN_AGREEING``); otherwise the lowest mask value is
+skipped, so one wrong mask (a real threshold that ate part of the object) cannot cut it.
 
 World frame, metres; the table top is z = 0 and nothing is kept below it.
 """
@@ -26,6 +41,11 @@ from real2sim.reconstruct.views import PosedViews, common_look_at_point, project
 
 
 MIN_VOTES = 3
+#: the widest angle between two views that see a point must reach this for the point to count (degrees)
+MIN_SPREAD_DEG = 25.0
+#: a point is carved only when this many of the views that see it put it outside their masks
+#: (when at least 2 * MIN_VOTES views see it; fewer views are all needed)
+MIN_AGREEING = 2
 
 
 @dataclass(frozen=True)
@@ -70,35 +90,114 @@ def voxel_footprint_px(views: PosedViews, grid: VoxelGrid) -> float:
     return grid.voxel_m * views.intrinsics.fl_x / distance
 
 
-def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction: float,
-                      chunk: int = 100_000, min_votes: int = MIN_VOTES) -> np.ndarray:
-    """(P,) float32 silhouette score of world points: see the module docstring.
+def view_spread_deg(directions: torch.Tensor, seen: torch.Tensor) -> torch.Tensor:
+    """(P,) how widely the views that see each point surround it, degrees.
 
-    A point fewer than ``min_votes`` cameras see scores 0: nothing constrains it, and
-    counting it as inside would let the hull run off where the views are sparse.
+    ``directions``: (V, P, 3) unit vectors from the points to the cameras; ``seen``: (V, P) bool.
+    The measure is ``2 asin(sqrt(lambda_2))`` of the directions' second moment matrix
+    (lambda_2 its middle eigenvalue): two views ``a`` degrees apart give exactly ``a``, views
+    spread along an arc of ``a`` degrees somewhat less, and a ring and a hemisphere alike
+    count by their widest spread, so a ring level with the object is as good as a dome.
+    """
+    weight = seen.to(directions.dtype)
+    moment = torch.einsum("vp,vpi,vpj->pij", weight, directions, directions)
+    moment = moment / weight.sum(dim=0).clamp_min(1.0)[:, None, None]
+    middle = torch.linalg.eigvalsh(moment.double())[:, 1].clamp(0.0, 1.0)
+    return torch.rad2deg(2.0 * torch.asin(middle.sqrt())).float()
+
+
+def border_touched(mask: np.ndarray) -> np.ndarray:
+    """(V, 4) bool: whether each view's mask (V, H, W) reaches its image's left, right, top and bottom edge."""
+    m = np.asarray(mask) >= 0.5
+    return np.stack([m[:, :, 0].any(1), m[:, :, -1].any(1), m[:, 0, :].any(1), m[:, -1, :].any(1)], axis=1)
+
+
+def _votes(views: PosedViews, w2c: torch.Tensor, pts: torch.Tensor, touched: torch.Tensor | None = None):
+    """Per view: where the points project (grid_sample coordinates), whether they are in its image,
+    and whether the view votes on them.
+
+    A view whose mask stays clear of an image edge holds the object's whole outline on that side,
+    so a point beyond that edge is outside the object: a vote of 0. Beyond an edge the mask reaches
+    (the object cut by the border), or behind the camera, the view cannot tell: no vote.
+    ``touched``: (V, 4) :func:`border_touched`; None counts only points in the image.
     """
     k = views.intrinsics
+    u, v, z = project_torch(k, w2c, pts)
+    grid = torch.stack([u * (2.0 / k.width) - 1.0, v * (2.0 / k.height) - 1.0], dim=-1)
+    in_image = (z > 0) & (grid.abs() <= 1).all(dim=-1)
+    if touched is None:
+        return grid, in_image, in_image
+    beyond = torch.stack([grid[..., 0] < -1, grid[..., 0] > 1, grid[..., 1] < -1, grid[..., 1] > 1], dim=-1)
+    unknown = (beyond & touched[:, None, :]).any(dim=-1)
+    return grid, in_image, in_image | ((z > 0) & ~in_image & ~unknown)
+
+
+def _constrained(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tensor, min_votes: int,
+                 min_spread_deg: float) -> torch.Tensor:
+    """(P,) bool: enough views see the point, from directions far enough apart (module docstring)."""
+    ok = seen.sum(dim=0) >= min_votes
+    if min_spread_deg > 0 and bool(ok.any()):
+        idx = torch.nonzero(ok)[:, 0]
+        to_cam = centres[:, None, :] - pts[None, idx]
+        to_cam = to_cam / to_cam.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        ok[idx] = view_spread_deg(to_cam, seen[:, idx]) >= min_spread_deg
+    return ok
+
+
+def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction: float,
+                      chunk: int = 100_000, min_votes: int = MIN_VOTES,
+                      min_spread_deg: float = MIN_SPREAD_DEG) -> np.ndarray:
+    """(P,) float32 silhouette score of world points: see the module docstring.
+
+    A point fewer than ``min_votes`` cameras see, or seen only from directions less than
+    ``min_spread_deg`` apart, scores 0: nothing constrains it, and counting it as inside
+    would let the hull run off where the views are sparse.
+    """
     masks = torch.from_numpy(views.mask[:, None])  # (V, 1, H, W)
+    touched = torch.from_numpy(border_touched(views.mask))
     w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
+    centres = torch.from_numpy(views.c2w_cv[:, :3, 3]).float()
     out = np.empty(len(points_m), dtype=np.float32)
     with torch.no_grad():
         for start in range(0, len(points_m), chunk):
             pts = torch.from_numpy(np.asarray(points_m[start:start + chunk], dtype=np.float32))
-            u, v, z = project_torch(k, w2c, pts)
-            grid = torch.stack([u * (2.0 / k.width) - 1.0, v * (2.0 / k.height) - 1.0], dim=-1)
+            grid, _, seen = _votes(views, w2c, pts, touched)
             vals = torch.nn.functional.grid_sample(masks, grid[:, None], mode="bilinear", align_corners=False)[:, 0, 0]
-            no_vote = (z <= 0) | (grid.abs() > 1).any(dim=-1)
-            seen = (~no_vote).sum(dim=0)
-            ordered = vals.masked_fill(no_vote, 2.0).sort(dim=0).values  # the votes first, in order
-            rank = torch.clamp(torch.floor(outlier_fraction * seen).long(), max=torch.clamp(seen - 1, min=0))
+            count = seen.sum(dim=0)
+            ordered = vals.masked_fill(~seen, 2.0).sort(dim=0).values  # the votes first, in order
+            floor = torch.where(count >= 2 * min_votes, MIN_AGREEING - 1, 0)
+            rank = torch.maximum(torch.floor(outlier_fraction * count).long(), floor)
+            rank = torch.clamp(rank, max=torch.clamp(count - 1, min=0))
             score = ordered.gather(0, rank[None])[0]
-            out[start:start + chunk] = torch.where(seen >= min_votes, score, torch.zeros_like(score)).numpy()
+            # Below 0.5 a point is outside whatever the spread; its score still places the surface
+            # between voxels, so it keeps the score (the rule of min_votes alone). The spread is
+            # computed only where the masks would keep a point.
+            candidate = (score >= 0.5) & (count >= min_votes)
+            keep = count >= min_votes
+            if bool(candidate.any()):
+                keep = keep & (~candidate | _constrained(centres, pts, seen & candidate[None], min_votes, min_spread_deg))
+            out[start:start + chunk] = torch.where(keep, score, torch.zeros_like(score)).numpy()
+    return out
+
+
+def seen_together(views: PosedViews, points_m: np.ndarray, *, min_votes: int = MIN_VOTES,
+                  min_spread_deg: float = MIN_SPREAD_DEG, chunk: int = 100_000) -> np.ndarray:
+    """(P,) bool: which world points lie where the views see together (module docstring), masks aside."""
+    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
+    centres = torch.from_numpy(views.c2w_cv[:, :3, 3]).float()
+    out = np.empty(len(points_m), dtype=bool)
+    with torch.no_grad():
+        for start in range(0, len(points_m), chunk):
+            pts = torch.from_numpy(np.asarray(points_m[start:start + chunk], dtype=np.float32))
+            _, seen, _ = _votes(views, w2c, pts)
+            out[start:start + chunk] = _constrained(centres, pts, seen, min_votes, min_spread_deg).numpy()
     return out
 
 
 def object_region(views: PosedViews, *, outlier_fraction: float = 0.03, coarse_voxels: int = 64,
-                  table_z_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) world box (metres) holding the visual hull, found on a coarse grid around the cameras' common point.
+                  table_z_m: float | None = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) world box (metres) holding the visual hull, found on a coarse grid around the cameras' common point;
+    nothing below ``table_z_m`` (None: no table, the box is bounded below by the views alone).
 
     The search box grows until the hull no longer touches its sides. UserInputError
     when the masks agree on no region at all.
@@ -112,15 +211,33 @@ def object_region(views: PosedViews, *, outlier_fraction: float = 0.03, coarse_v
             raise UserInputError("the masks agree on no region of space: check the masks and the camera poses")
         idx = np.argwhere(inside)
         lo_i, hi_i = idx.min(axis=0), idx.max(axis=0)
-        touches = (lo_i[:2] == 0).any() or (hi_i >= np.asarray(grid.shape) - 1).any()
+        # on a table the hull may (must) touch the grid's floor; with none, every side counts
+        sides = slice(0, 2) if table_z_m is not None else slice(0, 3)
+        touches = (lo_i[sides] == 0).any() or (hi_i >= np.asarray(grid.shape) - 1).any()
         lo = grid.origin_m + (lo_i - 1.5) * grid.voxel_m
         hi = grid.origin_m + (hi_i + 1.5) * grid.voxel_m
         if not touches:
-            lo[2] = max(lo[2], table_z_m)
-            return lo, hi
+            if table_z_m is not None:
+                lo[2] = max(lo[2], table_z_m)
+            return _tightened(views, lo, hi, outlier_fraction, coarse_voxels, table_z_m)
         radius *= 2.0
     raise UserInputError("the visual hull does not close: the masks leave the object unbounded (too few views "
                          "from different directions?)")
+
+
+def _tightened(views: PosedViews, lo: np.ndarray, hi: np.ndarray, outlier_fraction: float, voxels: int,
+               table_z_m: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """The box ``[lo, hi]``, which holds the hull with room to spare, shrunk to the hull found on a grid
+    of ``voxels`` across it, plus a voxel and a half: the search grid's cells are a camera distance over
+    64, centimetres for a long lens, and every later grid spends its voxels across this box."""
+    grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
+    inside = silhouette_scores(views, grid.centres(), outlier_fraction).reshape(grid.shape) >= 0.5
+    if not inside.any():
+        return lo, hi
+    idx = np.argwhere(inside)
+    new_lo = np.maximum(grid.origin_m + (idx.min(axis=0) - 1.5) * grid.voxel_m, lo)
+    new_hi = np.minimum(grid.origin_m + (idx.max(axis=0) + 1.5) * grid.voxel_m, hi)
+    return new_lo, new_hi
 
 
 def carve(views: PosedViews, grid: VoxelGrid, outlier_fraction: float = 0.03, block: int = 3) -> np.ndarray:

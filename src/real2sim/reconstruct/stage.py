@@ -17,7 +17,7 @@ import resource
 import sys
 import time
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Iterator
 
@@ -116,6 +116,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     report: dict = {"backend": config.backend, "device": device, "seed": seed}
     with clock.stage("load"):
         views = load_views(dataset, max_side_px=config.max_image_side_px)
+        table_z_m = _table_z_m(dataset, config)
         train_idx, held_idx = held_out_split(views.count, config.held_out_every)
         train, held = views.subset(train_idx), views.subset(held_idx)
         truth = load_truth(dataset)
@@ -131,7 +132,11 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     if progress:
         progress("visual hull", 0, 0)
     with clock.stage("visual_hull"):
-        region = object_region(train, outlier_fraction=config.hull_outlier_fraction, table_z_m=config.table_z_m)
+        region = object_region(train, outlier_fraction=config.hull_outlier_fraction, table_z_m=table_z_m)
+    report["region_m"] = [region[0].tolist(), region[1].tolist()]
+    if table_z_m is None:  # no table: nothing to cut at; the grids' floor is the region's own
+        report["table"] = "none (the dataset has no table plane): the object is not cut below"
+        config = replace(config, table_z_m=float(region[0][2]))
     if config.backend == "hull":
         with clock.stage("hull_surface"):
             grid = VoxelGrid.covering(*region, config.hull_voxels, config.table_z_m)
@@ -182,6 +187,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     if held.count:
         with clock.stage("held_out_mesh_psnr"):
             report["psnr_mesh_held_out_db"] = _mesh_psnr(textured, held)
+    check_seen_together(mesh, train, region)
     report["held_out_views"] = list(held.names)
     report["train_views"] = int(train.count)
     report["mesh"] = {"vertices": int(len(textured.vertices)), "faces": int(len(textured.faces)),
@@ -195,6 +201,42 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     report["total_seconds"] = round(sum(s["seconds"] for s in clock.stages.values()), 3)
     report["config"] = asdict(config)
     return Reconstruction(mesh=textured, report=report, field=None if config.backend == "hull" else trained.field)
+
+
+def _table_z_m(dataset: Path | str, config: ReconstructConfig) -> float | None:
+    """The table's height (metres), or None when the dataset says its images show no table plane."""
+    from real2sim.formats.dataset import has_table_plane, read_dataset
+
+    return config.table_z_m if has_table_plane(read_dataset(dataset, check_files=False)) else None
+
+
+class UnboundedReconstruction(UserInputError):
+    """The reconstruction reaches where the views do not see together: refused rather than written."""
+
+
+def check_seen_together(mesh: trimesh.Trimesh, views: PosedViews, region: tuple[np.ndarray, np.ndarray],
+                        max_outside_fraction: float = 0.01, max_points: int = 20_000) -> None:
+    """Refuse (UnboundedReconstruction) a mesh (world frame, metres) larger than the region its views see
+    together: more than ``max_outside_fraction`` of its vertices outside the hull's box ``region`` (by more
+    than a tenth of the box's size) or where fewer than enough views see from far enough apart
+    (:func:`real2sim.reconstruct.hull.seen_together`). Nothing the views cannot bound is a result."""
+    from real2sim.reconstruct.hull import seen_together
+
+    verts = np.asarray(mesh.vertices)
+    if len(verts) > max_points:
+        verts = verts[np.random.default_rng(0).choice(len(verts), max_points, replace=False)]
+    lo, hi = region
+    slack = 0.1 * float(np.max(hi - lo))
+    outside_box = ((verts < lo - slack) | (verts > hi + slack)).any(axis=1)
+    unseen = ~seen_together(views, verts)
+    bad = outside_box | unseen
+    if bad.mean() > max_outside_fraction:
+        size_mm = 1000.0 * (verts.max(axis=0) - verts.min(axis=0))
+        raise UnboundedReconstruction(
+            f"the reconstruction ({size_mm[0]:.0f} x {size_mm[1]:.0f} x {size_mm[2]:.0f} mm) reaches beyond the region "
+            f"the views see together ({100 * bad.mean():.0f} % of its surface): refused; check that the poses and "
+            "masks belong together and that the object is seen from directions at least "
+            "25 degrees apart")
 
 
 def _psnr_region(views: PosedViews, i: int, covered: np.ndarray) -> np.ndarray:
