@@ -137,7 +137,7 @@ def kept_note(asset_dir: Path | str) -> str:
     manifest = mf.Manifest.load(Path(asset_dir))
     stages = list(manifest.data["stages"]) if manifest is not None else []
     if not stages:
-        return f"nothing was kept in {asset_dir}" if Path(asset_dir).is_dir() else "nothing was written"
+        return f"no finished stage is kept in {asset_dir}" if Path(asset_dir).is_dir() else "nothing was written"
     return (f"the finished stages ({', '.join(stages)}) are kept in {Path(asset_dir) / mf.RUN_DIRNAME}: fix the "
             "cause and run the same command again to resume from them")
 

@@ -114,7 +114,7 @@ def refuse_foreign(asset_dir: Path, manifest: mf.Manifest, names) -> None:
     that `run` did not write (a folder or file of the user's under a name the stage writes), or a
     folder of the run's holding files the run did not write. Nothing of the user's is ever deleted."""
     owned = manifest.owned()
-    theirs = sorted(n for n in names if n not in owned and (asset_dir / n).exists())
+    theirs = sorted(n for n in names if n not in owned and os.path.lexists(asset_dir / n))
     if theirs:
         raise UserInputError(f"{asset_dir / theirs[0]} was not written by run, and run writes that name; "
                              "move it out of the folder and run again")
