@@ -32,7 +32,8 @@ def register(sub) -> None:
         "dataset has ground_truth/ (pose, mask, reconstruction and mass-property errors), and with --evaluate the Drake evaluation into ASSETDIR/results. "
         "ASSETDIR/.run/run.json records each stage's input hashes, settings, outputs, wall seconds and peak "
         "memory; running again skips the unchanged stages and redoes those downstream of a change "
-        "(a new --collision refits without reconstructing), and resumes an interrupted run.",
+        "(a new --collision fits only that one), and resumes an interrupted run. A rerun replaces only what run "
+        "wrote: your own files in ASSETDIR are kept, and an evaluation of an earlier asset is kept, marked stale.",
         epilog="example: real2sim capture can.obj --out can_ds && "
         "real2sim run can_ds --mass 0.35 --out can_asset --collision cylinders:10 --backend hull",
     )
@@ -45,7 +46,8 @@ def register(sub) -> None:
                    help="COLMAP or ns-process-data dataset: metres per model unit, instead of --object-height-m")
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR",
                    help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
-    p.add_argument("--overwrite", action="store_true", help="discard ASSETDIR (and its cached stages) first")
+    p.add_argument("--overwrite", action="store_true",
+                   help="discard ASSETDIR first: its cached stages, results and any files of yours in it")
     p.add_argument("--refine-poses", action="store_true", help="refine the camera poses with COLMAP first")
     p.add_argument("--mask", choices=["provided", "maskrcnn", "background", "parallax"], default=None, metavar="METHOD",
                    help="make the masks first (on a copy in ASSETDIR/.run/masked): provided (masks/<image stem>.png), "
