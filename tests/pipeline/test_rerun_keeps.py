@@ -77,6 +77,19 @@ def test_rerun_with_other_settings_keeps_the_users_files(tiny_ds, asset_copy, ca
     assert "MY_NOTES.txt" not in manifest(asset_copy)["owned"]
 
 
+def test_rerun_of_a_folder_from_before_ownership_was_recorded_keeps_the_users_files(tiny_ds, asset_copy, capsys):
+    """Item 1: a run.json without ``owned`` (written by an older real2sim) whose asset stage failed
+    since: the entries its asset_config.json names are the run's, the rest the user's."""
+    record = manifest(asset_copy)
+    del record["owned"], record["stages"]["asset"]
+    (asset_copy / ".run" / "run.json").write_text(json.dumps(record))
+    (asset_copy / "MY_NOTES.txt").write_text("notes")
+    code, out, err = _run(capsys, tiny_ds, asset_copy, "0.35", "--collision", "mesh")
+    assert code == 0, err
+    assert (asset_copy / "MY_NOTES.txt").read_text() == "notes"
+    assert not (asset_copy / "spheres_4").exists() and (asset_copy / "mesh" / "model.urdf").is_file()
+
+
 def test_rerun_never_replaces_a_folder_holding_the_users_files(tiny_ds, asset_copy, capsys):
     """Item 1: a file of the user's inside a representation folder, or a folder of the user's under a
     name the run writes, stops the rerun with one line before anything is replaced."""

@@ -156,7 +156,9 @@ class Manifest:
         # and a project folder holding both can be moved.
         self.data = data or {"version": MANIFEST_VERSION, "stages": {}, "owned": {},
                              "dataset": os.path.relpath(Path(dataset).resolve(), self.asset_dir.resolve())}
-        if "owned" not in self.data:  # written before ownership was recorded: the stages' outputs, files unknown
+        #: run.json was written before ownership was recorded (``owned`` inferred below, files unknown)
+        self.legacy = "owned" not in self.data
+        if self.legacy:  # the stages' outputs
             self.data["owned"] = {out.split("/")[0]: {"stage": stage, "files": None}
                                   for stage, entry in self.data["stages"].items()
                                   for out in entry.get("outputs", []) if out.split("/")[0] != RUN_DIRNAME}

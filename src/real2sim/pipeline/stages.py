@@ -126,6 +126,21 @@ def refuse_foreign(asset_dir: Path, manifest: mf.Manifest, names) -> None:
                              f"{folder}/: move your files out of it and run again (files beside run's folders are kept)")
 
 
+def _infer_legacy_asset(asset_dir: Path, manifest: mf.Manifest) -> None:
+    """A run.json from before ownership was recorded, whose asset stage was forgotten (it failed):
+    the entries the asset's own asset_config.json names are the run's (their files unknown)."""
+    import json
+
+    from real2sim.formats.spec import parse_spec
+
+    try:
+        specs = json.loads((asset_dir / "asset_config.json").read_text())["collision"]
+        names = list(ASSET_FILES) + [parse_spec(text).name for text in specs]
+    except (OSError, ValueError, KeyError, TypeError, UserInputError):
+        return
+    manifest.claim("asset", {name: None for name in names if (asset_dir / name).exists()})
+
+
 def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: ProgressFn) -> dict:
     """build_asset into ``.run/asset`` (whole or not at all), then swap its entries into ASSETDIR.
 
@@ -135,6 +150,8 @@ def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: Pr
     from real2sim.asset.build import build_asset
 
     check_reaches_table(mesh, cfg.support_height_m)
+    if manifest.legacy and not manifest.owned("asset"):
+        _infer_legacy_asset(asset_dir, manifest)
     previous = set(manifest.owned("asset"))
     planned = set(ASSET_FILES) | {spec.name for spec in cfg.specs}
     refuse_foreign(asset_dir, manifest, sorted(planned | previous))
