@@ -219,3 +219,46 @@ def test_mesh_in_millimetres(tmp_path, can_obj, capsys):
     assert code == 0, err
     truth = trimesh.load(tmp_path / "ds" / "ground_truth" / "mesh.obj", force="mesh")
     np.testing.assert_allclose(np.sort(truth.extents), np.sort(mesh.extents / 1000.0), rtol=1e-4)
+
+
+def test_object_out_of_size_after_mesh_units_is_refused(tmp_path, can_obj, capsys):
+    """Issue 33 #9: a metre mesh read as millimetres (a 0.1 mm can) and a centimetre mesh read as
+    metres (10 m) are refused by `asset` and `capture` with the units that give a tabletop
+    size; nothing is written."""
+    import trimesh
+
+    cases = ((can_obj, "mm", "0.1 mm across", "--mesh-units m"),)
+    mesh = trimesh.load(can_obj, force="mesh")
+    mesh.apply_scale(100.0)
+    cm = tmp_path / "can_cm.stl"
+    mesh.export(cm)
+    cases += ((cm, "m", "10 m across", "--mesh-units cm"),)
+    for path, units, size, hint in cases:
+        code, _, err = run_cli(capsys, "asset", path, "--mass", "0.35", "--out", tmp_path / "a", "--collision", "mesh",
+                               "--mesh-units", units)
+        assert_one_line_error(code, err)
+        assert size in err and hint in err, err
+        code, _, err = run_cli(capsys, "capture", path, "--out", tmp_path / "ds", "--views", "8", "--width", "32",
+                               "--height", "24", "--mesh-units", units)
+        assert_one_line_error(code, err)
+        assert size in err and hint in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["can_cm.stl"]
+
+
+def test_object_size_limits_in_metres():
+    """5 mm to 5 m passes; just outside is refused, and a mesh no unit can fix says so."""
+    import trimesh
+
+    from real2sim.formats.errors import UserInputError
+    from real2sim.formats.mesh_io import check_object_size
+
+    assert check_object_size(trimesh.creation.box(extents=(0.006, 0.003, 0.003))) == pytest.approx(0.006)
+    assert check_object_size(trimesh.creation.box(extents=(4.9, 1.0, 1.0))) == pytest.approx(4.9)
+    with pytest.raises(UserInputError, match=r"4 mm across, under .*--mesh-units"):
+        check_object_size(trimesh.creation.box(extents=(0.004, 0.003, 0.003)))
+    with pytest.raises(UserInputError, match=r"20 m across, over .*--mesh-units cm"):
+        check_object_size(trimesh.creation.box(extents=(20.0, 1.0, 1.0)))
+    with pytest.raises(UserInputError, match=r"5.1 m across, over .*--mesh-units cm"):
+        check_object_size(trimesh.creation.box(extents=(5.1, 1.0, 1.0)))
+    with pytest.raises(UserInputError, match="no --mesh-units"):
+        check_object_size(trimesh.creation.box(extents=(1e-7, 1e-7, 1e-7)))

@@ -240,7 +240,7 @@ ARGV_CASES = {
     "asset --mu-dynamic > --mu-static": (["asset", "MESH", "--mass", "0.3", "--out", "o", "--mu-static", "0.3",
                                           "--mu-dynamic", "0.6"], "--mu-dynamic"),
     "asset --mass 5000": (["asset", "MESH", "--mass", "5000", "--out", "o"], "--mass"),
-    "asset 1000 m object": (["asset", "HUGE", "--mass", "0.3", "--out", "o"], "1000 m across, over the 10 m"),
+    "asset 1000 m object": (["asset", "HUGE", "--mass", "0.3", "--out", "o"], "1000 m across, over the largest object"),
     "asset object vs --resolution-hint": (["asset", "MESH", "--mass", "0.3", "--out", "o", "--resolution-hint",
                                            "0.0001"], "--resolution-hint"),
     "asset --sdf-cache is a file": (["asset", "MESH", "--mass", "0.3", "--out", "o", "--sdf-cache", "MESH"],

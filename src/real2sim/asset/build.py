@@ -155,7 +155,8 @@ def config_record(config: AssetConfig) -> dict:
 def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str = "mesh") -> None:
     """Refuse, before any work, a mesh this configuration cannot turn into a usable asset.
 
-    UserInputError (one line): an object larger than :data:`MAX_EXTENT_M`; an object more than
+    UserInputError (one line): an object smaller than :data:`MIN_EXTENT_M` or larger than :data:`MAX_EXTENT_M`
+    after ``mesh_units`` (the message names the units that fit); an object more than
     :data:`MAX_EXTENT_PER_RESOLUTION_HINT` resolution hints across when its shapes are
     hydroelastic (Drake would mesh them with millions of elements); with ``flat_bottom``, a
     support plane that is not finite, that leaves nothing of the mesh above it, or that lies
@@ -164,7 +165,7 @@ def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str
     """
     vertices = np.asarray(mesh.vertices, dtype=float)
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    extent = check_object_size(mesh, label)
+    extent = check_object_size(mesh, label, config.mesh_units)
     hint = config.contact.resolution_hint_m
     if config.contact.hydroelastic != "none" and extent > MAX_EXTENT_PER_RESOLUTION_HINT * hint:
         raise UserInputError(f"{label} is {extent:.4g} m across, over {MAX_EXTENT_PER_RESOLUTION_HINT:g} x "

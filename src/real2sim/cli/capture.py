@@ -183,7 +183,7 @@ def run_capture(args: argparse.Namespace) -> int:
         from real2sim.formats.mesh_io import check_object_size, load_mesh
 
         mesh_path, mesh = mesh, load_mesh(mesh, args.mesh_units)
-        check_object_size(mesh, str(mesh_path))
+        check_object_size(mesh, str(mesh_path), args.mesh_units)
     with progress_display() as progress:
         result = capture(mesh, args.out, cfg, progress=progress, overwrite=args.overwrite)
     print(f"dataset: {result.out_dir} ({result.num_views} views, rendered in {result.render_seconds:.1f} s)")

@@ -14,7 +14,12 @@ MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 MESH_UNITS_M = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 #: Largest object (bounding-box side), m: real2sim models objects a robot handles; a bigger
 #: mesh is almost always in other units (millimetres read as metres).
-MAX_EXTENT_M = 10.0
+MAX_EXTENT_M = 5.0
+#: Smallest object (bounding-box side), m: below it a mesh is almost always in other units
+#: (metres read as millimetres), and nothing a gripper handles is that small.
+MIN_EXTENT_M = 0.005
+#: Sizes (bounding-box side, m) of the tabletop objects a unit hint aims at.
+TABLETOP_EXTENT_M = (0.02, 0.5)
 
 
 def load_mesh(path: Path | str, units: str = "m") -> trimesh.Trimesh:
@@ -54,14 +59,38 @@ def load_mesh(path: Path | str, units: str = "m") -> trimesh.Trimesh:
     return mesh
 
 
-def check_object_size(mesh: trimesh.Trimesh, label: str = "mesh") -> float:
-    """The mesh's largest bounding-box side, m; UserInputError above :data:`MAX_EXTENT_M`."""
+def check_object_size(mesh: trimesh.Trimesh, label: str = "mesh", units: str = "m") -> float:
+    """The mesh's largest bounding-box side, m (the mesh in metres, read from a file in ``units``);
+    UserInputError below :data:`MIN_EXTENT_M` or above :data:`MAX_EXTENT_M`, naming the ``--mesh-units``
+    that would make it a tabletop object."""
     extent = float((mesh.bounds[1] - mesh.bounds[0]).max())
-    if extent > MAX_EXTENT_M:
-        guess = "mm" if extent / 1000.0 <= MAX_EXTENT_M else "another unit"
-        raise UserInputError(f"{label} is {extent:.4g} m across, over the {MAX_EXTENT_M:g} m limit of real2sim's "
-                             f"objects: a mesh in {guess}? real2sim reads metres; pass --mesh-units mm|cm|in")
-    return extent
+    if MIN_EXTENT_M <= extent <= MAX_EXTENT_M:
+        return extent
+    side = "under the smallest" if extent < MIN_EXTENT_M else "over the largest"
+    limit = MIN_EXTENT_M if extent < MIN_EXTENT_M else MAX_EXTENT_M
+    read_as = f" read in {units}" if units != "m" else ""
+    raise UserInputError(f"{label}{read_as} is {_length(extent)} across, {side} object real2sim handles "
+                         f"({_length(limit)}): {_units_hint(extent, units)}")
+
+
+def _length(metres: float) -> str:
+    """A length in the unit a person would say it in: mm below 1 m."""
+    return f"{metres * 1000:.3g} mm" if metres < 1.0 else f"{metres:.4g} m"
+
+
+def _units_hint(extent_m: float, units: str) -> str:
+    """Which ``--mesh-units`` makes an object ``extent_m`` across (read in ``units``) a tabletop object
+    (:data:`TABLETOP_EXTENT_M`): the first in :data:`MESH_UNITS_M`'s order (metric first), else the one
+    nearest that range that real2sim accepts."""
+    in_file = extent_m / MESH_UNITS_M.get(units, 1.0)
+    lo, hi = TABLETOP_EXTENT_M
+    others = [u for u in MESH_UNITS_M if u != units]
+    fits = [u for u in others if lo <= in_file * MESH_UNITS_M[u] <= hi]
+    best = fits[0] if fits else min(others, key=lambda u: abs(np.log(in_file * MESH_UNITS_M[u] / np.sqrt(lo * hi))))
+    size = in_file * MESH_UNITS_M[best]
+    if not MIN_EXTENT_M <= size <= MAX_EXTENT_M:
+        return f"no --mesh-units ({', '.join(MESH_UNITS_M)}) makes it a tabletop object; check the file's scale"
+    return f"the file in {best} would make it {_length(size)} across; pass --mesh-units {best}"
 
 
 def validate_mesh(mesh: trimesh.Trimesh, label: str = "mesh") -> None:
