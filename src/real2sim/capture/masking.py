@@ -37,6 +37,7 @@ from real2sim.formats.dataset import (Dataset, Frame, check_dataset_outputs, loa
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import current_umask
 from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.geometry.silhouettes import check_not_full
 
 METHODS = ("provided", "maskrcnn", "background")
 
@@ -258,6 +259,8 @@ def _provided_masks(root: Path, ds: Dataset, progress: ProgressFn) -> MaskResult
             ious.append(iou(m, load_mask(gt)))
         new_frames.append(replace(f, mask_path=os.path.relpath(p, ds.root)))
         progress("masks (provided)", i + 1, n)
+    # an all-white mask is no silhouette: every one is exit 2 before anything is written, some a warning
+    check_not_full(fractions, [f.file_path for f in ds.frames], f"the masks of {root}", stacklevel=4)
     if any(a.mask_path != b.mask_path for a, b in zip(new_frames, ds.frames)):
         write_transforms(root / "transforms.json", replace(ds, frames=tuple(new_frames)))
     return MaskResult("provided", n, "masks", float(np.mean(fractions)),

@@ -129,6 +129,10 @@ def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True,
             mask[i] = _area_resized(m.astype(np.float32), size)
     if need_masks and not np.any(mask.reshape(len(mask), -1).max(axis=1) > 0):
         raise UserInputError(f"{ds.root}: every mask is empty")
+    if need_masks:  # an all-white mask carves nothing: the hull or field fills the working volume
+        from real2sim.geometry.silhouettes import check_not_full
+
+        check_not_full((mask > 0.5).mean(axis=(1, 2)), [f.file_path for f in ds.frames], f"the masks of {ds.root}")
     views = PosedViews(rgb, mask, ds.poses_c2w_cv(), k, tuple(f.file_path for f in ds.frames), unrefined)
     common_look_at_point(views)
     return views
