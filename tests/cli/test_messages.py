@@ -155,3 +155,30 @@ def test_sigterm_in_a_verb_that_catches_ctrl_c_exits_143(tmp_path):
     assert proc.returncode == 128 + signal.SIGTERM, "".join(seen) + rest
     assert "Traceback" not in rest and "Aborted" not in rest, rest
     assert list(temp.iterdir()) == []
+
+
+@pytest.mark.parametrize("where", ["transforms.json", "images/frame_00002.png", "masks/frame_00002.png"])
+def test_fifo_in_a_dataset_is_one_line_not_a_hang(where, tiny_dataset, tmp_path):
+    """A FIFO where a file is expected: reading it waited forever for a writer (found walking the verbs)."""
+    import shutil
+
+    ds = Path(shutil.copytree(tiny_dataset, tmp_path / "ds"))
+    (ds / where).unlink()
+    os.mkfifo(ds / where)
+    proc = subprocess.run([sys.executable, "-m", "real2sim", "reconstruct", str(ds), "--out", str(tmp_path / "m"),
+                           "--backend", "hull"], capture_output=True, text=True, timeout=120)
+    assert_one_line(proc.returncode, proc.stderr, "is not a regular file")
+    assert not (tmp_path / "m").exists()
+
+
+def test_fifo_urdf_and_file_for_a_folder(tmp_path, capsys):
+    """`view` of an asset whose model.urdf is a FIFO hung in Drake's parser; `evaluate` of a file said
+    "asset folder not found"; a FIFO as weights file was "not found"."""
+    (tmp_path / "asset" / "mesh").mkdir(parents=True)
+    os.mkfifo(tmp_path / "asset" / "mesh" / "model.urdf")
+    proc = subprocess.run([sys.executable, "-m", "real2sim", "view", str(tmp_path / "asset"), "--seconds", "0"],
+                          capture_output=True, text=True, timeout=120)
+    assert_one_line(proc.returncode, proc.stderr, "is not a regular file")
+    (tmp_path / "afile").write_text("x")
+    code, _, err = run_cli(capsys, "evaluate", tmp_path / "afile", "--out", tmp_path / "e")
+    assert_one_line(code, err, "is a file, not an asset folder")

@@ -169,7 +169,10 @@ def load_maskrcnn(weights: Path | str | None, device: str = "cpu", min_size_px: 
         raise UserInputError("--method maskrcnn needs --weights PATH (a local Mask R-CNN weights file)")
     weights = Path(weights)
     if not weights.is_file():
-        raise UserInputError(f"Mask R-CNN weights file not found: {weights}")
+        from real2sim.formats.paths import missing
+
+        raise UserInputError(f"Mask R-CNN weights {weights} is not a regular file" if weights.exists()
+                             else missing(weights, "Mask R-CNN weights file"))
     if not (0 < int(min_size_px) <= int(max_size_px)):
         raise UserInputError(f"Mask R-CNN resize needs 0 < min size <= max size (got {min_size_px}, {max_size_px} px)")
     if int(max_instances) < 1:

@@ -169,6 +169,8 @@ def run(args: argparse.Namespace) -> int:
         if not urdfs:
             raise UserInputError(f"no representation {args.representation!r} in {args.asset}")
     urdf = urdfs[0]
+    if not urdf.is_file():  # a FIFO would keep Drake's parser waiting for a writer forever
+        raise UserInputError(f"{urdf} is not a regular file")
     address = resolve_host(args.host)  # before the model: a name that does not resolve fails at once
     builder, scene_graph = load_model(urdf)  # a model Drake cannot load fails here, before a port is opened
     meshcat = start_meshcat(args.host, args.port, address)

@@ -50,7 +50,9 @@ def discover_assets(asset_dirs: Sequence[Path | str]) -> list[Asset]:
     for raw in asset_dirs:
         d = Path(raw).resolve()
         if not d.is_dir():
-            raise UserInputError(f"asset folder not found: {raw}")
+            from real2sim.formats.paths import missing
+
+            raise UserInputError(f"{raw} is a file, not an asset folder" if d.exists() else missing(raw, "asset folder"))
         props = d / "physical_properties.json"
         if not props.is_file():
             raise UserInputError(f"{raw} is not an asset folder: physical_properties.json is missing")

@@ -213,11 +213,26 @@ def write_transforms(path: Path, ds: Dataset) -> None:
     write_json_atomic(Path(path), dataset_to_json(ds))
 
 
+def _not_a_file(path: Path, kind: str) -> str:
+    """Why ``path`` (an image or a mask) cannot be read as a file: a folder, a FIFO or a device is
+    there (reading a FIFO would wait forever), or nothing is (:func:`~real2sim.formats.paths.missing`)."""
+    from real2sim.formats.paths import missing
+
+    if path.is_dir():
+        return f"{kind} {path} is a folder, not a file"
+    if path.exists():
+        return f"{kind} {path} is not a regular file"
+    return missing(path, kind)
+
+
 def read_transforms(path: Path, root: Path | None = None, check_files: bool = True) -> Dataset:
     """Read and validate a nerfstudio ``transforms.json``; frame paths are relative to ``root`` (its folder)."""
     path = Path(path)
     root = Path(root) if root is not None else path.parent
     label = str(path)
+    if path.exists() and not path.is_file() and not path.is_dir():
+        # a FIFO or a device: reading it would wait forever for a writer
+        raise UserInputError(f"{label} is not a regular file")
     try:
         data = json.loads(path.read_text())
     except FileNotFoundError:
@@ -256,10 +271,9 @@ def read_transforms(path: Path, root: Path | None = None, check_files: bool = Tr
         if mp is not None:
             check_inside(root, str(mp), f"{flabel}: mask_path")
         if check_files:
-            if not (root / fp).is_file():
-                raise UserInputError(f"{flabel}: image {root / fp} not found")
-            if mp is not None and not (root / mp).is_file():
-                raise UserInputError(f"{flabel}: mask {root / mp} not found")
+            for kind, name in (("image", fp), ("mask", mp)):
+                if name is not None and not (root / name).is_file():
+                    raise UserInputError(f"{flabel}: {_not_a_file(root / name, kind)}")
         frames.append(Frame(file_path=fp, transform_matrix=m, mask_path=None if mp is None else str(mp),
                             extra={k: v for k, v in fr.items() if k not in frame_keys}))
     extra = {k: v for k, v in data.items() if k not in ("frames", "camera_model", "fl_x", "fl_y", "cx", "cy",
