@@ -68,6 +68,13 @@ def add_field_arguments(p) -> None:
     p.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
                    help="field backend: train from the visual hull as it is, without opening the concavities "
                         "the views disagree about (see docs/reconstruct.md)")
+    p.add_argument("--no-field-poses", dest="field_poses", action="store_false",
+                   help="field backend: train on the poses as given, without correcting each view's pose "
+                        "(a small rotation and a shift of a few millimetres, learnt with the field; the "
+                        "corrections are in report.json)")
+    p.add_argument("--no-field-colours", dest="field_colours", action="store_false",
+                   help="field backend: no per-view colour correction (a gain and an offset per channel "
+                        "that absorb each photo's exposure and white balance)")
     p.add_argument("--no-hollow-prior", dest="hollow_prior", action="store_false",
                    help="field backend: leave filled the space behind an opened concavity that the images "
                         "cannot place a surface in (a flat-coloured inside); by default it is taken as "
@@ -76,10 +83,14 @@ def add_field_arguments(p) -> None:
 
 def reconstruct_config(args: argparse.Namespace, field_voxels: int | None):
     """The ReconstructConfig the flags ask for (``field_voxels``: the field's fine grid, None for its default)."""
+    from dataclasses import replace
+
     from real2sim.reconstruct.stage import ReconstructConfig
     from real2sim.reconstruct.train import FieldConfig
 
     field = FieldConfig().with_budget(args.steps, field_voxels).with_carving(args.photo_carving, args.hollow_prior)
+    field = replace(field, pose_refinement=getattr(args, "field_poses", True),
+                    colour_correction=getattr(args, "field_colours", True))
     return ReconstructConfig(backend=args.backend, extraction=args.extraction, surface_level=args.surface_level,
                              field=field, texture_px=args.texture_px, max_image_side_px=args.max_image_px,
                              table_z_m=args.table_z)

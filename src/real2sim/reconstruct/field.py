@@ -75,18 +75,20 @@ class VoxelRadianceField(torch.nn.Module):
     def device(self) -> torch.device:
         return self.density_table.device
 
-    def occupancy_surface(self):
-        """The surface (trimesh, metres) of the occupied voxels' cells grown by one voxel, so that no
-        occupied sample lies outside it; made once per field (ray casts use it to skip empty space)."""
-        if getattr(self, "_occupancy_surface", None) is None:
+    def occupancy_surface(self, grow_voxels: int = 1):
+        """The surface (trimesh, metres) of the occupied voxels' cells grown by ``grow_voxels`` (at least
+        one, so that no occupied sample lies outside it); made once per field and growth (ray casts use
+        it to skip empty space)."""
+        surfaces = self.__dict__.setdefault("_occupancy_surfaces", {})
+        if grow_voxels not in surfaces:
             from scipy.ndimage import binary_dilation
 
             from real2sim.reconstruct.hull import surface_from_grid
 
-            grown = binary_dilation(self.occupancy.cpu().numpy()).astype(np.float32)
-            self._occupancy_surface = surface_from_grid(grown, self.grid, 0.5,
-                                                        table_z_m=float(self.grid.bounds_m[0, 2]))
-        return self._occupancy_surface
+            grown = binary_dilation(self.occupancy.cpu().numpy(), iterations=max(int(grow_voxels), 1))
+            surfaces[grow_voxels] = surface_from_grid(grown.astype(np.float32), self.grid, 0.5,
+                                                      table_z_m=float(self.grid.bounds_m[0, 2]))
+        return surfaces[grow_voxels]
 
     def grid_parameters(self) -> list[torch.nn.Parameter]:
         return [self.density_table, self.feature_table]

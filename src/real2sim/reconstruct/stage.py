@@ -7,7 +7,9 @@ depth), clean-up, texture from the field. ``hull``: the visual hull's surface,
 textured from the images; the baseline that shows what the field buys.
 
 Held-out views (every 10th) are never used to build anything; they give the
-PSNR of the field and of the textured mesh. With ``DATASET/ground_truth/`` the
+PSNR of the field and of the textured mesh; with the field's pose refinement their
+poses are first fitted to the trained field, which stays frozen (they have no
+correction of their own otherwise; the training views use their corrected poses). With ``DATASET/ground_truth/`` the
 mesh is compared with the true object (:mod:`real2sim.reconstruct.truth`).
 """
 
@@ -158,6 +160,12 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         with clock.stage("train_field"):
             trained = train_field(train, region, config.field, device=device, seed=seed, progress=progress,
                                   table_z_m=config.table_z_m)
+        if trained.corrections is not None:  # per-view pose and colour corrections (view_corrections.py)
+            from real2sim.reconstruct.view_corrections import correction_report
+
+            report["view_corrections"] = correction_report(trained.corrections, train, dataset_root=dataset,
+                                                           region_m=region)
+            train = trained.corrected_views(train)  # all that follows sees the views as the field was fitted to them
         report["loss_curve"] = [[int(s), float(v)] for s, v in trained.loss_curve]
         report["field_grid"] = list(trained.field.grid.shape)
         report["photo_carved_voxels"] = trained.carved_voxels
@@ -183,6 +191,13 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
             textured = bake_texture(mesh, trained.field, size_px=config.texture_px)
         if held.count:
             with clock.stage("held_out_field_psnr"):
+                if config.field.pose_refinement:  # held-out views never trained the field: fit their poses to it
+                    from real2sim.reconstruct.train import fit_views_to_field
+                    from real2sim.reconstruct.view_corrections import correction_report
+
+                    fitted = fit_views_to_field(trained.field, held, config.field, seed=seed)
+                    report["held_out_pose_fit"] = correction_report(fitted, held, dataset_root=dataset, region_m=region)
+                    held = replace(held, c2w_cv=fitted.corrected_c2w())
                 report["psnr_field_held_out_db"] = _field_psnr(trained.field, held, render_view)
     if held.count:
         with clock.stage("held_out_mesh_psnr"):

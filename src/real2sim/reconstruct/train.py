@@ -9,6 +9,11 @@ this is the mask used as alpha.
 Empty space is carved first: the field lives only inside a relaxed, dilated
 visual hull. Training runs coarse-to-fine: a coarse grid first, then the field
 is resampled onto a finer grid and trained further.
+
+Each training view's pose and colour are corrected alongside
+(:mod:`real2sim.reconstruct.view_corrections`): the rays of a view leave from its
+corrected camera and the colour it sees is the field's through its gain and bias.
+The fine grid's region is the visual hull of the corrected views.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.hull import VoxelGrid, carve
 from real2sim.reconstruct.photo_carving import CarvingConfig, CarvingResult, photo_carve
+from real2sim.reconstruct.view_corrections import CorrectionConfig, ViewCorrections
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
 
@@ -47,6 +53,10 @@ class FieldConfig:
     The field may fill carved space again only within ``carved_margin_voxels`` (of the
     coarse grid) of what carving kept; deeper carved space is not part of the field, so
     rays into an opened cavity skip it (a negative margin keeps all of it in the field).
+
+    ``pose_refinement``: each training view's pose is corrected with the field (on by default;
+    ``colour_correction``: its exposure and white balance), coarse to fine, with the rates and
+    priors of ``corrections``; see :mod:`real2sim.reconstruct.view_corrections`.
     """
 
     coarse_voxels: int = 80
@@ -69,6 +79,9 @@ class FieldConfig:
     photo_carving: bool = True
     carved_margin_voxels: int = 2
     carving: CarvingConfig = dataclass_field(default_factory=CarvingConfig)
+    pose_refinement: bool = True
+    colour_correction: bool = True
+    corrections: CorrectionConfig = dataclass_field(default_factory=CorrectionConfig)
 
     def with_budget(self, steps: int | None = None, voxels: int | None = None) -> "FieldConfig":
         """These settings with ``steps`` fine-grid training steps (the coarse grid gets half, so 1 step
@@ -94,6 +107,7 @@ class FieldConfig:
                 raise UserInputError(f"field setting {name} must be at least 4 (got {getattr(self, name)})")
         if self.coarse_steps < 0 or self.fine_steps < 1:
             raise UserInputError("field training needs at least one fine step")
+        self.corrections.validate()
 
 
 @dataclass(frozen=True)
@@ -108,23 +122,36 @@ class TrainResult:
     opened_voxels: int = 0
     # of ``seconds``, the starting density: the visual hull's score and photo-consistent carving
     hull_and_carving_seconds: float = 0.0
+    # the per-view corrections learnt with the field (None when neither poses nor colours are corrected)
+    corrections: ViewCorrections | None = None
+    # (N, 4, 4) the training views' camera-to-world poses the field was fitted to: the corrected ones
+    c2w_cv: np.ndarray | None = None
+
+    def corrected_views(self, views: PosedViews) -> PosedViews:
+        """``views`` (the ones trained on) with the poses the field was fitted to."""
+        return views if self.c2w_cv is None else replace(views, c2w_cv=self.c2w_cv)
 
 
 @dataclass(frozen=True)
 class RayPool:
-    """Training rays: world origins/directions (R, 3), target colour (R, 3), mask (R,), float32 tensors."""
+    """Training rays: world origins/directions (R, 3), target colour (R, 3), mask (R,), float32 tensors,
+    and the view each comes from (R,), int64."""
 
     origins: torch.Tensor
     directions: torch.Tensor
     rgb: torch.Tensor
     mask: torch.Tensor
+    view: torch.Tensor
+
+    def to(self, device) -> "RayPool":
+        return RayPool(*(getattr(self, f).to(device) for f in ("origins", "directions", "rgb", "mask", "view")))
 
 
 def ray_pool(views: PosedViews, *, mask_dilation_px: int, background_fraction: float,
              rng: np.random.Generator) -> RayPool:
     """Rays through every pixel near the object (dilated masks) plus a sample of the others."""
     k = views.intrinsics
-    origins, dirs, rgbs, masks = [], [], [], []
+    origins, dirs, rgbs, masks, index = [], [], [], [], []
     disk = np.ones((2 * mask_dilation_px + 1,) * 2, bool)
     for i in range(views.count):
         near = binary_dilation(views.mask[i] > 0.5, disk)
@@ -135,8 +162,9 @@ def ray_pool(views: PosedViews, *, mask_dilation_px: int, background_fraction: f
         dirs.append(d)
         rgbs.append(views.rgb[i, v_px, u_px])
         masks.append(views.mask[i, v_px, u_px])
+        index.append(np.full(len(u_px), i))
     cat = lambda xs: torch.from_numpy(np.concatenate(xs).astype(np.float32))
-    return RayPool(cat(origins), cat(dirs), cat(rgbs), cat(masks))
+    return RayPool(cat(origins), cat(dirs), cat(rgbs), cat(masks), torch.from_numpy(np.concatenate(index)))
 
 
 def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> np.ndarray:
@@ -195,16 +223,17 @@ def _deep_carved(carved: np.ndarray, source: VoxelGrid, target: VoxelGrid, margi
     return _resampled(deep, source, target)
 
 
-def occupancy_ranges(field: VoxelRadianceField, origins: torch.Tensor,
-                     directions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per ray, the distances (R,) where it first enters and last leaves the field's occupancy.
+def occupancy_ranges(field: VoxelRadianceField, origins: torch.Tensor, directions: torch.Tensor,
+                     grow_voxels: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per ray, the distances (R,) where it first enters and last leaves the field's occupancy
+    grown by ``grow_voxels``.
 
     Ray-cast (embree) against the occupancy's surface, so rendering marches only that
     stretch of each ray; a ray that misses gets an empty range.
     """
-    surface = field.occupancy_surface()
-    origins = origins.cpu().numpy().astype(np.float64)
-    dirs = directions.cpu().numpy().astype(np.float64)
+    surface = field.occupancy_surface(grow_voxels)
+    origins = origins.detach().cpu().numpy().astype(np.float64)
+    dirs = directions.detach().cpu().numpy().astype(np.float64)
     far = 4.0 * float(np.linalg.norm(field.grid.bounds_m[1] - field.grid.bounds_m[0])) + \
         float(np.abs(origins - field.grid.bounds_m.mean(axis=0)).max())
     t_in = np.zeros(len(origins))
@@ -222,18 +251,56 @@ def occupancy_ranges(field: VoxelRadianceField, origins: torch.Tensor,
     return to(t_in), to(t_out)
 
 
+class _PoolRanges:
+    """Each pool ray's stretch inside the field's occupancy, kept valid while pose corrections move the rays.
+
+    With moving rays the occupancy is grown by ``pad_voxels``: a corrected ray's occupied samples lie
+    within that of the ray the ranges were cast for, until some view's rays have moved by more
+    (``moved_m``), when they are cast again for the rays as they are then.
+    """
+
+    def __init__(self, field: VoxelRadianceField, pool: RayPool, corrections: ViewCorrections | None,
+                 pad_voxels: int = 3):
+        self.field, self.pool, self.corrections = field, pool, corrections
+        self.moving = corrections is not None and corrections.poses
+        self.grow = pad_voxels if self.moving else 1
+        corners = np.stack(np.meshgrid(*field.grid.bounds_m.T, indexing="ij"), axis=-1).reshape(-1, 3)
+        self.reach_m = float(np.linalg.norm(corners[None] - pool.origins.cpu().numpy()[::997, None], axis=-1).max())
+        self.casts = 0
+        self._cast()
+
+    def _cast(self) -> None:
+        origins, directions = self.pool.origins, self.pool.directions
+        if self.moving:
+            with torch.no_grad():
+                origins, directions = self.corrections.rays(self.pool.view, origins, directions)
+            self.since = self.corrections.snapshot()
+        self.t_in, self.t_out = occupancy_ranges(self.field, origins, directions, grow_voxels=self.grow)
+        self.casts += 1
+
+    def batch(self, pick: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        if self.moving and self.corrections.moved_m(*self.since, self.reach_m) > \
+                (self.grow - 1) * self.field.grid.voxel_m:
+            self._cast()
+        return self.t_in[pick], self.t_out[pick]
+
+
 def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], config: FieldConfig = FieldConfig(), *,
                 device: str = "cpu", seed: int = 0, progress: ProgressFn | None = None,
                 table_z_m: float = 0.0) -> TrainResult:
-    """Fit a :class:`VoxelRadianceField` to ``views`` inside the world box ``region_m`` (metres)."""
+    """Fit a :class:`VoxelRadianceField` to ``views`` inside the world box ``region_m`` (metres), with
+    the views' corrections (``config.pose_refinement``, ``config.colour_correction``)."""
     config.validate()
     t_start = time.perf_counter()
     rng = np.random.default_rng(seed)
     gen = torch.Generator(device="cpu").manual_seed(seed)
     pool = ray_pool(views, mask_dilation_px=config.mask_dilation_px,
-                    background_fraction=config.background_ray_fraction, rng=rng)
-    pool = RayPool(*(x.to(device) for x in (pool.origins, pool.directions, pool.rgb, pool.mask)))
+                    background_fraction=config.background_ray_fraction, rng=rng).to(device)
     lo, hi = region_m
+    corrections = None
+    if config.pose_refinement or config.colour_correction:
+        corrections = ViewCorrections(views.c2w_cv, 0.5 * (np.asarray(lo) + np.asarray(hi)), config.corrections,
+                                      poses=config.pose_refinement, colours=config.colour_correction, device=device)
     stages = [(config.coarse_voxels, config.coarse_steps), (config.fine_voxels, config.fine_steps)]
     stages = [(n, s) for n, s in stages if s > 0]
     total = sum(s for _, s in stages)
@@ -242,53 +309,110 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     init_density, carved, carving = hull_density(views, first_grid, config, progress, device)
     hull_and_carving_s = time.perf_counter() - t_hull
     field, done, curve = None, 0, []
+    learner = _Learner(corrections, total) if corrections is not None else None
     for voxels, steps in stages:
         grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
-        occupancy = field_occupancy(views, grid, config) & ~_deep_carved(carved, first_grid, grid,
-                                                                           config.carved_margin_voxels)
+        # the region the field may fill, seen by the views as they are now corrected
+        now = views if field is None or corrections is None else replace(views, c2w_cv=corrections.corrected_c2w())
+        occupancy = field_occupancy(now, grid, config) & ~_deep_carved(carved, first_grid, grid,
+                                                                         config.carved_margin_voxels)
         if field is None:
             field = VoxelRadianceField(grid, occupancy, feature_channels=config.feature_channels,
                                        init_density=init_density, device=device, generator=gen)
         else:
             field = field.upsampled(grid, occupancy)
-        done = _optimise(field, pool, config, steps, done, total, gen, progress, curve)
+        done = _optimise(field, pool, config, steps, done, total, gen, progress, curve, learner)
     return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
                        carved_voxels=int(carved.sum()), restored_voxels=carving.restored_voxels if carving else 0,
                        opened_voxels=carving.opened_voxels if carving else 0,
-                       hull_and_carving_seconds=hull_and_carving_s)
+                       hull_and_carving_seconds=hull_and_carving_s, corrections=corrections,
+                       c2w_cv=corrections.corrected_c2w() if corrections is not None else None)
+
+
+@dataclass
+class _Learner:
+    """The corrections, their optimiser and schedule over ``total`` steps; ``gauge``: take the rig's
+    common motion out after each step (off when the field is frozen and fixes the frame itself)."""
+
+    corrections: ViewCorrections
+    total: int
+    gauge: bool = True
+
+    def __post_init__(self):
+        self.optimiser = self.corrections.optimiser()
+
+
+def fit_views_to_field(field: VoxelRadianceField, views: PosedViews, config: FieldConfig, *, steps: int = 60,
+                       seed: int = 0) -> ViewCorrections:
+    """Corrections of ``views`` (poses, and colours with ``config.colour_correction``) that fit them to a
+    trained, frozen ``field``: how held-out views, which never trained it, are placed on the field's
+    frame before they judge it (as BARF evaluates). No gauge: the field fixes the frame."""
+    gen = torch.Generator(device="cpu").manual_seed(seed)
+    pool = ray_pool(views, mask_dilation_px=config.mask_dilation_px,
+                    background_fraction=config.background_ray_fraction, rng=np.random.default_rng(seed)).to(field.device)
+    centre = field.grid.bounds_m.mean(axis=0)
+    corrections = ViewCorrections(views.c2w_cv, centre, replace(config.corrections, warmup_steps=0),
+                                  poses=True, colours=config.colour_correction, device=field.device)
+    learner = _Learner(corrections, steps, gauge=False)
+    learning = [p.requires_grad for p in field.parameters()]
+    field.requires_grad_(False)  # no gradients for the grid tables: the largest part of a step's backward
+    try:
+        _optimise(field, pool, config, steps, 0, steps, gen, None, [], learner, learn_field=False)
+    finally:
+        for p, flag in zip(field.parameters(), learning):
+            p.requires_grad_(flag)
+    return corrections
 
 
 def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
-              gen: torch.Generator, progress: ProgressFn | None, curve: list) -> int:
-    """``steps`` Adam steps on ``field``; appends (step, mean loss) to ``curve``; returns the steps done so far."""
-    t_in, t_out = occupancy_ranges(field, pool.origins, pool.directions)
-    # fused: one kernel over the whole grid; the per-tensor loop took a quarter of each step
-    grid_opt = torch.optim.Adam([{"params": [field.density_table], "lr": config.lr_density, "base": config.lr_density},
-                                 {"params": [field.feature_table], "lr": config.lr_features, "base": config.lr_features}],
-                                fused=True)
-    dec_opt = torch.optim.Adam(field.decoder.parameters(), lr=config.lr_decoder)
+              gen: torch.Generator, progress: ProgressFn | None, curve: list, learner: _Learner | None = None,
+              learn_field: bool = True) -> int:
+    """``steps`` Adam steps on ``field`` (and on the corrections of ``learner``; on those alone when not
+    ``learn_field``); appends (step, mean loss) to ``curve``; returns the steps done so far."""
+    corrections = learner.corrections if learner is not None else None
+    ranges = _PoolRanges(field, pool, corrections)
+    optimisers = []
+    if learn_field:
+        # fused: one kernel over the whole grid; the per-tensor loop took a quarter of each step
+        grid_opt = torch.optim.Adam([{"params": [field.density_table], "lr": config.lr_density,
+                                      "base": config.lr_density},
+                                     {"params": [field.feature_table], "lr": config.lr_features,
+                                      "base": config.lr_features}], fused=True)
+        optimisers = [grid_opt, torch.optim.Adam(field.decoder.parameters(), lr=config.lr_decoder)]
+    if learner is not None:
+        optimisers.append(learner.optimiser)
     window: list[torch.Tensor] = []  # losses on the device, read once per reporting window (a GPU sync)
     report_every = max(steps // 20, 1)
     device = field.device
     for step in range(steps):
         # the grid's learning rate decays tenfold over each stage
-        for group in grid_opt.param_groups:
+        for group in optimisers[0].param_groups if learn_field else ():
             group["lr"] = group["base"] * 0.1 ** (step / max(steps, 1))
+        if learner is not None:
+            corrections.schedule(learner.optimiser, done, learner.total)
         pick = torch.randint(len(pool.origins), (config.rays_per_step,), generator=gen).to(device)
         jitter = torch.rand(config.rays_per_step, generator=gen).to(device)
         background = torch.rand(config.rays_per_step, 3, generator=gen).to(device)
-        out = field.render(pool.origins[pick], pool.directions[pick], step_voxels=config.step_voxels,
-                           view_dependent=config.view_dependent,
-                           jitter=jitter, t_range_m=(t_in[pick], t_out[pick]))
+        origins, directions, view = pool.origins[pick], pool.directions[pick], pool.view[pick]
+        t_range = ranges.batch(pick)
+        if corrections is not None:
+            origins, directions = corrections.rays(view, origins, directions)
+        out = field.render(origins, directions, step_voxels=config.step_voxels, view_dependent=config.view_dependent,
+                           jitter=jitter, t_range_m=t_range)
+        rgb = out.rgb if corrections is None else corrections.colour(view, out.rgb, out.opacity)
         m = pool.mask[pick][:, None]
         target = m * pool.rgb[pick] + (1 - m) * background
-        predicted = out.rgb + (1 - out.opacity)[:, None] * background
+        predicted = rgb + (1 - out.opacity)[:, None] * background
         loss = torch.mean((predicted - target) ** 2)
-        grid_opt.zero_grad(set_to_none=True)
-        dec_opt.zero_grad(set_to_none=True)
+        if corrections is not None:
+            loss = loss + corrections.prior_loss()
+        for opt in optimisers:
+            opt.zero_grad(set_to_none=True)
         loss.backward()
-        grid_opt.step()
-        dec_opt.step()
+        for opt in optimisers:
+            opt.step()
+        if learner is not None and learner.gauge:
+            corrections.fix_gauge()
         window.append(loss.detach())
         done += 1
         if step % report_every == report_every - 1 or step == steps - 1:
