@@ -114,6 +114,9 @@ class RefineResult:
     # per frame, in the dataset's order: whether COLMAP's pose replaced the given one (written into
     # transforms.json per frame, not into the report)
     frame_refined: tuple[bool, ...] = ()
+    # the median move of the refined frames from their given poses (after the alignment), mm and deg
+    median_correction_mm: float | None = None
+    median_correction_deg: float | None = None
 
     def to_json(self) -> dict:
         from dataclasses import asdict
@@ -291,9 +294,36 @@ def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progre
     if ok.sum() < max(3, cfg.min_refined_fraction * n):
         return fallback(f"only {int(ok.sum())} of {n} refined frames stayed within {cfg.max_change_deg} deg / "
                         f"{cfg.max_change_mm} mm of the given poses", **info)
+    moved_deg, moved_mm = float(np.median(rot_change[ok])), float(np.median(trans_change[ok]))
+    _warn_if_beyond_given_accuracy(ds, moved_mm, moved_deg, noise_mm, noise_deg, reproj)
     return aligned, RefineResult(refined=True, reason="ok", num_frames=n, num_refined_frames=int(ok.sum()),
                                  sim3_scale=float(s), seconds=time.perf_counter() - t_start,
-                                 frame_refined=tuple(bool(x) for x in ok), **info)
+                                 frame_refined=tuple(bool(x) for x in ok), median_correction_mm=moved_mm,
+                                 median_correction_deg=moved_deg, **info)
+
+
+def _warn_if_beyond_given_accuracy(ds: Dataset, moved_mm: float, moved_deg: float, noise_mm: float,
+                                   noise_deg: float, reproj_px: float | None) -> None:
+    """Warn when COLMAP moved the refined frames (median ``moved_mm`` / ``moved_deg``) by more than the given
+    poses' stated accuracy allows (3 x ``noise_mm`` / ``noise_deg``) plus what COLMAP's own reprojection
+    error (``reproj_px``) leaves uncertain: a pixel at the cameras' distance from the scene. Given poses that
+    are already right (a noise-free capture) are then made worse, not better."""
+    k = ds.intrinsics
+    c2w = ds.poses_c2w_gl()
+    centres, axes = c2w[:, :3, 3], -c2w[:, :3, 2]
+    # the scene's distance: to the point nearest every optical axis (least squares)
+    off_axis = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]
+    scene = np.linalg.lstsq(off_axis.sum(axis=0), (off_axis @ centres[:, :, None]).sum(axis=0)[:, 0], rcond=None)[0]
+    distance_m = float(np.median(np.linalg.norm(centres - scene, axis=1)))
+    px_rad = float(reproj_px or 1.0) / max(k.fl_x, k.fl_y)
+    allowed_mm = 3.0 * noise_mm + 1e3 * px_rad * distance_m
+    allowed_deg = 3.0 * noise_deg + np.degrees(px_rad)
+    if moved_mm > allowed_mm or moved_deg > allowed_deg:
+        warnings.warn(f"refine-poses moved the refined frames by {moved_mm:.2f} mm / {moved_deg:.3f} deg (median), "
+                      f"more than the given poses' stated accuracy ({noise_mm:g} mm / {noise_deg:g} deg) and COLMAP's "
+                      f"{reproj_px or 0:.2f} px reprojection error allow ({allowed_mm:.2f} mm / {allowed_deg:.3f} deg): "
+                      "the refined poses may be worse than the given ones; keep transforms_unrefined.json if the "
+                      "given poses are accurate", RuntimeWarning, stacklevel=4)
 
 
 def _with_errors(result: RefineResult, gt: Dataset | None, names: list[str], before: np.ndarray,
@@ -308,6 +338,23 @@ def _with_errors(result: RefineResult, gt: Dataset | None, names: list[str], bef
     ra, ta = pose_errors(after, ref)
     return replace(result, rot_error_before_deg=float(rb.mean()), trans_error_before_mm=float(tb.mean()),
                    rot_error_after_deg=float(ra.mean()), trans_error_after_mm=float(ta.mean()))
+
+
+#: Worsening against ground truth below which a refinement is not called worse (COLMAP's jitter).
+WORSE_TOLERANCE_MM = 0.1
+WORSE_TOLERANCE_DEG = 0.02
+
+
+def _warn_if_worse_than_given(result: RefineResult) -> None:
+    """With ground truth: warn when the refined poses are further from it than the given ones were."""
+    if not result.refined or result.trans_error_after_mm is None:
+        return
+    if (result.trans_error_after_mm > result.trans_error_before_mm + WORSE_TOLERANCE_MM
+            or result.rot_error_after_deg > result.rot_error_before_deg + WORSE_TOLERANCE_DEG):
+        warnings.warn(f"refine-poses made the poses worse against ground_truth/: position "
+                      f"{result.trans_error_before_mm:.2f} -> {result.trans_error_after_mm:.2f} mm, rotation "
+                      f"{result.rot_error_before_deg:.3f} -> {result.rot_error_after_deg:.3f} deg (mean over frames)",
+                      RuntimeWarning, stacklevel=3)
 
 
 def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
@@ -331,6 +378,7 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
     poses, result = refine_dataset_poses(ds, cfg, progress)
     names = [f.file_path for f in ds.frames]
     result = _with_errors(result, read_ground_truth(root), names, ds.poses_c2w_gl(), poses)
+    _warn_if_worse_than_given(result)
     if progress:
         progress("writing", refine_steps(cfg) - 1, refine_steps(cfg))
     unrefined = root / "transforms_unrefined.json"
