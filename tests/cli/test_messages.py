@@ -182,3 +182,29 @@ def test_fifo_urdf_and_file_for_a_folder(tmp_path, capsys):
     (tmp_path / "afile").write_text("x")
     code, _, err = run_cli(capsys, "evaluate", tmp_path / "afile", "--out", tmp_path / "e")
     assert_one_line(code, err, "is a file, not an asset folder")
+
+
+@pytest.mark.slow
+def test_sigterm_during_evaluate_says_what_is_kept(tmp_path):
+    """evaluate keeps its finished simulations in .RESULTS.partial on purpose (resumable); a SIGTERM
+    said only "real2sim: terminated" and left the hidden folder unexplained. ~1 min on 2 busy cores."""
+    from real2sim.geometry.objects import export_object
+
+    mesh = export_object("can", tmp_path / "can" / "model.obj")
+    asset = tmp_path / "asset"
+    assert main(["asset", str(mesh), "--mass", "0.35", "--out", str(asset), "--collision", "mesh"]) == 0
+    proc = subprocess.Popen([sys.executable, "-m", "real2sim", "evaluate", str(asset), "--out", str(tmp_path / "e"),
+                             "--tasks", "push", "--runs", "4", "--contact", "point", "--jobs", "1", "--no-animations"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stderr:
+            if "1/8" in line:  # one simulation finished: the partial folder holds it
+                proc.send_signal(signal.SIGTERM)
+                break
+        _, rest = proc.communicate(timeout=300)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, rest
+    lines = [line for line in rest.splitlines() if line.strip() and "/8" not in line]
+    assert len(lines) == 1 and "kept in" in lines[0] and ".e.partial" in lines[0] and "resume" in lines[0], rest
+    assert (tmp_path / ".e.partial" / "runs.csv").is_file()

@@ -173,8 +173,11 @@ def _reference_properties(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    import os
+
     from real2sim.cli.progress import progress_display
     from real2sim.evaluate.sweep import evaluate
+    from real2sim.evaluate.workdir import partial_dir
     from real2sim.formats.errors import UserInputError
 
     config = config_from_args(args)
@@ -185,11 +188,23 @@ def run(args: argparse.Namespace) -> int:
                              else missing(args.reference, "reference mesh"))
     # SIGTERM unwinds as Ctrl-C does (real2sim.cli.main): the sweep ends its workers, keeps its rows.
     # The sweep's messages go to stdout, as they always have; the count of simulations to stderr.
-    with _reference_properties(args) as reference_properties, \
-            progress_display(echo=lambda m: print(m, flush=True)) as progress:
-        result = evaluate(args.assets, args.out, config, reference_mesh=args.reference, progress=progress,
-                          overwrite=args.overwrite, reference_properties=reference_properties,
-                          animations=not args.no_animations)
+    partial = partial_dir(Path(os.path.abspath(args.out)))
+    try:
+        with _reference_properties(args) as reference_properties, \
+                progress_display(echo=lambda m: print(m, flush=True)) as progress:
+            result = evaluate(args.assets, args.out, config, reference_mesh=args.reference, progress=progress,
+                              overwrite=args.overwrite, reference_properties=reference_properties,
+                              animations=not args.no_animations)
+    except KeyboardInterrupt as exc:
+        if not partial.is_dir():
+            raise
+        # the sweep keeps its finished rows on purpose (resumable): say where, instead of a bare "terminated"
+        from real2sim.cli import Terminated
+
+        word, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
+        print(f"real2sim evaluate: {word}; the simulations finished so far are kept in {partial}: run the same "
+              "command again to resume", file=sys.stderr)
+        return code
     _print_summary(result.summary, args.recommend)
     print(f"{result.simulated} simulations run, {result.skipped} reused, {result.failed} failed; "
           f"results in {result.out_dir} (report: {result.report_path})")
