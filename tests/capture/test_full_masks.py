@@ -75,3 +75,19 @@ def test_silhouettes_pass_quietly(tiny, capsys, tmp_path):
     shutil.copytree(tiny, root)
     code, _, err = run_cli(capsys, "mask", root, "--method", "provided")
     assert code == 0 and "WARNING" not in err, err
+
+
+def test_computed_masks_all_full_publish_nothing(tiny, tmp_path):
+    """A method whose every mask is full (here a stand-in for a background difference against the wrong
+    empty scene) is refused before masks_<method>/ or transforms.json change."""
+    from real2sim.capture.masking import publish_masks
+    from real2sim.formats.dataset import read_dataset
+
+    root = tmp_path / "ds"
+    shutil.copytree(tiny, root)
+    before = (root / "transforms.json").read_bytes()
+    ds = read_dataset(root)
+    with pytest.raises(UserInputError, match="the background masks of .*: every mask covers over 95 %"):
+        publish_masks(root, ds, "background", lambda i, f: np.ones((24, 32), bool))
+    assert (root / "transforms.json").read_bytes() == before
+    assert not [p.name for p in root.iterdir() if "masks_background" in p.name]

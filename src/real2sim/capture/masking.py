@@ -338,6 +338,8 @@ def publish_masks(root: Path, ds: Dataset, method: str, mask_of: Callable[[int, 
                 ious.append(iou(m, load_mask(gt)))
             new_frames.append(replace(f, mask_path=f"{out_name}/{name}"))
             progress(f"masks ({method})", i + 1, n)
+        # masks over (nearly) the whole image are no silhouettes: all of them is exit 2 and nothing published
+        check_not_full(fractions, [f.file_path for f in ds.frames], f"the {method} masks of {root}", stacklevel=4)
         write_mask_marker(tmp, method, [Path(f.mask_path).name for f in new_frames])
         check_mask_folder(root, ds, method, may_replace)
         # Swap the folder in, then the transforms.json pointing to it.
