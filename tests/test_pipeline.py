@@ -20,7 +20,9 @@ import pytest
 
 from real2sim.cli import main
 
-FAST = ["--backend", "hull", "--voxels", "64", "--max-faces", "4000", "--texture-px", "256"]
+# the hull, small; poses as given (refinement is the default where a dataset has poses to refine)
+HULL = ["--backend", "hull", "--voxels", "64", "--max-faces", "4000", "--texture-px", "256"]
+FAST = [*HULL, "--no-refine-poses"]
 
 
 def _capture(out: Path) -> Path:
@@ -241,7 +243,7 @@ def test_refine_poses_works_on_a_copy_and_leaves_the_dataset_alone(can_ds_no_tru
     before = {p.relative_to(can_ds_no_truth): p.read_bytes() for p in can_ds_no_truth.rglob("*") if p.is_file()}
     out = tmp_path / "can_asset"
     code, stdout, _ = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, "--collision", "mesh",
-                              "--refine-poses", *FAST)
+                              "--refine-poses", *HULL)
     assert code == 0 and "stages run: refine_poses, reconstruct, asset" in stdout
     after = {p.relative_to(can_ds_no_truth): p.read_bytes() for p in can_ds_no_truth.rglob("*") if p.is_file()}
     assert after == before  # not one byte of the user's dataset written

@@ -298,6 +298,6 @@ def test_run_masks_a_copy_whatever_masks_folder_the_dataset_has(dataset, tmp_pat
     (theirs / "README_MINE.txt").write_text("mine")
     code, _, err = run_cli(capsys, "run", dataset, "--mass", "0.35", "--out", tmp_path / "A", "--mask", "background",
                            "--backend", "hull", "--voxels", "32", "--max-faces", "1000", "--texture-px", "64",
-                           "--collision", "mesh")
+                           "--collision", "mesh", "--no-refine-poses")
     assert code == 0, err
     assert snapshot(theirs) == {"README_MINE.txt": b"mine"}

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tests.pipeline.colmap_capture import make_colmap_capture, random_similarity
-from tests.pipeline.test_robot_frame import CAN_HEIGHT_M, FAST
+from tests.pipeline.test_robot_frame import CAN_HEIGHT_M, FAST, HULL
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_parallax_masks_of_a_robot_capture_wait_for_refined_poses(tmp_path):
         frame.pop("mask_path", None)
     (ds / "transforms.json").write_text(json.dumps(transforms))
     out = tmp_path / "asset"
-    assert main(["run", str(ds), "--out", str(out), "--mask", "parallax", "--refine-poses", *FAST]) == 0
+    assert main(["run", str(ds), "--out", str(out), "--mask", "parallax", "--refine-poses", *HULL]) == 0
     stages = list(json.loads((out / ".run" / "run.json").read_text())["stages"])
     assert stages.index("refine_poses") < stages.index("masks") < stages.index("reconstruct")
     truth = json.loads((out / "truth.json").read_text())

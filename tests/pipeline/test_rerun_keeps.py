@@ -15,7 +15,8 @@ import pytest
 
 from tests.cli_helpers import run_cli
 
-FAST = ["--backend", "hull", "--voxels", "48", "--max-faces", "2000", "--texture-px", "64", "--iterations", "50"]
+FAST = ["--backend", "hull", "--voxels", "48", "--max-faces", "2000", "--texture-px", "64", "--iterations", "50",
+        "--no-refine-poses"]
 EVALUATE = ["--evaluate", "--tasks", "push", "--contact", "point", "--runs", "1", "--jobs", "1",
             "--duration-scale", "0.2"]
 

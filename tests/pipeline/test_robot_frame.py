@@ -35,8 +35,9 @@ from real2sim.pipeline import robot_frame as rf
 from tests.pipeline.colmap_capture import make_colmap_capture, make_nerfstudio_capture, random_similarity
 from tests.reconstruct.conftest import raised_dataset
 
-FAST = ["--backend", "hull", "--voxels", "64", "--max-faces", "4000", "--texture-px", "256",
+HULL = ["--backend", "hull", "--voxels", "64", "--max-faces", "4000", "--texture-px", "256",
         "--collision", "mesh", "--mass", "0.35"]
+FAST = [*HULL, "--no-refine-poses"]  # a metric capture's poses as given (refining them is run's default)
 CAN_HEIGHT_M = 0.1
 
 

@@ -164,6 +164,10 @@ def run(args: argparse.Namespace) -> int:
         return 1
     minutes, cpu_minutes = (time.perf_counter() - start) / 60, (_cpu_seconds() - cpu_start) / 60
     _print_summary(out, plan, cap_cfg, result.truth, minutes, cpu_minutes)
+    from real2sim.cli.run import stage_warning_lines
+
+    for line in stage_warning_lines(result.stage_warnings):  # what degraded, again at the end
+        print(line)
     return 0
 
 

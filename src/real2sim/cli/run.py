@@ -16,7 +16,8 @@ from real2sim.cli.reconstruct import (IMAGE_PX, STEPS, TABLE_Z_HELP, TABLE_Z_M, 
 RUNS = integer(1, 1000)
 DURATION_SCALE = positive(100.0)
 
-# run always closes the bottom at the reconstruction's table plane and keeps the table's normal
+# run always closes the bottom at the support (the table plane, or the object's lowest seen points
+# without one: real2sim.pipeline.support) and keeps the table's normal
 # as the asset's +z (unless --pca-up), so these `asset` flags are hidden (and ignored).
 _FORCED_ASSET_FLAGS = ("flat_bottom", "support_height", "keep_up")
 
@@ -26,12 +27,15 @@ def register(sub) -> None:
         "run",
         help="images to asset in one command: [refine poses] -> reconstruct -> asset [-> evaluate], resumable",
         description="Chain the stages over one dataset (transforms.json, images/, masks/, table top at z = 0): "
-        "optional pose refinement (on a copy in ASSETDIR/.run/dataset; the dataset is never modified), "
+        "pose refinement of given poses (on a copy in ASSETDIR/.run/dataset; the dataset is never modified; "
+        "--no-refine-poses skips it), "
         "reconstruction (ASSETDIR/.run/reconstruct: mesh.obj, report.json), the asset (flat bottom at the table "
-        "plane, canonical pose, inertia, one folder per SPEC with model.urdf), ASSETDIR/truth.json when the "
+        "plane, or for a dataset without one (transforms.json table_plane: false) at the lowest part of the "
+        "reconstruction the cameras see; canonical pose, inertia, one folder per SPEC with model.urdf), ASSETDIR/truth.json when the "
         "dataset has ground_truth/ (pose, mask, reconstruction and mass-property errors), and with --evaluate the Drake evaluation into ASSETDIR/results. "
         "ASSETDIR/.run/run.json records each stage's input hashes, settings, outputs, wall seconds and peak "
-        "memory; running again skips the unchanged stages and redoes those downstream of a change "
+        "memory, and the warnings each stage raised (repeated at the end of every run, and in truth.json); "
+        "running again skips the unchanged stages and redoes those downstream of a change "
         "(a new --collision fits only that one), and resumes an interrupted run. A rerun replaces only what run "
         "wrote: your own files in ASSETDIR are kept, and an evaluation of an earlier asset is kept, marked stale.",
         epilog="example: real2sim capture can.obj --out can_ds && "
@@ -48,7 +52,13 @@ def register(sub) -> None:
                    help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
     p.add_argument("--overwrite", action="store_true",
                    help="discard ASSETDIR first: its cached stages, results and any files of yours in it")
-    p.add_argument("--refine-poses", action="store_true", help="refine the camera poses with COLMAP first")
+    refine = p.add_mutually_exclusive_group()
+    refine.add_argument("--refine-poses", dest="refine_poses", action="store_const", const=True, default=None,
+                        help="refine the camera poses with COLMAP first (the default for a transforms.json of given "
+                        "poses not refined yet; a COLMAP dataset's poses are COLMAP's own); when COLMAP keeps the "
+                        "given poses, or pycolmap is missing, the run goes on with them and says so (WARNING)")
+    refine.add_argument("--no-refine-poses", dest="refine_poses", action="store_const", const=False,
+                        help="use the dataset's poses as they are")
     p.add_argument("--mask", choices=["provided", "maskrcnn", "background", "parallax"], default=None, metavar="METHOD",
                    help="make the masks first (on a copy in ASSETDIR/.run/masked): provided (masks/<image stem>.png), "
                    "maskrcnn (needs --mask-weights), background (background/<image name>), parallax (from the "
@@ -98,7 +108,7 @@ def config_from_args(args: argparse.Namespace):
 
     from real2sim.cli.asset import config_from_args as asset_config
     from real2sim.formats.errors import UserInputError
-    from real2sim.pipeline.run import RunConfig, check_dataset
+    from real2sim.pipeline.run import RunConfig, check_dataset, poses_to_refine
     from real2sim.reconstruct.stage import resolve_device
 
     if args.seed < 0 or args.seed >= 2**63:
@@ -134,7 +144,7 @@ def config_from_args(args: argparse.Namespace):
             raise UserInputError(f"--mask-threshold must be in 0..255 (got {args.mask_threshold})")
         mask = MaskConfig(threshold=args.mask_threshold, weights=args.mask_weights, device=args.device)
     refine = None
-    if args.refine_poses:
+    if args.refine_poses or (args.refine_poses is None and not scale_given and poses_to_refine(args.dataset)):
         from real2sim.capture.pose_refinement import RefineConfig
 
         refine = RefineConfig(seed=args.seed)
@@ -174,4 +184,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"vs truth: Chamfer {rec.get('chamfer_mm', float('nan')):.2f} mm, IoU {rec.get('iou', float('nan')):.3f}; "
               f"CoM {phys['com_error_mm']:.2f} mm, inertia eigenvalues {100 * phys['inertia_eigenvalue_max_rel_error']:.1f} %"
               f" ({result.asset_dir / 'truth.json'})")
+    for line in stage_warning_lines(result.stage_warnings):
+        print(line)
     return 0
+
+
+def stage_warning_lines(stage_warnings: list[dict]) -> list[str]:
+    """What degraded, again at the end of the summary (each was printed when it happened, or by the
+    run that made a stage this one skipped): one ``WARNING: ...`` line each, naming the stage."""
+    return [f"WARNING: {w['message']} (stage {w['stage']})" for w in stage_warnings]

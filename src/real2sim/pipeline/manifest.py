@@ -24,6 +24,10 @@ A stage is recorded only after its outputs are in place (each is written to a
 temporary name and renamed), and run.json itself is replaced atomically, so a
 Ctrl-C or a killed process leaves the finished stages recorded and nothing else.
 
+Warnings: a stage's entry lists, under ``warnings``, every Python warning shown while it ran (a
+fallback, pose refinement that kept the given poses, ...), one plain sentence each, so that a run
+that skips the stage as unchanged still repeats them (:func:`recorded_warnings`).
+
 Ownership: ``owned`` maps each entry of ASSETDIR that `run` wrote (outside ``.run/``) to the
 stage that wrote it and, for a folder, the files in it as written. A rerun replaces or removes
 only these entries, and refuses to replace a folder holding files it did not write
@@ -40,6 +44,7 @@ import os
 import resource
 import sys
 import time
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -279,3 +284,32 @@ def timed() -> Iterator[list[float]]:
         yield box
     finally:
         box[0] = time.perf_counter() - start
+
+
+def plain_warning_text(message: Warning | str) -> str:
+    """A warning's message as one plain sentence (its lines and spaces joined), as the command line prints it."""
+    return " ".join(str(message).split())
+
+
+@contextmanager
+def recorded_warnings() -> Iterator[list[str]]:
+    """``with recorded_warnings() as raised: ...``: every Python warning shown while the block runs
+    is also appended to ``raised`` (as :func:`plain_warning_text`, each text once, in order).
+
+    It is shown as before, by whatever displays warnings now (the command line's plain ``WARNING:``
+    line): recording is added to the display, not put in its place, so the warning appears when it
+    happens. Warnings the filters ignore are neither shown nor recorded. The filters' memory of
+    what was shown is reset for the block (``catch_warnings``), so a stage that falls back the same
+    way as a stage before it is still heard."""
+    raised: list[str] = []
+    with warnings.catch_warnings():  # puts the display back when the block ends
+        show = warnings.showwarning
+
+        def record(message, category, filename, lineno, file=None, line=None):
+            text = plain_warning_text(message)
+            if text not in raised:
+                raised.append(text)
+            show(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = record
+        yield raised

@@ -6,38 +6,46 @@ Stages, in order (each one the existing stage function, called as it is; ``masks
 0. ``robot_frame`` (a COLMAP dataset: images + ``sparse/0``, no transforms.json):
    :func:`real2sim.pipeline.normalise.normalise` moves it into the robot frame (table
    plane z = 0, z up, metres from ``object_height_m`` or ``scale``) -> ``ASSETDIR/.run/robot_frame/``;
-1. ``refine_poses`` (optional): :func:`real2sim.capture.refine_poses` on a copy of
-   the dataset in ``ASSETDIR/.run/dataset/`` (the user's dataset is never written);
+1. ``refine_poses`` (``RunConfig.refine``; the command's default where :func:`poses_to_refine`):
+   :func:`real2sim.capture.refine_poses` on a copy of the dataset in ``ASSETDIR/.run/dataset/``
+   (the user's dataset is never written); without pycolmap, skipped with a warning;
 2. ``reconstruct``: :func:`real2sim.reconstruct.stage.reconstruct` +
    ``write_reconstruction`` -> ``ASSETDIR/.run/reconstruct/`` (mesh.obj, report.json);
-3. ``asset``: :func:`real2sim.asset.build_asset` on that mesh (flat bottom at the
-   table plane z = 0 of the dataset's world frame) -> the usual ASSETDIR layout;
+3. ``asset``: :func:`real2sim.asset.build_asset` on that mesh (flat bottom at the support:
+   the table plane z = 0 of the dataset's world frame, or, for a dataset without a table
+   plane, the object's own lowest seen points, :mod:`real2sim.pipeline.support`) -> the usual ASSETDIR layout;
 4. ``truth`` (when the dataset has ``ground_truth/``; a COLMAP dataset also needs
    ``ground_truth/model_from_world.json``, see :mod:`real2sim.pipeline.normalise`): ``ASSETDIR/truth.json``;
 5. ``evaluate`` (optional): :func:`real2sim.evaluate.sweep.evaluate` -> ``ASSETDIR/results/``.
 
-Caching, resuming and the manifest: :mod:`real2sim.pipeline.manifest`.
+Caching, resuming and the manifest: :mod:`real2sim.pipeline.manifest`. Every Python warning a
+stage raises (a fallback, pose refinement that kept the given poses) is shown when it happens,
+recorded in the stage's run.json entry, and returned in :attr:`RunResult.stage_warnings` (those of
+stages skipped as unchanged too), which the command repeats in its summary and truth.json lists.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import shutil
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING
 
-from real2sim.formats.dataset import is_model_frame, read_dataset
+from real2sim.formats.dataset import has_table_plane, is_model_frame, read_dataset
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import check_output_dir, make_output_dir, output_lock
-from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.formats.progress import ProgressFn
 from real2sim.pipeline import manifest as mf
 from real2sim.pipeline.masks import PARALLAX
 from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, sparse_point_files
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
-                                      _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine, _robot_frame,
-                                      _truth, check_evaluations)
+                                      EVALUATIONS, _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine,
+                                      _refine_unavailable, _robot_frame, _truth, check_evaluations, rewrite_reports)
+from real2sim.pipeline.runner import RunProgress, Runner, StageFailed
+from real2sim.pipeline.support import support_height_m
 from real2sim.pipeline.truth import has_ground_truth
 
 if TYPE_CHECKING:
@@ -63,7 +71,8 @@ class RunConfig:
     stage's defaults. mask_method: None -> the dataset's own masks (every frame must
     have one); else masks are made with :func:`real2sim.pipeline.masks.make_masks` (``mask``
     the capture methods' settings, None -> defaults) on a copy; ``parallax`` masks of a robot
-    capture are made after refine_poses, on the refined poses. refine: None -> no pose refinement.
+    capture are made after refine_poses, on the refined poses. refine: None -> no pose refinement
+    (the API does what it is given; the command line refines by default where :func:`poses_to_refine`).
     evaluation: None -> no evaluation. object_height_m (the object's height above the table,
     metres) or scale (metres per model unit): exactly one for a COLMAP dataset (poses in an
     arbitrary frame and scale), which the ``robot_frame`` stage then normalises; neither for a
@@ -89,38 +98,6 @@ class RunConfig:
         return NormaliseConfig(object_height_m=self.object_height_m, scale=self.scale)
 
 
-class RunProgress:
-    """The whole run through one :class:`~real2sim.formats.progress.ProgressFn`.
-
-    A stage's end is a message ("[3/7] reconstruct: done", "... unchanged, skipped"); called as a
-    ProgressFn itself, it passes the running stage's work on with the stage in front
-    ("[3/7] reconstruct - training field ..."). A stage's start is no message of its own: a stage
-    that stops on bad input before any work leaves only its error.
-    """
-
-    def __init__(self, progress: ProgressFn | None = None):
-        self.progress = progress or null_progress
-        self.label = ""
-
-    def stage(self, name: str, index: int, count: int, status: str) -> None:
-        """``status``: "running", "skipped" (unchanged), "done"."""
-        self.label = f"[{index}/{count}] {name}"
-        if status != "running":
-            self.progress(f"{self.label}: {'unchanged, skipped' if status == 'skipped' else 'done'}", 0, 0)
-
-    def __call__(self, message: str, done: int, total: int) -> None:
-        self.progress(f"{self.label} - {message}", done, total)
-
-
-class StageFailed(RuntimeError):
-    """A stage raised; the finished stages stay recorded in run.json for a resume."""
-
-    def __init__(self, stage: str, cause: BaseException):
-        self.stage, self.cause = stage, cause
-        text = str(cause).splitlines()[0] if str(cause) else type(cause).__name__
-        super().__init__(f"stage {stage} failed: {type(cause).__name__}: {text}")
-
-
 @dataclass
 class RunResult:
     asset_dir: Path
@@ -128,7 +105,10 @@ class RunResult:
     manifest_path: Path
     truth: dict | None = None
     urdf_paths: list[Path] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)  # plain sentences, for "WARNING: ..." lines
+    warnings: list[str] = field(default_factory=list)  # run's own notices (a stale evaluation), said once
+    #: what degraded: every warning the stages raised, ``{"stage", "message"}``, those of the stages
+    #: skipped as unchanged included (from run.json); the command repeats them in its summary
+    stage_warnings: list[dict] = field(default_factory=list)
 
 
 def kept_note(asset_dir: Path | str) -> str:
@@ -140,6 +120,14 @@ def kept_note(asset_dir: Path | str) -> str:
         return f"no finished stage is kept in {asset_dir}" if Path(asset_dir).is_dir() else "nothing was written"
     return (f"the finished stages ({', '.join(stages)}) are kept in {Path(asset_dir) / mf.RUN_DIRNAME}: fix the "
             "cause and run the same command again to resume from them")
+
+
+def poses_to_refine(dataset: Path | str) -> bool:
+    """Whether ``dataset`` has poses that COLMAP refinement can improve: a transforms.json of given poses
+    (a robot's, a calibration's) that `refine-poses` has not refined yet. A COLMAP model or an
+    ns-process-data folder holds COLMAP's own poses already: nothing to refine."""
+    ds = read_dataset(Path(dataset), check_files=False)
+    return not is_model_frame(ds) and "real2sim_refinement" not in ds.extra
 
 
 def _dataset_files(root: Path) -> list[str]:
@@ -210,45 +198,6 @@ def _discard(asset_dir: Path) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
-class _Runner:
-    """Runs the stages in order, skipping the current ones; records each finished stage."""
-
-    def __init__(self, manifest: mf.Manifest, progress: RunProgress, count: int):
-        self.manifest, self.progress, self.count = manifest, progress, count
-        self.index = 0
-        self.statuses: dict[str, str] = {}
-
-    def stage(self, name: str, inputs: dict, settings: Any, upstream: str | None, outputs: list[str] | None,
-              work: Callable[[], dict | None]) -> str:
-        """Run ``work`` unless the stage is current. ``outputs`` None: ``work`` returns {"outputs": [...]}."""
-        self.index += 1
-        key = mf.stage_key(inputs, settings, upstream)
-        if self.manifest.is_current(name, key):
-            self.statuses[name] = "skipped"
-            self.progress.stage(name, self.index, self.count, "skipped")
-            return key
-        self.progress.stage(name, self.index, self.count, "running")
-        self.manifest.forget(name)
-        measured = mf.reset_stage_peak()
-        with mf.timed() as clock:
-            try:
-                extra = work() or {}
-            except (KeyboardInterrupt, StageFailed):
-                raise
-            except UserInputError as exc:
-                raise UserInputError(f"stage {name}: {exc}") from exc
-            except Exception as exc:  # noqa: BLE001 -- one line naming the stage; the traceback is chained
-                raise StageFailed(name, exc) from exc
-        outputs = outputs if outputs is not None else extra.pop("outputs")
-        self.manifest.record(name, key=key, inputs=inputs, settings=settings, outputs=outputs,
-                             wall_seconds=clock[0], stage_peak=mf.stage_peak_mb() if measured else None,
-                             extra=extra)
-        self.manifest.own(name, sorted({out.split("/")[0] for out in outputs} - {mf.RUN_DIRNAME}))
-        self.statuses[name] = "ran"
-        self.progress.stage(name, self.index, self.count, "done")
-        return key
-
-
 def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, *, overwrite: bool = False,
                  progress: ProgressFn | None = None) -> RunResult:
     """Run (or resume) every stage for ``dataset`` into ``asset_dir``; see the module docstring.
@@ -271,6 +220,9 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     if robot_frame is not None and recon_cfg.table_z_m != 0.0:
         raise UserInputError("a table height is for a dataset in metres; a COLMAP capture's table is found in its "
                              "sparse points and put at z = 0")
+    if recon_cfg.table_z_m != 0.0 and not has_table_plane(read_dataset(dataset, check_files=False)):
+        raise UserInputError(f"{dataset} has no table plane (transforms.json table_plane: false), so a table height "
+                             "does not apply: the support is found from the object's own lowest points")
     asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m, keep_up=not config.pca_up)
     # A run resumes in place, so an existing ASSETDIR passes the "exists" rule; every other rule of
     # the output helper (inputs, working folder, foreign folders) holds even for a resume.
@@ -300,7 +252,7 @@ def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: 
         asset_cfg = replace(asset_cfg, specs=asset_cfg.specs + (parse_spec("mesh"),))
     count = (2 + bool(config.mask_method) + bool(robot_frame) + bool(config.refine) + truth + bool(config.evaluation)
              + (truth and config.evaluation is not None))
-    runner = _Runner(manifest, progress, count)
+    runner = Runner(manifest, progress, count)
     try:
         result = _run_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg, truth, evaluation_mesh)
     except BaseException as exc:
@@ -324,7 +276,7 @@ def _kept_evaluation_mesh(manifest: mf.Manifest) -> bool:
     return bool(entry.get("evaluation_mesh", any(isinstance(s, dict) and s.get("text") == "mesh" for s in specs)))
 
 
-def _prepare_dataset(runner: _Runner, dataset: Path, run_dir: Path, config: RunConfig, table_z_m: float
+def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunConfig, table_z_m: float
                      ) -> tuple[Path, Path, str | None]:
     """The optional stages before the reconstruction (masks, robot_frame, refine_poses): the dataset
     the reconstruction reads, the one whose ground_truth/ is in its frame, and the last stage's key.
@@ -366,10 +318,14 @@ def _prepare_dataset(runner: _Runner, dataset: Path, run_dir: Path, config: RunC
         shutil.rmtree(run_dir / "robot_frame", ignore_errors=True)
     if config.refine is not None:
         source = used
-        upstream = runner.stage("refine_poses", {"dataset": mf.files_digest(source, _dataset_files(source))},
-                                config.refine, upstream, [f"{mf.RUN_DIRNAME}/dataset"],
-                                lambda: _refine(source, run_dir, config.refine, progress))
-        used = run_dir / "dataset"
+        inputs = {"dataset": mf.files_digest(source, _dataset_files(source))}
+        if importlib.util.find_spec("pycolmap") is not None:
+            upstream = runner.stage("refine_poses", inputs, config.refine, upstream, [f"{mf.RUN_DIRNAME}/dataset"],
+                                    lambda: _refine(source, run_dir, config.refine, progress))
+            used = run_dir / "dataset"
+        else:  # `make install` has it; without it the run goes on with the given poses, with a warning
+            upstream = runner.stage("refine_poses", inputs, {"config": config.refine, "pycolmap": "missing"},
+                                    upstream, None, lambda: _refine_unavailable(run_dir))
     elif manifest.entry("refine_poses"):
         manifest.forget("refine_poses")
         shutil.rmtree(run_dir / "dataset", ignore_errors=True)
@@ -379,7 +335,7 @@ def _prepare_dataset(runner: _Runner, dataset: Path, run_dir: Path, config: RunC
     return used, truth_root, upstream
 
 
-def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConfig, recon_cfg, asset_cfg,
+def _run_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfig, recon_cfg, asset_cfg,
                 with_truth: bool, evaluation_mesh: bool) -> RunResult:
     run_dir = asset_dir / mf.RUN_DIRNAME
     manifest, progress = runner.manifest, runner.progress
@@ -393,9 +349,11 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
         lambda: _reconstruct(used, recon_dir, recon_cfg, config.device, config.seed, progress))
 
     mesh_files = [f for f in mf.tree_files(recon_dir) if f != "report.json"]
+    support_m, support_from = support_height_m(used, recon_dir / "mesh.obj", recon_cfg.table_z_m)
+    asset_cfg = replace(asset_cfg, support_height_m=support_m)
     asset_key = runner.stage("asset", {"mesh": mf.files_digest(recon_dir, mesh_files)}, asset_cfg, upstream, None,
                              lambda: {**_asset(recon_dir / "mesh.obj", asset_dir, asset_cfg, manifest, progress),
-                                      "evaluation_mesh": evaluation_mesh})
+                                      "evaluation_mesh": evaluation_mesh, "support": support_from})
     asset_outputs = manifest.entry("asset")["outputs"]
 
     gt_files = [f for f in _dataset_files(truth_root) if f.startswith("ground_truth/")] if with_truth else []
@@ -423,6 +381,9 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
                 "evaluate_truth", inputs_now["evaluate_truth"],
                 {**settings, "seed_properties": asset_cfg.seed}, eval_key, [TRUTH_RESULTS_DIRNAME],
                 lambda: _evaluate_truth(truth_root, asset_dir, config.evaluation, asset_cfg.seed, manifest, progress))
+        # a report is written inside its stage, before the stage's own warnings are recorded: again with them
+        rewrite_reports(asset_dir, manifest, [folder for stage, folder in EVALUATIONS if runner.statuses.get(stage)
+                                              == "ran" and (manifest.entry(stage) or {}).get("warnings")])
     else:  # no --evaluate: an evaluation of this very asset still holds, and truth.json keeps its dynamics
         for stage in ("evaluate", "evaluate_truth") if with_truth else ("evaluate",):
             if valid.get(stage):
@@ -434,14 +395,17 @@ def _run_stages(runner: _Runner, dataset: Path, asset_dir: Path, config: RunConf
         inputs = {"ground_truth": mf.files_digest(truth_root, gt_files),
                   "asset": mf.files_digest(asset_dir, ["physical_properties.json", "canonical_transform.json"]),
                   "reconstruct_report": mf.files_digest(recon_dir, ["report.json"])}
-        runner.stage("truth", inputs, {"seed": asset_cfg.seed, "refined": config.refine is not None,
-                                       "dynamics": dynamics}, eval_key or asset_key, ["truth.json"],
+        raised = runner.warnings()  # the stages' so far, repeated in truth.json
+        settings = {"seed": asset_cfg.seed, "refined": config.refine is not None, "dynamics": dynamics,
+                    **({"warnings": raised} if raised else {})}  # none: the key of runs from before warnings
+        runner.stage("truth", inputs, settings, eval_key or asset_key, ["truth.json"],
                      lambda: _truth(truth_root, used, asset_dir, recon_dir, manifest, asset_cfg.seed, dynamics,
-                                    refined=config.refine is not None, robot_frame=config.robot_frame() is not None))
+                                    refined=config.refine is not None, robot_frame=config.robot_frame() is not None,
+                                    raised=raised))
         truth = json.loads((asset_dir / "truth.json").read_text())
     elif manifest.entry("truth"):  # the dataset lost its ground_truth/: a stale truth.json would mislead
         manifest.forget("truth")
         (asset_dir / "truth.json").unlink(missing_ok=True)
 
     urdfs = sorted(asset_dir.glob("*/model.urdf"))
-    return RunResult(asset_dir, runner.statuses, manifest.path, truth, urdfs, warnings)
+    return RunResult(asset_dir, runner.statuses, manifest.path, truth, urdfs, warnings, runner.warnings())

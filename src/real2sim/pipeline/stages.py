@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import warnings
 from pathlib import Path
 from typing import Callable
 
@@ -57,13 +58,32 @@ def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: Progre
 
 
 def _refine(dataset: Path, run_dir: Path, refine_cfg, progress: ProgressFn) -> dict:
+    """refine_poses on a copy. When COLMAP keeps all the given poses, refine_poses warns itself; when it
+    keeps some, this stage says so: those frames keep the robot's noise."""
     from real2sim.capture.pose_refinement import refine_poses
 
     def edit(copy: Path) -> dict:
         result = refine_poses(copy, refine_cfg, progress)
+        kept = result.num_frames - result.num_refined_frames
+        if result.refined and kept:
+            warnings.warn(f"pose refinement kept the given poses of {kept} of {result.num_frames} frames (too few "
+                          "triangulated observations, or a refined pose too far from the given one); the "
+                          "reconstruction aligns them to the others", RuntimeWarning, stacklevel=2)
         return {"result": result.to_json()}
 
     return _edited_copy(dataset, run_dir / "dataset", edit)
+
+
+#: Why poses are not refined without pycolmap, for the warning and truth.json.
+PYCOLMAP_MISSING = "pycolmap is not installed (`make install` installs it; or pip install pycolmap)"
+
+
+def _refine_unavailable(run_dir: Path) -> dict:
+    """The refine_poses stage without pycolmap: no copy, the given poses go on, with a warning."""
+    shutil.rmtree(run_dir / "dataset", ignore_errors=True)  # an earlier run's refined copy: not this run's poses
+    warnings.warn(f"pose refinement skipped: {PYCOLMAP_MISSING}; the given poses are used as they are",
+                  RuntimeWarning, stacklevel=2)
+    return {"outputs": [], "result": {"refined": False, "reason": f"skipped: {PYCOLMAP_MISSING}"}}
 
 
 def _robot_frame(dataset: Path, run_dir: Path, cfg: NormaliseConfig, seed: int, progress: ProgressFn) -> dict:
@@ -240,10 +260,24 @@ def check_evaluations(asset_dir: Path, manifest: mf.Manifest, inputs_now: dict[s
     return valid, warnings
 
 
+def rewrite_reports(asset_dir: Path, manifest: mf.Manifest, folders) -> None:
+    """report.html (and summary, plots) of the evaluation ``folders`` of ASSETDIR written again, now that
+    truth.json or run.json's warnings hold more; the new files are recorded as the run's."""
+    from real2sim.report.html import write_report
+
+    for name in folders:
+        folder = Path(asset_dir) / name
+        if (folder / "runs.csv").is_file():
+            before = set(mf.all_files(folder))
+            write_report(folder)
+            manifest.add_owned_files(name, set(mf.all_files(folder)) - before)
+
+
 def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, manifest: mf.Manifest, seed: int,
-           dynamics: bool, *, refined: bool, robot_frame: bool) -> None:
+           dynamics: bool, *, refined: bool, robot_frame: bool, raised: list[dict] = ()) -> None:
     """truth.json; ``dynamics``: with the evaluations' comparison (run now, or kept and still valid);
-    ``refined`` / ``robot_frame``: whether those stages are part of this run."""
+    ``refined`` / ``robot_frame``: whether those stages are part of this run; ``raised``: the warnings the
+    stages before raised (``{"stage", "message"}``), repeated in truth.json."""
     import json
 
     from real2sim.pipeline.truth import build_truth
@@ -263,17 +297,12 @@ def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, manifest
     record = build_truth(dataset, used, asset_dir, report, refinement=refinement, seed=seed,
                          robot_frame=frame_entry.get("result") if frame_entry else None,
                          true_properties=true_properties)
+    record["warnings"] = list(raised)  # what degraded on the way: judge the errors above with it
     results, results_truth = asset_dir / RESULTS_DIRNAME, asset_dir / TRUTH_RESULTS_DIRNAME
     if dynamics and (results_truth / "summary.csv").is_file():
         from real2sim.pipeline.truth_dynamics import dynamics_record
 
         record["dynamics"] = dynamics_record(results, results_truth)
     mf.write_json_atomic(asset_dir / "truth.json", record)
-    if dynamics:
-        from real2sim.report.html import write_report
-
-        for folder in (results, results_truth):  # their reports show the truth now
-            if (folder / "runs.csv").is_file():
-                before = set(mf.all_files(folder))
-                write_report(folder)
-                manifest.add_owned_files(folder.name, set(mf.all_files(folder)) - before)
+    if dynamics:  # their reports show the truth now
+        rewrite_reports(asset_dir, manifest, (RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME))

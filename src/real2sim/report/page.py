@@ -189,11 +189,13 @@ def render_html(summary: Sequence[Mapping], rows: Sequence[Mapping], config: Map
                 results_dir: Path | None = None) -> str:
     """The report page as one HTML string (plots and pictures inlined as base64 PNG).
 
-    With ``results_dir``, the asset folders its config.json names add two sections: pictures
-    of every representation, and the truth (for assets with a truth.json).
+    With ``results_dir``, the asset folders its config.json names add sections: the warnings
+    `real2sim run` recorded making them, pictures of every representation, and the truth (for
+    assets with a truth.json).
     """
-    from real2sim.report.sections import animations_section, pictures_section, truth_section
+    from real2sim.report.sections import animations_section, pictures_section, truth_section, warnings_section
 
+    warned = warnings_section(results_dir, config) if results_dir is not None else ""
     truth = truth_section(results_dir, config) if results_dir is not None else ""
     pictures = pictures_section(results_dir, config, rows) if results_dir is not None else ""
     animations = animations_section(results_dir) if results_dir is not None else ""
@@ -226,6 +228,7 @@ def render_html(summary: Sequence[Mapping], rows: Sequence[Mapping], config: Map
 <p>{len(rows)} simulations of {len(summary)} representation/contact-model pairs; objects: {html.escape(', '.join(objects))};
 tasks: {html.escape(', '.join(tasks))}. Generated {stamp}.
 Protocol: {html.escape(str(config.get('protocol', 'unknown')))}.</p>
+{warned}
 
 <h2>Summary (layout of the paper's Table I)</h2>
 <p>Means over objects, tasks and runs; OCAE and ATE in metres, CPD in m/s, ST = wall-clock seconds per

@@ -133,6 +133,38 @@ def truth_section(results_dir: Path, config: Mapping) -> str:
             "judged against it (ASSETDIR/truth.json).</p>" + "\n".join(parts))
 
 
+#: Where `real2sim run` records each stage of an asset folder, with the warnings it raised
+#: (real2sim.pipeline.manifest; read here as a file, the report being below the pipeline).
+RUN_MANIFEST = Path(".run") / "run.json"
+
+
+def asset_warnings(folder: Path) -> list[dict]:
+    """The warnings `real2sim run` recorded for the asset in ``folder`` (``{"stage", "message"}``, in
+    the order of its stages), [] for an asset not made by run or an unreadable record."""
+    try:
+        stages = json.loads((Path(folder) / RUN_MANIFEST).read_text()).get("stages")
+    except (OSError, ValueError, AttributeError):
+        return []
+    found: list[dict] = []
+    for name, entry in stages.items() if isinstance(stages, dict) else ():
+        texts = entry.get("warnings") if isinstance(entry, dict) else None
+        if isinstance(texts, list):
+            found += [{"stage": str(name), "message": str(text)} for text in texts]
+    return found
+
+
+def warnings_section(results_dir: Path, config: Mapping) -> str:
+    """What degraded while `real2sim run` made the assets (a fallback, poses that stayed unrefined), or ''.
+    Near the top of the page: every number below is to be read with it."""
+    items = [f"<li><b>{html.escape(name)}</b>, stage {html.escape(w['stage'])}: {html.escape(w['message'])}</li>"
+             for name, folder in sorted(asset_folders(results_dir, config).items()) for w in asset_warnings(folder)]
+    if not items:
+        return ""
+    return ("<h2 class='err'>Warnings</h2><p class='err'>Making the assets fell back or degraded on the way "
+            "(ASSETDIR/.run/run.json); the results below are those of the assets as made.</p><ul>"
+            + "".join(items) + "</ul>")
+
+
 def animations_section(results_dir: Path) -> str:
     """Links to RESULTS/animations/*.html (self-contained Meshcat pages), or ''."""
     pages = sorted((Path(results_dir) / "animations").glob("*.html"))
