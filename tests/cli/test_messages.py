@@ -60,6 +60,7 @@ def test_output_under_proc_is_one_line(argv, tiny_dataset, capsys):
     ["refine-poses", ""],
     ["report", ""],
     ["view", ""],
+    ["objects", "export", "can", ""],
 ])
 def test_empty_path_is_refused(argv, tiny_dataset, tmp_path, capsys):
     """`--out ''` (an unset shell variable) was taken as the working folder."""

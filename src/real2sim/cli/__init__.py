@@ -15,8 +15,10 @@ import os
 import signal
 import sys
 import warnings
+from pathlib import Path
 
 from real2sim import __version__
+from real2sim.cli import options
 from real2sim.cli.options import integer
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import public_paths
@@ -58,6 +60,10 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # verb not part of this build
             raise
         module.register(sub)
+    for verb_parser in sub.choices.values():  # also for a verb whose register() does not call options.finish
+        for action in verb_parser._actions:
+            if action.type is Path:
+                action.type = options.path  # '' is not the working folder
     return parser
 
 
