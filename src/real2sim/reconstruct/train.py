@@ -255,34 +255,53 @@ class _PoolRanges:
     """Each pool ray's stretch inside the field's occupancy, kept valid while pose corrections move the rays.
 
     With moving rays the occupancy is grown by ``pad_voxels``: a corrected ray's occupied samples lie
-    within that of the ray the ranges were cast for, until some view's rays have moved by more
-    (``moved_m``), when they are cast again for the rays as they are then.
+    within that of the ray the ranges were cast for until its view's rays have moved by more
+    (``moved_m``). Then the batch's rays of such views are cast as they are now; the whole pool is
+    cast again when a quarter of the views have moved that far, at most every ``min_interval`` steps
+    (a cast of the pool costs seconds, of a batch tens of milliseconds).
     """
 
     def __init__(self, field: VoxelRadianceField, pool: RayPool, corrections: ViewCorrections | None,
-                 pad_voxels: int = 3):
+                 pad_voxels: int = 4, min_interval: int = 50):
         self.field, self.pool, self.corrections = field, pool, corrections
         self.moving = corrections is not None and corrections.poses
         self.grow = pad_voxels if self.moving else 1
+        self.allowance_m = (self.grow - 1) * field.grid.voxel_m
+        self.min_interval = min_interval
         corners = np.stack(np.meshgrid(*field.grid.bounds_m.T, indexing="ij"), axis=-1).reshape(-1, 3)
         self.reach_m = float(np.linalg.norm(corners[None] - pool.origins.cpu().numpy()[::997, None], axis=-1).max())
-        self.casts = 0
+        self.casts, self.steps = 0, 0
         self._cast()
 
+    def _corrected(self, index: torch.Tensor | None = None):
+        origins, directions, view = self.pool.origins, self.pool.directions, self.pool.view
+        if index is not None:
+            origins, directions, view = origins[index], directions[index], view[index]
+        if not self.moving:
+            return origins, directions
+        with torch.no_grad():
+            return self.corrections.rays(view, origins, directions)
+
     def _cast(self) -> None:
-        origins, directions = self.pool.origins, self.pool.directions
         if self.moving:
-            with torch.no_grad():
-                origins, directions = self.corrections.rays(self.pool.view, origins, directions)
             self.since = self.corrections.snapshot()
-        self.t_in, self.t_out = occupancy_ranges(self.field, origins, directions, grow_voxels=self.grow)
-        self.casts += 1
+        self.t_in, self.t_out = occupancy_ranges(self.field, *self._corrected(), grow_voxels=self.grow)
+        self.casts, self.last_cast = self.casts + 1, self.steps
 
     def batch(self, pick: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        if self.moving and self.corrections.moved_m(*self.since, self.reach_m) > \
-                (self.grow - 1) * self.field.grid.voxel_m:
+        self.steps += 1
+        if not self.moving:
+            return self.t_in[pick], self.t_out[pick]
+        stale = self.corrections.moved_m(*self.since, self.reach_m) > self.allowance_m
+        if stale.float().mean() > 0.25 and self.steps - self.last_cast >= self.min_interval:
             self._cast()
-        return self.t_in[pick], self.t_out[pick]
+            stale[:] = False
+        t_in, t_out = self.t_in[pick], self.t_out[pick]
+        redo = torch.nonzero(stale[self.pool.view[pick]])[:, 0]
+        if len(redo):
+            fresh = occupancy_ranges(self.field, *self._corrected(pick[redo]), grow_voxels=self.grow)
+            t_in, t_out = t_in.index_put((redo,), fresh[0]), t_out.index_put((redo,), fresh[1])
+        return t_in, t_out
 
 
 def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], config: FieldConfig = FieldConfig(), *,

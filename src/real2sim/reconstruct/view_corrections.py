@@ -14,10 +14,11 @@ Three things keep the corrections honest:
 
 * a Gaussian prior toward zero (``prior_deg``, ``prior_mm`` its scales), so a view whose
   images say little (a featureless side) stays where the robot put it;
-* a fixed gauge: the field can follow any rigid motion of the whole rig, so after every
-  step the rigid motion that best explains all corrections together (least squares, a
-  small rotation about the views' common point plus a shift) is taken out of them. The
-  world frame stays the robot's, with the table at z = 0;
+* a fixed gauge: the field can follow any rigid motion of the whole rig, and any growth of
+  it about the object, so after every step the motion that best explains all corrections
+  together (least squares: a small rotation about the views' common point, a shift, a
+  growth) is taken out of them. The world frame and its scale stay the robot's, with the
+  table at z = 0;
 * coarse to fine: the poses learn while the field is on its coarse grid, where the
   trilinear blend of big voxels gives every misaligned pixel a gradient that reaches a
   few millimetres (the idea of BARF's band-limited start), and their learning rate
@@ -49,19 +50,22 @@ class CorrectionConfig:
     translation in metres (the rotation's rate times the median camera distance, so that both move a
     pixel alike); colour gain in log units."""
 
-    lr_rotation_rad: float = 2e-3
-    lr_colour: float = 5e-3
+    lr_rotation_rad: float = 1e-3
+    lr_colour: float = 2e-2
     lr_final_fraction: float = 0.01
     warmup_steps: int = 40
     prior_deg: float = 2.0
     prior_mm: float = 10.0
-    prior_gain: float = 0.3
-    prior_weight: float = 1e-3
+    prior_gain: float = 1.0
+    # offsets are held closer to zero than gains: on a low-contrast surface an offset imitates a gain,
+    # and an exposure change is a gain
+    prior_bias: float = 0.1
+    prior_weight: float = 1e-2
 
     def validate(self) -> None:
         from real2sim.formats.errors import UserInputError
 
-        for name in ("lr_rotation_rad", "lr_colour", "prior_deg", "prior_mm", "prior_gain"):
+        for name in ("lr_rotation_rad", "lr_colour", "prior_deg", "prior_mm", "prior_gain", "prior_bias"):
             if not getattr(self, name) > 0:
                 raise UserInputError(f"correction setting {name} must be > 0 (got {getattr(self, name)})")
         if self.warmup_steps < 0 or self.prior_weight < 0 or not 0 < self.lr_final_fraction <= 1:
@@ -109,23 +113,25 @@ class ViewCorrections(torch.nn.Module):
         c = self.config
         groups = []
         if self.poses:
-            groups += [{"params": [self.rotation_rad], "lr": c.lr_rotation_rad, "base": c.lr_rotation_rad},
+            groups += [{"params": [self.rotation_rad], "lr": c.lr_rotation_rad, "base": c.lr_rotation_rad,
+                        "warmup": True},
                        {"params": [self.translation_m], "lr": c.lr_rotation_rad * self.distance_m,
-                        "base": c.lr_rotation_rad * self.distance_m}]
-        if self.colours:
-            groups += [{"params": [self.log_gain, self.bias], "lr": c.lr_colour, "base": c.lr_colour}]
+                        "base": c.lr_rotation_rad * self.distance_m, "warmup": True}]
+        if self.colours:  # no warm-up: a gain has no wrong basin to fall into, and late it finds the field adapted
+            groups += [{"params": [self.log_gain, self.bias], "lr": c.lr_colour, "base": c.lr_colour,
+                        "warmup": False}]
         return torch.optim.Adam(groups or [{"params": [], "base": 0.0}])
 
     def schedule(self, optimiser: torch.optim.Adam, done: int, total: int) -> None:
-        """Learning rates for the step after ``done`` of ``total``: zero during warm-up, then an
+        """Learning rates for the step after ``done`` of ``total``: zero during the poses' warm-up, then an
         exponential decay to ``lr_final_fraction``."""
         c = self.config
         for group in optimiser.param_groups:
-            if done < c.warmup_steps:
+            start = c.warmup_steps if group.get("warmup") else 0
+            if done < start:
                 group["lr"] = 0.0
             else:
-                progress = (done - c.warmup_steps) / max(total - c.warmup_steps, 1)
-                group["lr"] = group["base"] * c.lr_final_fraction ** progress
+                group["lr"] = group["base"] * c.lr_final_fraction ** ((done - start) / max(total - start, 1))
 
     # -- applying them ---------------------------------------------------------------------------
     def rays(self, view: torch.Tensor, origins: torch.Tensor, directions: torch.Tensor):
@@ -150,7 +156,8 @@ class ViewCorrections(torch.nn.Module):
             terms = terms + (self.rotation_rad ** 2).sum(-1).mean() / np.radians(c.prior_deg) ** 2 \
                 + (self.translation_m ** 2).sum(-1).mean() / (1e-3 * c.prior_mm) ** 2
         if self.colours:
-            terms = terms + ((self.log_gain ** 2).sum(-1).mean() + (self.bias ** 2).sum(-1).mean()) / c.prior_gain ** 2
+            terms = terms + (self.log_gain ** 2).sum(-1).mean() / c.prior_gain ** 2 \
+                + (self.bias ** 2).sum(-1).mean() / c.prior_bias ** 2
         return c.prior_weight * terms
 
     @torch.no_grad()
@@ -158,9 +165,9 @@ class ViewCorrections(torch.nn.Module):
         """Take out of the corrections the rigid motion of the whole rig (pose) and the common
         gain and bias (colour) that best explain them; see the module docstring."""
         if self.poses:
-            w, t = _rig_motion(self.rotation_rad, self.translation_m, self._arm_m, self.distance_m)
+            w, moves = _rig_motion(self.rotation_rad, self.translation_m, self._arm_m, self.distance_m)
             self.rotation_rad -= w
-            self.translation_m -= torch.cross(w.expand_as(self._arm_m), self._arm_m, dim=-1) + t
+            self.translation_m -= moves
         if self.colours:
             self.log_gain -= self.log_gain.mean(dim=0)
             self.bias -= self.bias.mean(dim=0)
@@ -176,13 +183,13 @@ class ViewCorrections(torch.nn.Module):
             c2w[:, :3, 3] += self.translation_m.detach().double().cpu().numpy()
         return c2w
 
-    def moved_m(self, rotation_since: torch.Tensor, translation_since: torch.Tensor, reach_m: float) -> float:
-        """The most any view's rays moved, within ``reach_m`` of its camera, since the corrections were
+    def moved_m(self, rotation_since: torch.Tensor, translation_since: torch.Tensor, reach_m: float) -> torch.Tensor:
+        """(V,) how far each view's rays moved, within ``reach_m`` of its camera, since the corrections were
         ``rotation_since``, ``translation_since`` (metres; first order in the rotation)."""
         with torch.no_grad():
             turn = (self.rotation_rad - rotation_since).norm(dim=-1)
             shift = (self.translation_m - translation_since).norm(dim=-1)
-            return float((shift + turn * reach_m).max()) if len(turn) else 0.0
+            return shift + turn * reach_m
 
     def snapshot(self) -> tuple[torch.Tensor, torch.Tensor]:
         return self.rotation_rad.detach().clone(), self.translation_m.detach().clone()
@@ -190,9 +197,11 @@ class ViewCorrections(torch.nn.Module):
 
 def _rig_motion(rotation: torch.Tensor, translation: torch.Tensor, arm_m: torch.Tensor,
                 distance_m: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """The small rigid motion (rotation vector w about the pivot, shift t) of the whole rig closest, in
-    least squares, to the per-view corrections: view i moves by w, w x arm_i + t. Rotations are weighed
-    by ``distance_m`` so that both residuals are in metres."""
+    """The small motion of the whole rig closest, in least squares, to the per-view corrections: a
+    rotation vector w about the pivot, a shift t and a growth s of the rig about the pivot (the field
+    scaled with it renders the same images), so view i turns by w and moves by w x arm_i + t + s arm_i.
+    Rotations are weighed by ``distance_m`` so that both residuals are in metres. Returns (w, the
+    per-view moves (V, 3))."""
     views = len(arm_m)
     dtype = torch.float64
     arm = arm_m.to(dtype)
@@ -201,13 +210,14 @@ def _rig_motion(rotation: torch.Tensor, translation: torch.Tensor, arm_m: torch.
     skew = torch.zeros(views, 3, 3, dtype=dtype, device=arm.device)
     skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -arm[:, 2], arm[:, 1], -arm[:, 0]
     skew = skew - skew.transpose(1, 2)
-    rows_rot = torch.cat([distance_m * eye.expand(views, 3, 3), torch.zeros(views, 3, 3, dtype=dtype,
-                                                                             device=arm.device)], dim=2)
-    rows_move = torch.cat([-skew, eye.expand(views, 3, 3)], dim=2)
-    a = torch.cat([rows_rot, rows_move], dim=1).reshape(-1, 6)
+    rows_rot = torch.cat([distance_m * eye.expand(views, 3, 3),
+                          torch.zeros(views, 3, 4, dtype=dtype, device=arm.device)], dim=2)
+    rows_move = torch.cat([-skew, eye.expand(views, 3, 3), arm[:, :, None]], dim=2)
+    a = torch.cat([rows_rot, rows_move], dim=1).reshape(-1, 7)
     b = torch.cat([distance_m * rotation.to(dtype), translation.to(dtype)], dim=1).reshape(-1)
-    solution = torch.linalg.lstsq(a.cpu(), b.cpu()[:, None]).solution[:, 0].to(rotation.device)
-    return solution[:3].to(rotation.dtype), solution[3:].to(rotation.dtype)
+    solution = torch.linalg.lstsq(a.cpu(), b.cpu()[:, None]).solution[:, 0].to(arm.device)
+    moves = (rows_move @ solution)  # (V, 3)
+    return solution[:3].to(rotation.dtype), moves.to(rotation.dtype)
 
 
 def correction_report(corrections: ViewCorrections, views, *, dataset_root=None,
