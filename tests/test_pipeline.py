@@ -251,6 +251,15 @@ def test_refine_poses_works_on_a_copy_and_leaves_the_dataset_alone(can_ds_no_tru
     assert (copy / "transforms.json").is_file() and (copy / "refine_report.json").is_file()
     record = manifest(out)["stages"]
     assert record["refine_poses"]["result"]["num_frames"] == 60
+    # frames COLMAP could not refine keep the robot's poses: said, and kept in run.json for the summary
+    result, said = record["refine_poses"]["result"], record["refine_poses"].get("warnings", [])
+    kept = result["num_frames"] - result["num_refined_frames"]
+    if not result["refined"]:
+        assert [w for w in said if w.startswith("pose refinement kept the given poses:")], said
+    elif kept:
+        assert f"pose refinement kept the given poses of {kept} of 60 frames" in " ".join(said), said
+    else:
+        assert said == []
     assert record["reconstruct"]["inputs"]["dataset"]["files"] >= 121
 
 
