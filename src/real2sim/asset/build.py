@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from real2sim.asset.reuse import file_sha256, reuse_collision, reusable_representations
+from real2sim.asset.reuse import reuse_collision, reusable_representations
+from real2sim.formats.outputs import file_sha256
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
 from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.contact import ContactProperties

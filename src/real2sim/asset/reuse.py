@@ -23,16 +23,6 @@ NOT_GEOMETRY = ("mass_kg", "collision", "contact", "formats")
 MODEL_FILES = ("model.urdf", "model.sdf", "model.xml")
 
 
-def file_sha256(path: Path) -> str:
-    import hashlib
-
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(1 << 20):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def reusable_representations(previous_dir: Path | str, config_path: Path) -> dict[str, Path]:
     """``{SPEC text: folder}`` of the representations in the asset folder ``previous_dir`` that a build
     with the asset_config.json at ``config_path`` may reuse: both records name the same input mesh

@@ -50,6 +50,7 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 from real2sim.formats.dataset import write_json_atomic as _write_json_atomic
+from real2sim.formats.outputs import file_sha256  # noqa: F401 (public here)
 
 MANIFEST_VERSION = 1
 RUN_DIRNAME = ".run"
@@ -75,14 +76,6 @@ def _jsonable(value: Any) -> Any:
 def settings_record(settings: Any) -> Any:
     """The JSON form of a stage's settings (dataclasses field by field, paths as strings)."""
     return _jsonable(settings)
-
-
-def file_sha256(path: Path, chunk: int = 1 << 20) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(chunk):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def files_digest(root: Path, relpaths: Iterable[str]) -> dict:
