@@ -23,13 +23,12 @@ import numpy as np
 import trimesh
 
 from real2sim.asset.reuse import reuse_collision, reusable_representations
-from real2sim.formats.outputs import file_sha256
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
 from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.mesh_io import MAX_EXTENT_M, check_object_size, export_textured_mesh, load_mesh, validate_mesh  # noqa: F401
-from real2sim.formats.outputs import atomic_output_dir
+from real2sim.formats.outputs import atomic_output_dir, file_sha256
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
 from real2sim.formats.progress import ProgressFn, null_progress, prefixed
 from real2sim.formats.spec import CollisionSpec
