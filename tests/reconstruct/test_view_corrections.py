@@ -21,7 +21,7 @@ from real2sim.reconstruct.views import load_views, project
 from .conftest import copy_dataset
 
 # small grids, few steps: seconds on 2 cores
-CONFIG = replace(FieldConfig(rays_per_step=2048, photo_carving=False).with_budget(steps=160, voxels=64),
+CONFIG = replace(FieldConfig(rays_per_step=2048, photo_carving=False, pose_refinement=True).with_budget(steps=160, voxels=64),
                  corrections=replace(FieldConfig().corrections, warmup_steps=20))
 BAD_VIEWS = np.arange(3, 54, 6)  # every 6th training view gets a wrong pose
 
@@ -152,7 +152,7 @@ def test_report_json_has_the_corrections_and_the_pose_errors(can_capture, tmp_pa
 
     dataset = copy_dataset(can_capture, tmp_path / "can", ground_truth=True)
     (dataset / "ground_truth" / "mesh.obj").unlink()
-    config = replace(tiny_config, field=replace(tiny_config.field, photo_carving=False))
+    config = replace(tiny_config, field=replace(tiny_config.field, photo_carving=False, pose_refinement=True))
     out = write_reconstruction(reconstruct(dataset, config), tmp_path / "mesh")
     report = json.loads((out / "report.json").read_text())
     corrections = report["view_corrections"]
@@ -191,10 +191,11 @@ def test_jpeg_photos_load_as_the_png_ones(can_capture, tmp_path, views):
     assert np.abs(jpeg.rgb - views.rgb).mean() < 0.02
 
 
-@pytest.mark.parametrize("flags, poses, colours", [([], True, True), (["--no-field-poses"], False, True),
-                                                    (["--no-field-poses", "--no-field-colours"], False, False)])
+@pytest.mark.parametrize("flags, poses, colours", [([], False, True), (["--field-poses"], True, True),
+                                                    (["--field-poses", "--no-field-colours"], True, False)])
 def test_command_line_turns_the_corrections_off(flags, poses, colours):
-    """`reconstruct` (and `run`, which shares the flags) on by default, off with --no-field-poses / --no-field-colours."""
+    """`reconstruct` (and `run`, which shares the flags): colours corrected by default (--no-field-colours turns
+    them off), poses with --field-poses."""
     from real2sim.cli import build_parser
     from real2sim.cli.reconstruct import reconstruct_config
 
