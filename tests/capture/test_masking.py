@@ -131,7 +131,7 @@ def test_maskrcnn_error_paths(tmp_path, captures):
         with pytest.raises(UserInputError, match="torchvision"):
             compute_masks(root, "maskrcnn", MaskConfig(weights=weights))
     else:
-        with pytest.raises(UserInputError, match="cannot read Mask R-CNN weights"):
+        with pytest.raises(UserInputError, match="is not a Mask R-CNN weights file"):
             compute_masks(root, "maskrcnn", MaskConfig(weights=weights))
     assert not (root / "masks_maskrcnn").exists()
 
