@@ -45,6 +45,8 @@ def test_a_colmap_capture_without_masks_becomes_an_asset_close_to_the_truth(phon
     assert truth["reconstruction"]["iou"] >= 0.85, truth["reconstruction"]
 
 
+# about 100 s: the COLMAP capture above keeps parallax masks in the default suite
+@pytest.mark.slow
 def test_parallax_masks_of_a_robot_capture_wait_for_refined_poses(tmp_path):
     """With --refine-poses the masks are made on the refined dataset, after refine_poses."""
     from real2sim.capture.wrist_camera import CaptureConfig, capture
