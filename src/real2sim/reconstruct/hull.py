@@ -229,8 +229,7 @@ def object_region(views: PosedViews, *, outlier_fraction: float = 0.03, coarse_v
         # on a table the hull may (must) touch the grid's floor; with none, every side counts
         sides = slice(0, 2) if table_z_m is not None else slice(0, 3)
         touches = (lo_i[sides] == 0).any() or (hi_i >= np.asarray(grid.shape) - 1).any()
-        lo = grid.origin_m + (lo_i - 1.5) * grid.voxel_m
-        hi = grid.origin_m + (hi_i + 1.5) * grid.voxel_m
+        lo, hi = _padded_box(grid, inside)
         if not touches:
             if table_z_m is not None:
                 lo[2] = max(lo[2], table_z_m)
@@ -249,10 +248,16 @@ def _tightened(views: PosedViews, lo: np.ndarray, hi: np.ndarray, outlier_fracti
     inside = silhouette_scores(views, grid.centres(), outlier_fraction).reshape(grid.shape) >= 0.5
     if not inside.any():
         return lo, hi
+    new_lo, new_hi = _padded_box(grid, inside)
+    return np.maximum(new_lo, lo), np.minimum(new_hi, hi)
+
+
+def _padded_box(grid: VoxelGrid, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) metres: the centres of the outermost voxels of ``inside`` (a non-empty bool array of
+    ``grid.shape``), a voxel and a half further out."""
     idx = np.argwhere(inside)
-    new_lo = np.maximum(grid.origin_m + (idx.min(axis=0) - 1.5) * grid.voxel_m, lo)
-    new_hi = np.minimum(grid.origin_m + (idx.max(axis=0) + 1.5) * grid.voxel_m, hi)
-    return new_lo, new_hi
+    return (grid.origin_m + (idx.min(axis=0) - 1.5) * grid.voxel_m,
+            grid.origin_m + (idx.max(axis=0) + 1.5) * grid.voxel_m)
 
 
 def carve(views: PosedViews, grid: VoxelGrid, outlier_fraction: float = 0.03, block: int = 3) -> np.ndarray:

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 import trimesh
 
+from real2sim.formats.dataset import has_table_plane, read_dataset
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.train import FieldConfig
@@ -117,8 +118,9 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     clock = _StageClock()
     report: dict = {"backend": config.backend, "device": device, "seed": seed}
     with clock.stage("load"):
-        views = load_views(dataset, max_side_px=config.max_image_side_px)
-        table_z_m = _table_z_m(dataset, config)
+        ds = read_dataset(dataset)
+        views = load_views(ds, max_side_px=config.max_image_side_px)
+        table_z_m = config.table_z_m if has_table_plane(ds) else None  # None: the images show no table
         train_idx, held_idx = held_out_split(views.count, config.held_out_every)
         train, held = views.subset(train_idx), views.subset(held_idx)
         truth = load_truth(dataset)
@@ -218,13 +220,6 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     return Reconstruction(mesh=textured, report=report, field=None if config.backend == "hull" else trained.field)
 
 
-def _table_z_m(dataset: Path | str, config: ReconstructConfig) -> float | None:
-    """The table's height (metres), or None when the dataset says its images show no table plane."""
-    from real2sim.formats.dataset import has_table_plane, read_dataset
-
-    return config.table_z_m if has_table_plane(read_dataset(dataset, check_files=False)) else None
-
-
 class UnboundedReconstruction(UserInputError):
     """The reconstruction reaches where the views do not see together: refused rather than written."""
 
@@ -235,7 +230,7 @@ def check_seen_together(mesh: trimesh.Trimesh, views: PosedViews, region: tuple[
     together: more than ``max_outside_fraction`` of its vertices outside the hull's box ``region`` (by more
     than a tenth of the box's size) or where fewer than enough views see from far enough apart
     (:func:`real2sim.reconstruct.hull.seen_together`). Nothing the views cannot bound is a result."""
-    from real2sim.reconstruct.hull import seen_together
+    from real2sim.reconstruct.hull import MIN_SPREAD_DEG, seen_together
 
     verts = np.asarray(mesh.vertices)
     if len(verts) > max_points:
@@ -250,8 +245,8 @@ def check_seen_together(mesh: trimesh.Trimesh, views: PosedViews, region: tuple[
         raise UnboundedReconstruction(
             f"the reconstruction ({size_mm[0]:.0f} x {size_mm[1]:.0f} x {size_mm[2]:.0f} mm) reaches beyond the region "
             f"the views see together ({100 * bad.mean():.0f} % of its surface): refused; check that the poses and "
-            "masks belong together and that the object is seen from directions at least "
-            "25 degrees apart")
+            f"masks belong together and that the object is seen from directions at least "
+            f"{MIN_SPREAD_DEG:g} degrees apart")
 
 
 def _psnr_region(views: PosedViews, i: int, covered: np.ndarray) -> np.ndarray:
@@ -309,7 +304,6 @@ def _json_default(value):
 def import_external(dataset: Path | str, mesh_path: Path | str, dataparser_transforms: Path | str, *,
                     config: ReconstructConfig = ReconstructConfig()) -> Reconstruction:
     """A nerfstudio-exported mesh put back in the dataset's world frame and cleaned, with the same report."""
-    from real2sim.formats.dataset import read_dataset
     from real2sim.reconstruct.external import import_nerfstudio_mesh
     from real2sim.reconstruct.truth import compare_to_truth, load_truth
 
