@@ -292,6 +292,11 @@ def detect_board(image_rgb: np.ndarray, spec: BoardSpec, K: np.ndarray, dist=Non
     board = _cv_board(spec)
     params = cv2.aruco.CharucoParameters()
     params.cameraMatrix, params.distCoeffs = K_cv, dist_cv
+    # A corner next to one found marker is kept (OpenCV's default wants two): the object hides the
+    # board's middle, and at phone resolutions far markers drop out; the corner's sub-pixel fit and
+    # the reprojection check below catch a wrong one. Markers missed at first are looked for again
+    # where the board says they must be.
+    params.minMarkers, params.tryRefineMarkers = 1, True
     detector_params = cv2.aruco.DetectorParameters()
     detector_params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX  # markers' corners, for the corner fit
     detector = cv2.aruco.CharucoDetector(board, params, detector_params)

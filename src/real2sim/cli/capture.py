@@ -46,7 +46,8 @@ def register(sub) -> None:
     add_mesh_units_argument(p)
     p.add_argument("--out", type=Path, required=True, metavar="DATASET", help="output dataset folder (must not exist)")
     p.add_argument("--overwrite", action="store_true", help="replace DATASET if it exists")
-    p.add_argument("--views", type=integer(1, 2000), default=200, help="number of images (default 200)")
+    p.add_argument("--views", type=integer(1, 2000), default=None,
+                   help="number of images (default 200; --handheld 60; --video: frames, e.g. 600 = 20 s at 30 fps)")
     p.add_argument("--width", type=IMAGE_PX, default=640, help="image width, px (default 640)")
     p.add_argument("--height", type=IMAGE_PX, default=480, help="image height, px (default 480)")
     p.add_argument("--pose-noise-mm", type=NOISE_MM, default=5.0, metavar="MM",
@@ -57,6 +58,7 @@ def register(sub) -> None:
     p.add_argument("--with-background", action="store_true",
                    help="also render the empty table from the same poses into background/ (for mask --method background)")
     _add_hard_rig_arguments(p)
+    _add_handheld_arguments(p)
     options.finish(p)
     p.set_defaults(func=run_capture)
 
@@ -150,6 +152,26 @@ def _add_hard_rig_arguments(p: argparse.ArgumentParser) -> None:
                    help="JPEG quality, 1-100, with --jpeg (default 90)")
 
 
+def _add_handheld_arguments(p: argparse.ArgumentParser) -> None:
+    """A person with a phone instead of a robot (issue #29): photos or a video, no poses given."""
+    g = p.add_argument_group("handheld phone", "what a person walking around the object with a phone gets: "
+                             "JPEG photos named IMG_0001.jpg... (or clip.mp4) directly in DATASET, no poses; the "
+                             "exact poses only in DATASET/ground_truth/")
+    g.add_argument("--handheld", action="store_true",
+                   help="an orbit at varying height and distance, camera rolled a few degrees, some views close enough "
+                   "to cut the object, a phone lens (--fov-deg, default 65), motion blur, JPEG (default 60 views)")
+    g.add_argument("--board", action="store_true",
+                   help="with --handheld: the printed board of `real2sim board` (default 7x5, 32 mm) lies flat on the "
+                   "table under the object; its frame is the world frame")
+    g.add_argument("--video", action="store_true",
+                   help="with --handheld: write DATASET/clip.mp4 (H.264) of --views frames at --fps instead of photos")
+    g.add_argument("--fps", type=FPS, default=30.0, help="with --video: frames per second (default 30)")
+
+
+#: --fps of a handheld video.
+FPS = number(1.0, 240.0)
+
+
 def _resolve_mesh(text: str):
     """A mesh file path, or the textured bundled object of that name when no such file exists."""
     path = Path(text)
@@ -168,8 +190,14 @@ def run_capture(args: argparse.Namespace) -> int:
 
     from real2sim.formats.errors import UserInputError
 
+    if args.handheld:
+        return _run_handheld(args)
+    for flag in ("board", "video"):
+        if getattr(args, flag):
+            raise UserInputError(f"--{flag} needs --handheld")
     if args.jpeg_quality is not None and not args.jpeg:
         raise UserInputError("--jpeg-quality needs --jpeg")
+    args.views = 200 if args.views is None else args.views
     cfg = CaptureConfig(views=args.views, width=args.width, height=args.height, pose_noise_mm=args.pose_noise_mm,
                         pose_noise_deg=args.pose_noise_deg, seed=args.seed, with_background=args.with_background,
                         ring_elevation_deg=args.ring_elevation_deg, focal_px=args.focal_px, fov_deg=args.fov_deg,
@@ -238,4 +266,42 @@ def run_mask(args: argparse.Namespace) -> int:
     if result.mean_iou is not None:
         line += f"; IoU vs ground truth mean {result.mean_iou:.4f}, min {result.min_iou:.4f}"
     print(line)
+    return 0
+
+
+#: Flags of the robot capture that a handheld one has no use for, with their defaults.
+_NOT_HANDHELD = {"pose_noise_mm": 5.0, "pose_noise_deg": 1.0, "with_background": False, "ring_elevation_deg": None,
+                 "focal_px": None, "cut_off_fraction": 0.0, "no_table": False, "exposure_jitter": 0.0,
+                 "white_balance_jitter": 0.0}
+
+
+def _run_handheld(args: argparse.Namespace) -> int:
+    from real2sim.capture.board import DEFAULT_BOARD
+    from real2sim.capture.handheld import HandheldConfig, capture_handheld
+    from real2sim.cli.progress import progress_display
+    from real2sim.formats.errors import UserInputError
+    from real2sim.formats.outputs import check_output_dir
+
+    for name, default in _NOT_HANDHELD.items():
+        if getattr(args, name) != default:
+            raise UserInputError(f"--{name.replace('_', '-')} is not a handheld capture's setting (drop it or --handheld)")
+    if args.fps != 30.0 and not args.video:
+        raise UserInputError("--fps needs --video")
+    cfg = HandheldConfig(views=60 if args.views is None else args.views, width=args.width, height=args.height,
+                         fov_deg=65.0 if args.fov_deg is None else args.fov_deg, seed=args.seed,
+                         board=DEFAULT_BOARD if args.board else None, video=args.video, fps=args.fps,
+                         jpeg_quality=args.jpeg_quality or DEFAULT_JPEG_QUALITY)
+    cfg.validate()
+    check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
+    mesh = _resolve_mesh(args.mesh)
+    if isinstance(mesh, Path):
+        from real2sim.formats.mesh_io import check_object_size, load_mesh
+
+        mesh_path, mesh = mesh, load_mesh(mesh, args.mesh_units)
+        check_object_size(mesh, str(mesh_path), args.mesh_units)
+    with progress_display() as progress:
+        result = capture_handheld(mesh, args.out, cfg, progress=progress, overwrite=args.overwrite)
+    what = "frames in clip.mp4" if cfg.video else "photos"
+    print(f"handheld capture: {result.out_dir} ({result.num_views} {what}, rendered in {result.render_seconds:.1f} s; "
+          "exact poses in ground_truth/)")
     return 0
