@@ -13,6 +13,7 @@ from real2sim.evaluate.metrics import (
     ate_m,
     contact_runs,
     cpd_m_per_s,
+    cpd_paper,
     ocae_m,
     quaternion_wxyz_to_matrices,
     real_time_factor,
@@ -188,3 +189,38 @@ def test_force_weighted_cpd_treats_unloaded_steps_as_no_contact():
         cpd_m_per_s(pts, dt, contact_forces_n=forces[:3])
     with pytest.raises(ValueError):
         cpd_m_per_s(pts, dt, contact_forces_n=[np.zeros((2, 3))] * 10)
+
+
+def test_cpd_paper_pads_missing_contacts_with_the_world_origin_and_differences_per_sample():
+    # Object origin 0.5 m from the world origin. Samples: two contacts at radii 0.1 and 0.3,
+    # then one at 0.1 (the other vanished), then none, then the two again.
+    position = np.tile([0.3, 0.4, 0.0], (4, 1))
+    pts = [np.array([[0.1, 0, 0], [0, 0.3, 0]]), np.array([[0.1, 0, 0]]), np.zeros((0, 3)),
+           np.array([[0.1, 0, 0], [0, 0.3, 0]])]
+    # Padded to 2 points per sample, a padding point 0.5 m from the object origin:
+    series = np.array([(0.1 + 0.3) / 2, (0.1 + 0.5) / 2, (0.5 + 0.5) / 2, (0.1 + 0.3) / 2])  # 0.2 0.3 0.5 0.2
+    # numpy.gradient, unit spacing: one-sided at the ends, central inside
+    grads = np.array([0.3 - 0.2, (0.5 - 0.2) / 2, (0.2 - 0.3) / 2, 0.2 - 0.5])
+    assert np.allclose(np.gradient(series), grads)
+    assert cpd_paper(pts, position) == pytest.approx(np.mean(np.abs(grads)))  # 0.15 m per sample
+    assert cpd_paper(pts, position) == pytest.approx(0.15)
+    # Ours ignores the contacts' coming and going: only the one 3-sample run [0.2 0.3 0.5] would count,
+    # and here no run reaches 3 samples, so ours is undefined where the paper's is 0.15.
+    assert math.isnan(cpd_m_per_s(pts, 1e-3))
+
+
+def test_cpd_paper_takes_the_surfaces_when_the_run_has_any_and_rescales_to_1_ms():
+    position = np.tile([0.0, 0.0, 0.2], (3, 1))
+    # Each sample: one point pair (radius 1) first, then its surface centroids (radius 0.1).
+    pts = [np.array([[1.0, 0, 0], [0.1, 0, 0]]), np.array([[1.0, 0, 0], [0.1, 0, 0]]), np.array([[1.0, 0, 0]])]
+    counts = [1, 1, 0]
+    # Surfaces only: 0.1, 0.1, then padding 0.2 -> gradients 0, 0.05, 0.1
+    assert cpd_paper(pts, position, counts) == pytest.approx(0.05)
+    # No surface anywhere: every point is a point pair -> padded to 2: 0.55, 0.55, 0.6
+    assert cpd_paper(pts, position) == pytest.approx(np.mean([0.0, 0.025, 0.05]))
+    # Sampled every 2 ms, a sample's change is twice a 1 ms sample's: halved
+    assert cpd_paper(pts, position, counts, dt_s=2e-3) == pytest.approx(0.025)
+
+
+def test_cpd_paper_without_contact_is_nan():
+    assert math.isnan(cpd_paper([np.zeros((0, 3))] * 5, np.zeros((5, 3))))

@@ -82,6 +82,10 @@ def test_contact_points_are_in_the_object_frame(can_asset, contact_model):
     # One force per contact point; at rest the floor carries the weight: the mean net
     # contact force on the object, back in the world, is m g upward.
     assert [len(f) for f in traj.contact_forces_object_n] == [len(p) for p in traj.contact_points_object_m]
+    # which of them are hydroelastic surfaces (the paper's CPD picks one kind): all or none here
+    surfaces = np.asarray(traj.contact_surface_counts)
+    counts = np.array([len(p) for p in traj.contact_points_object_m])
+    assert np.array_equal(surfaces, counts if contact_model == "hydroelastic" else np.zeros_like(counts))
     late = [i for i in steps if i >= 250]
     net_w = []
     for i in late:

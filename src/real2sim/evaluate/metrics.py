@@ -176,6 +176,56 @@ def cpd_m_per_s(contact_points_object: Sequence[np.ndarray], dt_s: float, breaks
     return float(np.mean(np.abs(np.concatenate(grads))))
 
 
+#: The authors' logging rate for the equation-error experiments (``logging_frequency_hz: 1000``
+#: in nepfaff/sim2sim's experiment files): ``cpd_paper`` is per sample at this rate.
+PAPER_LOG_PERIOD_S = 1e-3
+
+
+def cpd_paper(contact_points_object: Sequence[np.ndarray], object_position_m: np.ndarray,
+              surface_counts: Sequence[int] | None = None, dt_s: float = PAPER_LOG_PERIOD_S) -> float:
+    """Contact point discontinuity exactly as the paper's evaluation code computes it, in metres
+    per logged sample at the authors' 1 kHz (the unit their Table I prints as "m/s").
+
+    Their steps, read from ``sim2sim/util/metrics.py`` and ``script_utils.py``:
+
+    1. the contacts of a run are the hydroelastic surfaces' centroids if the run has any
+       surface at all, otherwise the point pairs' contact points;
+    2. every sample is padded to the run's largest contact count with points at the world
+       origin (``np.zeros``), a sample without contact being all padding;
+    3. the points go into the object frame and the mean of their distances from the object
+       origin is taken per sample (a padding point lies ``|object position|`` from it);
+    4. ``np.gradient`` of that series with unit spacing (first-order at the ends), and the
+       mean of its absolute values.
+
+    So, unlike :func:`cpd_m_per_s`, contacts appearing or vanishing count as jumps (towards the
+    world origin), and equation-error resets are not cut out.
+
+    ``contact_points_object``: per sample (k_t, 3) points in the object frame, the point pairs'
+    first and then ``surface_counts[t]`` surface centroids (the evaluation's logging order);
+    None counts every point as a point pair. ``object_position_m``: (T, 3) world position of the
+    object frame's origin. ``dt_s``: our sampling period; at other periods than 1 ms the result
+    is rescaled to a 1 ms sample (exact only at 1 ms, the evaluation's default step). NaN when
+    the run has no contact at all (their mean over an empty axis).
+    """
+    points = [np.asarray(p, dtype=float).reshape(-1, 3) for p in contact_points_object]
+    position = np.asarray(object_position_m, dtype=float).reshape(-1, 3)
+    if len(position) != len(points):
+        raise ValueError("object_position_m must have one row per sample of contact_points_object")
+    counts = np.zeros(len(points), dtype=int) if surface_counts is None else np.asarray(surface_counts, dtype=int)
+    if len(counts) != len(points):
+        raise ValueError("surface_counts must have one entry per sample")
+    use_surfaces = bool(np.any(counts > 0))
+    chosen = [p[len(p) - c:] if use_surfaces else p[:len(p) - c] for p, c in zip(points, counts)]
+    width = max((len(p) for p in chosen), default=0)
+    if width == 0 or len(chosen) < 2:
+        return float("nan")
+    padding_radius = np.linalg.norm(position, axis=1)
+    series = np.array([(np.linalg.norm(p, axis=1).sum() + (width - len(p)) * r) / width
+                       for p, r in zip(chosen, padding_radius)])
+    per_sample = float(np.mean(np.abs(np.gradient(series))))
+    return per_sample * (PAPER_LOG_PERIOD_S / dt_s)
+
+
 def real_time_factor(sim_duration_s: float, sim_time_s: float) -> float:
     """Simulated seconds per wall-clock second (>1: faster than real time); NaN if unmeasured."""
     if not (np.isfinite(sim_time_s) and sim_time_s > 0):

@@ -84,6 +84,9 @@ def config_record(config, assets: Sequence[Asset], reference_meshes: dict[str, P
             "object origin, inside contiguous contact runs of >= 3 steps, cut at equation-error resets",
             "cpd_force_weighted_m_per_s": "as cpd_m_per_s, with the mean contact-point distance weighted by "
             "contact force magnitude (not in the paper)",
+            "cpd_paper": "the paper's code's CPD: mean |numpy.gradient| per 1 ms sample of the mean distance of the "
+            "contact points (missing ones padded with the world origin) from the object origin, whole run "
+            "(docs/evaluation.md)",
             "sim_time_s": "wall-clock seconds per candidate simulation (measured under the sweep's parallel load)",
         },
         "software": {"python": platform.python_version(), "drake": drake_version, "machine": platform.machine(),

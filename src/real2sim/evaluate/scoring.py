@@ -40,9 +40,10 @@ def _sign_continuous(q: np.ndarray) -> np.ndarray:
 
 
 def score(reference: Any, candidate: Any, lever_m: float = 1.0) -> dict[str, float]:
-    """ATE, OCAE (m) of ``candidate`` against ``reference``, and the candidate's CPD (m/s), as the
-    paper defines it and force-weighted (:func:`real2sim.evaluate.metrics.cpd_m_per_s`)."""
-    from real2sim.evaluate.metrics import ate_m, cpd_m_per_s, ocae_m, real_time_factor
+    """ATE, OCAE (m) of ``candidate`` against ``reference``, and the candidate's CPD: ours (m/s), as the
+    paper defines it in words and force-weighted (:func:`real2sim.evaluate.metrics.cpd_m_per_s`), and
+    the paper's code's (m per 1 ms sample, :func:`real2sim.evaluate.metrics.cpd_paper`)."""
+    from real2sim.evaluate.metrics import ate_m, cpd_m_per_s, cpd_paper, ocae_m, real_time_factor
 
     p_ref, q_ref, p_c, q_c = _align(reference, candidate)
     times = np.asarray(candidate.times_s, dtype=float)
@@ -54,11 +55,16 @@ def score(reference: Any, candidate: Any, lever_m: float = 1.0) -> dict[str, flo
     forces = getattr(candidate, "contact_forces_object_n", None)
     cpd_fw = (cpd_m_per_s(candidate.contact_points_object_m, dt_s, breaks, contact_forces_n=forces)
               if forces and math.isfinite(dt_s) else float("nan"))
+    surfaces = getattr(candidate, "contact_surface_counts", None)
+    surfaces = surfaces if surfaces is not None and len(surfaces) == len(candidate.contact_points_object_m) else None
+    paper = (cpd_paper(candidate.contact_points_object_m, candidate.object_position_m, surfaces, dt_s)
+             if math.isfinite(dt_s) else float("nan"))
     return {
         "ate_m": ate_m(p_ref, p_c),
         "ocae_m": ocae_m(p_ref, q_ref, p_c, q_c, lever_m=lever_m),
         "cpd_m_per_s": cpd,
         "cpd_force_weighted_m_per_s": cpd_fw,
+        "cpd_paper": paper,
         "sim_time_s": float(candidate.sim_time_s),
         "sim_duration_s": float(candidate.sim_duration_s),
         "real_time_factor": real_time_factor(candidate.sim_duration_s, candidate.sim_time_s),

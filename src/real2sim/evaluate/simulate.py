@@ -170,6 +170,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     av = np.empty((n + 1, na))
     contacts_w: list[np.ndarray] = []
     forces_w: list[np.ndarray] = []
+    surface_counts = np.zeros(n + 1, dtype=np.int64)
     reset_set = set(int(r) for r in reset_steps)
     read_contacts = _contact_reader(scene)
 
@@ -180,7 +181,8 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
         av[i] = plant.GetVelocities(pctx, scene.actuated_instance)
 
     def log_contacts() -> None:
-        pts, forces = read_contacts(pctx)
+        pts, forces, surfaces = read_contacts(pctx)
+        surface_counts[len(contacts_w)] = surfaces
         contacts_w.append(pts)
         forces_w.append(forces)
 
@@ -209,7 +211,8 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     return Trajectory(times_s=np.arange(n + 1) * dt, object_position_m=oq[:, 4:].copy(),
                       object_quaternion_wxyz=oq[:, :4].copy(), object_spatial_velocity=ov,
                       actuated_positions=aq, actuated_velocities=av,
-                      contact_points_object_m=contacts_o, contact_forces_object_n=forces_o, sim_time_s=sim_time_s,
+                      contact_points_object_m=contacts_o, contact_forces_object_n=forces_o,
+                      contact_surface_counts=surface_counts, sim_time_s=sim_time_s,
                       sim_duration_s=n * dt, instrumented_time_s=instrumented_time_s,
                       reset_steps=reset_steps, task=scene.task, contact_model=scene.contact_model,
                       representation=representation, run=run)
@@ -248,14 +251,16 @@ def _started(scene: Scene, initial: _State, label: str):
 
 def _contact_reader(scene: Scene):
     """A function of the plant's context: the object's contact points (K, 3) and the forces it feels
-    there (K, 3), world frame, from point contacts and hydroelastic contact surfaces (at their
-    centroids). The port and the object's ids are looked up once: it is called every step."""
+    there (K, 3), world frame, point contacts first and then hydroelastic contact surfaces (at their
+    centroids), and how many of the K are surfaces. The port and the object's ids are looked up
+    once: it is called every step."""
     port = scene.plant.get_contact_results_output_port()
     obj_index, obj_geoms = scene.object_body.index(), scene.object_geometry_ids
 
-    def read(pctx) -> tuple[np.ndarray, np.ndarray]:
+    def read(pctx) -> tuple[np.ndarray, np.ndarray, int]:
         results = port.Eval(pctx)
         pts, forces = [], []
+        surfaces = 0
         for k in range(results.num_point_pair_contacts()):
             info = results.point_pair_contact_info(k)
             # contact_force() acts on body B; the object feels minus that when it is body A.
@@ -272,10 +277,13 @@ def _contact_reader(scene: Scene):
             if surface.id_M() in obj_geoms:
                 pts.append(surface.centroid())
                 forces.append(info.F_Ac_W().translational())
+                surfaces += 1
             elif surface.id_N() in obj_geoms:
                 pts.append(surface.centroid())
                 forces.append(-info.F_Ac_W().translational())
-        return np.asarray(pts, dtype=float).reshape(-1, 3), np.asarray(forces, dtype=float).reshape(-1, 3)
+                surfaces += 1
+        return (np.asarray(pts, dtype=float).reshape(-1, 3), np.asarray(forces, dtype=float).reshape(-1, 3),
+                surfaces)
 
     return read
 

@@ -36,6 +36,9 @@ class Trajectory:
         of those points, N, expressed in the object frame (point contact: the pair's
         force; hydroelastic: the surface's net force). Only used to weight the
         force-weighted CPD; empty in trajectories saved before it existed.
+    contact_surface_counts: (T,) int, how many of each sample's contact points (the last ones)
+        are hydroelastic surface centroids, the others being point pairs (the paper's CPD
+        picks one kind per run); empty in trajectories saved before it existed.
     sim_time_s: wall seconds of the bare timed run (see module docstring).
     sim_duration_s: simulated seconds.
     instrumented_time_s: wall seconds of the per-step logging run.
@@ -60,6 +63,7 @@ class Trajectory:
     representation: str
     run: int
     contact_forces_object_n: list = field(default_factory=list)
+    contact_surface_counts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 def save_trajectory(traj: Any, path: Path) -> None:
