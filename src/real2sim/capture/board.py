@@ -182,6 +182,16 @@ def board_image(spec: BoardSpec, dots_per_m: float) -> np.ndarray:
 # ----------------------------------------------------------------------------- the printed page
 
 
+def board_centre_on_page_dots(spec: BoardSpec, page_shape: tuple[int, int], dots_per_mm: int) -> np.ndarray:
+    """(x, y) of the chequered area's centre from the page's centre, in dots (x right, y up the
+    page), as :func:`page_image` lays out a page of ``page_shape`` (rows, columns)."""
+    sq = int(round(spec.square_m * 1000.0 * dots_per_mm))
+    board_h, board_w = sq * spec.squares_y, sq * spec.squares_x
+    top = int(round((page_shape[0] - TEXT_BAND_MM * dots_per_mm - board_h) / 2))
+    left = (page_shape[1] - board_w) // 2
+    return np.array([left + board_w / 2 - page_shape[1] / 2, page_shape[0] / 2 - (top + board_h / 2)])
+
+
 def page_image(spec: BoardSpec, paper: str = "a4", dots_per_mm: int = DOTS_PER_MM) -> np.ndarray:
     """The whole landscape page, uint8 greyscale: the board centred above a line of text that says
     what it is and how to print it. UserInputError when the board does not fit the paper."""
@@ -301,10 +311,26 @@ def detect_board(image_rgb: np.ndarray, spec: BoardSpec, K: np.ndarray, dist=Non
     detector_params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX  # markers' corners, for the corner fit
     detector = cv2.aruco.CharucoDetector(board, params, detector_params)
     corners, ids, _, _ = detector.detectBoard(grey)
-    if ids is None or len(ids) < MIN_CORNERS:
+    if ids is None:
         return None
-    ids = ids.ravel().astype(int)
-    image_px = corners.reshape(-1, 2).astype(float)
+    return board_view_from_corners(ids.ravel(), corners.reshape(-1, 2) + 0.5, spec, K, dist_cv)
+
+
+def board_view_from_corners(ids: np.ndarray, corners_px: np.ndarray, spec: BoardSpec, K: np.ndarray,
+                            dist=None) -> BoardView | None:
+    """The board's pose from found ChArUco corners: ``ids`` (N,) OpenCV corner ids, ``corners_px``
+    (N, 2) in the project's pixel convention (centres at u + 0.5). None when they are too few, on
+    one line, or reproject worse than ``MAX_REPROJECTION_PX`` after the fit."""
+    import cv2
+
+    ids = np.asarray(ids).ravel().astype(int)
+    if len(ids) < MIN_CORNERS:
+        return None
+    K = np.asarray(K, dtype=float)
+    dist_cv = np.zeros(4) if dist is None else np.asarray(dist, dtype=float).ravel()
+    K_cv = K.copy()
+    K_cv[:2, 2] -= 0.5
+    image_px = np.asarray(corners_px, dtype=float).reshape(-1, 2) - 0.5  # OpenCV's pixel centres
     board_pts = board_corners_m(spec)[ids]
     # Corners along one line leave the pose undetermined.
     if np.linalg.matrix_rank(board_pts[:, :2] - board_pts[:, :2].mean(0), tol=1e-3 * spec.square_m) < 2:

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from real2sim.capture.board import BoardSpec, page_image
+from real2sim.capture.board import BoardSpec, board_centre_on_page_dots, page_image
 from real2sim.capture.capture_output import save_png
 from real2sim.capture.hard_rigs import apply_colour_gains, colour_gains
 from real2sim.capture.render_scene import OBJECT_LABEL, RenderScene
@@ -228,25 +228,13 @@ def _build_scene(config: HandheldConfig, mesh_obj: Path, world_from_mesh: np.nda
         # Metres per texture dot from the squares themselves (a whole number of dots each), so that
         # the rendered squares are exactly ``square_m`` whatever the rounding of the page.
         m_per_dot = config.board.square_m / round(config.board.square_m * 1000.0 * BOARD_TEXTURE_DOTS_PER_MM)
-        offset = _board_centre_on_page_dots(config.board, page.shape, BOARD_TEXTURE_DOTS_PER_MM) * m_per_dot
+        offset = board_centre_on_page_dots(config.board, page.shape, BOARD_TEXTURE_DOTS_PER_MM) * m_per_dot
         quad = _textured_quad_obj(work / "board.obj", (page.shape[1] * m_per_dot, page.shape[0] * m_per_dot), 0.0,
                                   page_png)
         pose = np.eye(4)
         pose[:2, 3] = -offset  # the chequered area's centre at the origin
         _add_anchored(scene, Mesh(str(quad)), pose, "board", TABLE_LABEL, None)
     return scene
-
-
-def _board_centre_on_page_dots(spec: BoardSpec, page_shape: tuple[int, int], dots_per_mm: int) -> np.ndarray:
-    """(x, y) of the chequered area's centre from the page's centre, dots (x right, y up the page),
-    as :func:`~real2sim.capture.board.page_image` lays the page out."""
-    from real2sim.capture.board import TEXT_BAND_MM
-
-    sq = int(round(spec.square_m * 1000.0 * dots_per_mm))
-    board_h, board_w = sq * spec.squares_y, sq * spec.squares_x
-    top = int(round((page_shape[0] - TEXT_BAND_MM * dots_per_mm - board_h) / 2))
-    left = (page_shape[1] - board_w) // 2
-    return np.array([left + board_w / 2 - page_shape[1] / 2, page_shape[0] / 2 - (top + board_h / 2)])
 
 
 # ----------------------------------------------------------------------------- rendering
@@ -297,7 +285,7 @@ def motion_blur(image: np.ndarray, streak_px: np.ndarray) -> np.ndarray:
     for f in np.linspace(-0.5, 0.5, steps):
         shift = np.array([[1.0, 0.0, f * streak_px[0]], [0.0, 1.0, f * streak_px[1]]])
         out += cv2.warpAffine(image, shift, (image.shape[1], image.shape[0]), flags=cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_REFLECT)
+                              borderMode=cv2.BORDER_REFLECT).reshape(image.shape)  # OpenCV drops a lone channel
     return out / steps
 
 
