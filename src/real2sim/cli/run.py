@@ -41,7 +41,14 @@ def register(sub) -> None:
         epilog="example: real2sim capture can.obj --out can_ds && "
         "real2sim run can_ds --mass 0.35 --out can_asset --collision cylinders:10 --backend hull",
     )
-    p.add_argument("dataset", type=Path, help="dataset folder (transforms.json, images/, masks/)")
+    p.add_argument("dataset", type=Path, metavar="DATASET|PHOTOS_DIR|VIDEO",
+                   help="dataset folder (transforms.json, images/, masks/), or a folder of phone photos, or a video "
+                   "(.mp4, .mov, ...): poses by structure from motion, metres and the table from the printed board "
+                   "(`real2sim board`) or --object-height-m")
+    p.add_argument("--frames", type=integer(8, 2000), default=None, metavar="N",
+                   help="a video: frames kept, the sharpest of each equal stretch of the clip (default 80)")
+    p.add_argument("--board-square-mm", type=positive(1000.0), default=None, metavar="MM",
+                   help="photos or a video: the printed board's square side as measured, mm, when the print was scaled")
     p.add_argument("--object-height-m", type=positive(10.0), default=None, metavar="H", help="a COLMAP dataset "
                    "(images/ + sparse/0, no transforms.json) or an ns-process-data folder (transforms.json with "
                    "applied_transform, sparse_pc.ply): the object's height above the table, metres; sets the "
@@ -118,8 +125,11 @@ def config_from_args(args: argparse.Namespace):
         from real2sim.pipeline.normalise import NormaliseConfig
 
         NormaliseConfig(object_height_m=args.object_height_m, scale=args.scale).validate()
-    # Every image and mask, and the frame options against the dataset's kind, before any display.
-    check_dataset(args.dataset, masks_needed=args.mask is None, scale_given=scale_given)
+    phone = phone_config(args)
+    if phone is None:  # every image and mask, and the frame options against the dataset's kind, before any display
+        check_dataset(args.dataset, masks_needed=args.mask is None, scale_given=scale_given)
+    elif args.mask is None:
+        args.mask = "parallax"  # the board's texture is what parallax masks need
     if scale_given and args.table_z != 0.0:
         raise UserInputError("--table-z is for a dataset in metres; a COLMAP capture's table is found in its "
                              "sparse points and put at z = 0")
@@ -144,7 +154,10 @@ def config_from_args(args: argparse.Namespace):
             raise UserInputError(f"--mask-threshold must be in 0..255 (got {args.mask_threshold})")
         mask = MaskConfig(threshold=args.mask_threshold, weights=args.mask_weights, device=args.device)
     refine = None
-    if args.refine_poses or (args.refine_poses is None and not scale_given and poses_to_refine(args.dataset)):
+    if phone is not None and args.refine_poses:
+        raise UserInputError("--refine-poses is for given poses; photos and videos get theirs from structure from motion")
+    if phone is None and (args.refine_poses or (args.refine_poses is None and not scale_given
+                                                and poses_to_refine(args.dataset))):
         from real2sim.capture.pose_refinement import RefineConfig
 
         refine = RefineConfig(seed=args.seed)
@@ -156,7 +169,27 @@ def config_from_args(args: argparse.Namespace):
         evaluation = evaluation_config(args)
     return RunConfig(asset=asset, reconstruct=recon, mask_method=args.mask, mask=mask, refine=refine,
                      evaluation=evaluation, device=args.device, seed=args.seed,
-                     object_height_m=args.object_height_m, scale=args.scale, pca_up=args.pca_up)
+                     object_height_m=args.object_height_m, scale=args.scale, pca_up=args.pca_up, phone=phone)
+
+
+def phone_config(args: argparse.Namespace):
+    """PhoneConfig when DATASET is a folder of photos or a video (UserInputError for one with no images),
+    else None (and then --frames and --board-square-mm are refused)."""
+    from real2sim.formats.errors import UserInputError
+    from real2sim.pipeline.phone import PhoneConfig, phone_input
+    from real2sim.capture.sfm import SfmConfig
+    from real2sim.capture.video import DEFAULT_FRAMES
+
+    phone = phone_input(args.dataset)
+    if phone is None:
+        for flag, value in (("--frames", args.frames), ("--board-square-mm", args.board_square_mm)):
+            if value is not None:
+                raise UserInputError(f"{flag} is for photos or a video, and {args.dataset} is a dataset")
+        return None
+    if args.frames is not None and phone.kind != "video":
+        raise UserInputError(f"--frames is for a video, and {args.dataset} is a folder of photos")
+    return PhoneConfig(frames=args.frames or DEFAULT_FRAMES, board_square_mm=args.board_square_mm,
+                       sfm=SfmConfig(seed=args.seed))
 
 
 def run(args: argparse.Namespace) -> int:

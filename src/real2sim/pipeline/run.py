@@ -1,5 +1,9 @@
 """`real2sim run`: a posed, masked dataset -> a simulation asset folder, stage by stage, resumable.
 
+A phone capture (a folder of photos, or a video: :func:`real2sim.pipeline.phone.phone_input`) first
+goes through ``sfm`` and, without object_height_m/scale, ``board_frame`` (:mod:`real2sim.pipeline.phone`),
+which make the dataset the stages below read.
+
 Stages, in order (each one the existing stage function, called as it is; ``masks``
 (with ``mask_method``) first makes the masks on a copy in ``ASSETDIR/.run/masked/``):
 
@@ -53,6 +57,7 @@ if TYPE_CHECKING:
     from real2sim.capture.masking import MaskConfig
     from real2sim.capture.pose_refinement import RefineConfig
     from real2sim.evaluate.sweep import EvaluationConfig
+    from real2sim.pipeline.phone import PhoneConfig
     from real2sim.reconstruct.stage import ReconstructConfig
 
 # Evaluation settings that change how fast, not what: not part of the evaluate stage's key.
@@ -76,7 +81,8 @@ class RunConfig:
     evaluation: None -> no evaluation. object_height_m (the object's height above the table,
     metres) or scale (metres per model unit): exactly one for a COLMAP dataset (poses in an
     arbitrary frame and scale), which the ``robot_frame`` stage then normalises; neither for a
-    transforms.json dataset (already metric, table at z = 0).
+    transforms.json dataset (already metric, table at z = 0). phone: a phone capture's settings (video
+    frames, the board's square, structure from motion); None -> defaults.
     """
 
     asset: "AssetConfig"
@@ -90,6 +96,7 @@ class RunConfig:
     object_height_m: float | None = None
     scale: float | None = None
     pca_up: bool = False
+    phone: "PhoneConfig | None" = None
 
     def robot_frame(self) -> NormaliseConfig | None:
         """The robot_frame stage's settings; None when neither object_height_m nor scale is given."""
@@ -210,17 +217,25 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     """
     from real2sim.reconstruct.stage import ReconstructConfig
 
+    from real2sim.pipeline.phone import phone_input
+
     run_progress = RunProgress(progress)
     robot_frame = config.robot_frame()
-    dataset = check_dataset(Path(dataset), masks_needed=config.mask_method is None, scale_given=bool(robot_frame))
+    phone = phone_input(dataset)
+    if phone is None:
+        dataset = check_dataset(Path(dataset), masks_needed=config.mask_method is None, scale_given=bool(robot_frame))
+    else:
+        dataset = phone.path
+        if config.mask_method is None:
+            raise UserInputError("photos or a video have no masks: pass --mask parallax|background|maskrcnn")
     if robot_frame is not None:
         robot_frame.validate()
     recon_cfg = config.reconstruct or ReconstructConfig()
     recon_cfg.validate()
-    if robot_frame is not None and recon_cfg.table_z_m != 0.0:
+    if (robot_frame is not None or phone is not None) and recon_cfg.table_z_m != 0.0:
         raise UserInputError("a table height is for a dataset in metres; a COLMAP capture's table is found in its "
                              "sparse points and put at z = 0")
-    if recon_cfg.table_z_m != 0.0 and not has_table_plane(read_dataset(dataset, check_files=False)):
+    if phone is None and recon_cfg.table_z_m != 0.0 and not has_table_plane(read_dataset(dataset, check_files=False)):
         raise UserInputError(f"{dataset} has no table plane (transforms.json table_plane: false), so a table height "
                              "does not apply: the support is found from the object's own lowest points")
     asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m, keep_up=not config.pca_up)
@@ -235,11 +250,31 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
         make_output_dir(asset_dir, made_by="real2sim run")
         _remove_stale_temporaries(asset_dir)
         manifest.save()
-        return _run_locked(manifest, created, dataset, asset_dir, config, recon_cfg, asset_cfg, run_progress)
+        return _run_locked(manifest, created, dataset, asset_dir, config, recon_cfg, asset_cfg, run_progress, phone)
 
 
 def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: Path, config: RunConfig,
-                recon_cfg, asset_cfg, progress: RunProgress) -> RunResult:
+                recon_cfg, asset_cfg, progress: RunProgress, phone=None) -> RunResult:
+    runner = Runner(manifest, progress, 0)
+    try:
+        if phone is not None:  # the dataset the stages below read is made first
+            from real2sim.pipeline.phone import phone_stages
+
+            truth = "ground_truth/mesh.obj" in phone.files
+            runner.count = 1 + (config.robot_frame() is None) + _stage_count(config, truth)
+            dataset = phone_stages(runner, phone, asset_dir / mf.RUN_DIRNAME, config)
+        return _counted_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg)
+    except BaseException as exc:
+        if created and not manifest.data["stages"]:
+            shutil.rmtree(asset_dir, ignore_errors=True)  # nothing finished: leave nothing behind
+        elif isinstance(exc, UserInputError):  # the folder stays, deliberately: say so on the one line
+            raise UserInputError(f"{exc}; {kept_note(asset_dir)}") from exc
+        raise
+
+
+def _counted_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfig, recon_cfg, asset_cfg
+                    ) -> RunResult:
+    manifest = runner.manifest
     robot_frame = config.robot_frame()
     # A COLMAP dataset's ground truth is usable only when it says how the model frame relates to it.
     truth = has_ground_truth(dataset) and (robot_frame is None or (dataset / "ground_truth" / MODEL_FROM_WORLD).is_file())
@@ -250,18 +285,14 @@ def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: 
 
         # The reconstruction itself as a representation: its own dynamics against the truth.
         asset_cfg = replace(asset_cfg, specs=asset_cfg.specs + (parse_spec("mesh"),))
-    count = (2 + bool(config.mask_method) + bool(robot_frame) + bool(config.refine) + truth + bool(config.evaluation)
-             + (truth and config.evaluation is not None))
-    runner = Runner(manifest, progress, count)
-    try:
-        result = _run_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg, truth, evaluation_mesh)
-    except BaseException as exc:
-        if created and not manifest.data["stages"]:
-            shutil.rmtree(asset_dir, ignore_errors=True)  # nothing finished: leave nothing behind
-        elif isinstance(exc, UserInputError):  # the folder stays, deliberately: say so on the one line
-            raise UserInputError(f"{exc}; {kept_note(asset_dir)}") from exc
-        raise
-    return result
+    runner.count = runner.index + _stage_count(config, truth)
+    return _run_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg, truth, evaluation_mesh)
+
+
+def _stage_count(config: RunConfig, truth: bool) -> int:
+    """The stages from masks on (a phone capture's own come before)."""
+    return (2 + bool(config.mask_method) + bool(config.robot_frame()) + bool(config.refine) + truth
+            + bool(config.evaluation) + (truth and config.evaluation is not None))
 
 
 def _kept_evaluation_mesh(manifest: mf.Manifest) -> bool:
