@@ -131,6 +131,30 @@ def test_video_capture_writes_a_decodable_mp4(tmp_path, capsys):
     assert gt.extra["real2sim"]["video"] == {"file": "clip.mp4", "fps": 24.0, "frames": 16}
 
 
+def test_video_rotation_metadata_turns_the_stored_frames_upright(tmp_path):
+    """A phone held upright stores turned frames and says how to turn them back: decoded and turned
+    by the stream's rotation, they are the picture an unturned capture of the same path shows."""
+    import av
+
+    decoded = {}
+    for rotation in (0, 270):
+        cfg = HandheldConfig(views=6, width=96, height=72, video=True, video_rotation_deg=rotation, seed=2)
+        capture_handheld(_bottle(), tmp_path / str(rotation), cfg)
+        with av.open(str(tmp_path / str(rotation) / "clip.mp4")) as container:
+            frames = list(container.decode(video=0))
+        decoded[rotation] = [(f.rotation, f.to_ndarray(format="rgb24").astype(float)) for f in frames]
+    assert all(r == 0 for r, _ in decoded[0]) and all(r % 360 == 270 for r, _ in decoded[270])
+    for (_, plain), (r, stored) in zip(decoded[0], decoded[270]):
+        assert stored.shape == (96, 72, 3)
+        upright = np.rot90(stored, k=r // 90)  # counter-clockwise quarter turns
+
+        def coarse(img):  # 4x4 block means: H.264's chroma subsampling differs with the stored orientation
+            return img.reshape(18, 4, 24, 4, 3).mean(axis=(1, 3))
+
+        right, wrong = (np.abs(coarse(u) - coarse(plain)).mean() for u in (upright, np.rot90(upright, 2)))
+        assert right < 4 and right < 0.3 * wrong, (right, wrong)
+
+
 @pytest.mark.parametrize("argv, says", [
     (["--board"], "--board needs --handheld"),
     (["--video"], "--video needs --handheld"),
@@ -141,6 +165,9 @@ def test_video_capture_writes_a_decodable_mp4(tmp_path, capsys):
     (["--handheld", "--ring-elevation-deg", "20"], "--ring-elevation-deg"),
     (["--handheld", "--fov-deg", "150"], "--fov-deg"),
     (["--handheld", "--fps", "0"], "--fps"),
+    (["--handheld", "--video-rotation-deg", "90"], "--video-rotation-deg needs --video"),
+    (["--video-rotation-deg", "90"], "--video-rotation-deg needs --handheld"),
+    (["--handheld", "--video", "--video-rotation-deg", "45"], "--video-rotation-deg"),
 ])
 def test_handheld_bad_flags_exit_2(tmp_path, capsys, argv, says):
     out = tmp_path / "ds"

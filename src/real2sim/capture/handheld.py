@@ -72,6 +72,9 @@ class HandheldConfig:
     hand shake in a random direction; video: along the image motion over half a frame interval).
     ``exposure_jitter_stops``: RMS auto-exposure change. ``supersample``: rendered at this many
     times the size and averaged down (anti-aliasing, as a lens and sensor do).
+    ``video_rotation_deg`` (0, 90, 180, 270): the video's frames are stored turned and the stream's
+    display matrix says to turn them back by this much, counter-clockwise, as a phone held upright
+    records (270: portrait); ``width`` x ``height`` and ground_truth/ are the picture as displayed.
     """
 
     views: int = 60
@@ -93,6 +96,7 @@ class HandheldConfig:
     motion_blur_px: float = 1.5
     exposure_jitter_stops: float = 0.1
     supersample: int = 2
+    video_rotation_deg: int = 0
     table_size_m: float = 2.4
     texture_seed: int = 7
 
@@ -112,6 +116,10 @@ class HandheldConfig:
             raise UserInputError(f"--fov-deg must be in 20..120 for a handheld capture (got {self.fov_deg})")
         if not (np.isfinite(self.fps) and 1.0 <= self.fps <= 240.0):
             raise UserInputError(f"--fps must be in 1..240 (got {self.fps})")
+        if self.video_rotation_deg not in (0, 90, 180, 270):
+            raise UserInputError(f"--video-rotation-deg must be 0, 90, 180 or 270 (got {self.video_rotation_deg})")
+        if self.video_rotation_deg and not self.video:
+            raise UserInputError("--video-rotation-deg needs --video")
         if not 1 <= int(self.jpeg_quality) <= 100:
             raise UserInputError(f"--jpeg-quality must be in 1..100 (got {self.jpeg_quality})")
         if self.board is not None:
@@ -338,14 +346,19 @@ class _VideoWriter:
 
         self.container = av.open(str(path), mode="w")
         self.stream = self.container.add_stream("libx264", rate=Fraction(config.fps).limit_denominator(1001))
-        self.stream.width, self.stream.height, self.stream.pix_fmt = config.width, config.height, "yuv420p"
+        self.turns = config.video_rotation_deg // 90  # counter-clockwise quarter turns that display a stored frame
+        w, h = (config.height, config.width) if self.turns % 2 else (config.width, config.height)
+        self.stream.width, self.stream.height, self.stream.pix_fmt = w, h, "yuv420p"
+        if self.turns:
+            self.stream.set_display_rotation(config.video_rotation_deg if config.video_rotation_deg <= 180 else -90)
         # quality from the JPEG setting: crf 18 (q 100) .. 33 (q 1); keyframes every second
         self.stream.options = {"crf": str(int(round(33 - 15 * config.jpeg_quality / 100))), "g": str(int(config.fps))}
 
     def write(self, rgb: np.ndarray) -> None:
         import av
 
-        for packet in self.stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")):
+        stored = np.rot90(rgb, k=-self.turns)  # turned back by the player
+        for packet in self.stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(stored), format="rgb24")):
             self.container.mux(packet)
 
     def close(self) -> None:
@@ -361,7 +374,8 @@ def _write_truth_files(gt: Path, config: HandheldConfig, cam: CameraIntrinsics, 
              if config.board is not None else "table top z=0, the object's footprint centre the origin, z up, metres",
              "paths_relative_to": "..", "close_views": [int(i) for i in close]}
     if config.video:
-        block["video"] = {"file": VIDEO_NAME, "fps": config.fps, "frames": int(config.views)}
+        block["video"] = {"file": VIDEO_NAME, "fps": config.fps, "frames": int(config.views),
+                          "display_rotation_deg": config.video_rotation_deg}
     write_transforms(gt / "transforms.json", Dataset(gt.parent, cam, tuple(frames), {"real2sim": block}))
     (gt / "object_pose.json").write_text(json.dumps({
         "world_from_mesh": world_from_mesh.tolist(),
