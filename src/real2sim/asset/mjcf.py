@@ -25,6 +25,9 @@ representation (the whole non-convex object) therefore changes shape in MuJoCo:
 :func:`mjcf_notes` says so, and the asset stage prints it and records it in
 ``fit_report.json``.
 
+``scene.xml`` beside it (:func:`write_scene_xml`) is the file to open, as in MuJoCo
+Menagerie: it includes ``model.xml`` and adds a floor under the object, a light and a sky.
+
 All file names are relative to the representation folder (``meshdir`` and
 ``texturedir`` are left unset, so MuJoCo resolves them from the model file).
 """
@@ -82,7 +85,7 @@ def mjcf_notes(geometry: CollisionGeometry) -> list[str]:
             "a handle's hole) are filled; use a primitive or convex-decomposition representation in MuJoCo"]
 
 
-def _visual_texture(rep_dir: Path, visual_mesh_relpath: str) -> str | None:
+def visual_texture(rep_dir: Path, visual_mesh_relpath: str) -> str | None:
     """The visual mesh's texture image (relative to ``rep_dir``), from its MTL's ``map_Kd``."""
     obj = rep_dir / visual_mesh_relpath
     mtl = obj.with_suffix(".mtl")
@@ -116,7 +119,7 @@ def build_mjcf(geometry: CollisionGeometry, props: PhysicalProperties, contact: 
         ET.SubElement(asset, "mesh", name="visual", file=visual_mesh_relpath)
         visual = {"name": "visual", "type": "mesh", "mesh": "visual", "contype": "0", "conaffinity": "0",
                   "group": str(VISUAL_GROUP), "mass": "0"}
-        texture = _visual_texture(rep_dir, visual_mesh_relpath)
+        texture = visual_texture(rep_dir, visual_mesh_relpath)
         if texture is not None:
             ET.SubElement(asset, "texture", name="visual", type="2d", file=texture)
             ET.SubElement(asset, "material", name="visual", texture="visual")
@@ -180,3 +183,41 @@ def lowest_collision_z(model, data) -> float:
             z = (p + model.mesh_vert[start:start + count] @ r.T)[:, 2].min()
         low = min(low, float(z))
     return low
+
+
+SCENE_NAME = "scene.xml"
+
+
+def build_scene_xml(floor_z_m: float, model_file: str = MJCF_NAME) -> ET.Element:
+    """A MuJoCo Menagerie-style ``scene.xml``: includes ``model_file`` and adds a floor whose top is
+    at ``floor_z_m`` (the object's lowest collision point, so it stands on it when opened), a
+    light, a sky and a camera framing. The object keeps the asset frame: centred, not on z = 0."""
+    root = ET.Element("mujoco", model="object scene")
+    ET.SubElement(root, "include", file=model_file)
+    ET.SubElement(root, "statistic", center=_nums((0.0, 0.0, 0.0)), extent="0.4")
+    visual = ET.SubElement(root, "visual")
+    ET.SubElement(visual, "headlight", diffuse="0.6 0.6 0.6", ambient="0.3 0.3 0.3", specular="0 0 0")
+    ET.SubElement(visual, "global", azimuth="120", elevation="-20")
+    asset = ET.SubElement(root, "asset")
+    ET.SubElement(asset, "texture", type="skybox", builtin="gradient", rgb1="0.3 0.5 0.7", rgb2="0 0 0",
+                  width="512", height="3072")
+    ET.SubElement(asset, "texture", type="2d", name="groundplane", builtin="checker", mark="edge",
+                  rgb1="0.2 0.3 0.4", rgb2="0.1 0.2 0.3", markrgb="0.8 0.8 0.8", width="300", height="300")
+    ET.SubElement(asset, "material", name="groundplane", texture="groundplane", texuniform="true",
+                  texrepeat="5 5", reflectance="0.2")
+    world = ET.SubElement(root, "worldbody")
+    ET.SubElement(world, "light", pos=_nums((0.0, 0.0, floor_z_m + 1.5)), dir="0 0 -1", directional="true")
+    ET.SubElement(world, "geom", name="floor", size="0 0 0.05", type="plane", material="groundplane",
+                  pos=_nums((0.0, 0.0, floor_z_m)))
+    return root
+
+
+def write_scene_xml(rep_dir: Path, geometry: CollisionGeometry) -> Path:
+    """Write ``rep_dir/scene.xml`` beside model.xml (:func:`build_scene_xml`); returns its path."""
+    from real2sim.asset.round_pieces import lowest_point_z_m
+
+    root = build_scene_xml(lowest_point_z_m(geometry, rep_dir))
+    ET.indent(root, space=" ")
+    path = Path(rep_dir) / SCENE_NAME
+    path.write_text(ET.tostring(root, encoding="unicode") + "\n")
+    return path

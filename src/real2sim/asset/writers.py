@@ -81,8 +81,9 @@ VISUAL_MESH_RELPATH = "../visual/model.obj"
 SDF_VERSION = "1.9"
 
 
-#: Model files an asset can hold per representation: model.urdf (always), model.sdf, model.xml (MuJoCo).
-ASSET_FORMATS = ("urdf", "sdf", "mjcf")
+#: Model files an asset can hold per representation: model.urdf and model_portable.urdf (always),
+#: model.sdf, model.xml + scene.xml (MuJoCo), model.usda (USD for Isaac).
+ASSET_FORMATS = ("urdf", "sdf", "mjcf", "usd")
 
 ET.register_namespace("drake", DRAKE_NS)
 
@@ -330,8 +331,10 @@ def write_representation(
     model_name: str = "object",
     link_name: str = LINK_NAME,
 ) -> None:
-    """Write ``rep_dir/model.urdf`` (always), ``rep_dir/model.sdf`` (if "sdf" in formats) and
-    ``rep_dir/model.xml`` for MuJoCo (if "mjcf" in formats; see :mod:`real2sim.asset.mjcf`).
+    """Write ``rep_dir/model.urdf`` for Drake and ``rep_dir/model_portable.urdf`` for every other URDF
+    consumer (always; :mod:`real2sim.asset.portable_urdf`), ``rep_dir/model.sdf`` (if "sdf" in
+    formats), ``rep_dir/model.xml`` and ``scene.xml`` for MuJoCo (if "mjcf" in formats; see
+    :mod:`real2sim.asset.mjcf`) and ``rep_dir/model.usda`` (if "usd"; :mod:`real2sim.asset.usd`).
 
     ``geometry`` is in the asset frame (metres); mesh files of convex/mesh shapes are
     paths relative to ``rep_dir`` and must already exist there (the decomposition
@@ -350,10 +353,18 @@ def write_representation(
     rep_dir.mkdir(parents=True, exist_ok=True)
     args = (geometry, props, contact, visual_mesh_relpath, model_name, link_name)
     (rep_dir / "model.urdf").write_text(write_model_urdf_string(*args))
+    from real2sim.asset.portable_urdf import write_portable_urdf
+
+    write_portable_urdf(rep_dir, *args)
     if "sdf" in formats:
         (rep_dir / "model.sdf").write_text(write_model_sdf_string(*args))
     if "mjcf" in formats:
-        from real2sim.asset.mjcf import MJCF_NAME, write_model_mjcf_string
+        from real2sim.asset.mjcf import MJCF_NAME, write_model_mjcf_string, write_scene_xml
 
         (rep_dir / MJCF_NAME).write_text(write_model_mjcf_string(
             geometry, props, contact, rep_dir, visual_mesh_relpath, model_name))
+        write_scene_xml(rep_dir, geometry)
+    if "usd" in formats:
+        from real2sim.asset.usd import write_model_usda
+
+        write_model_usda(rep_dir, geometry, props, contact, visual_mesh_relpath, model_name)
