@@ -1,0 +1,171 @@
+"""`run PHOTOS_DIR|VIDEO`: structure from motion and the board's world frame on a small simulated handheld
+capture (the poses land on the true ones in metres, no alignment), and each bad input is one line, exit 2.
+The whole run on a capture is the slow test at the end."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from real2sim.formats.dataset import CV_FROM_GL, read_dataset, read_ground_truth, rotation_angle_deg
+from real2sim.formats.errors import UserInputError
+from real2sim.pipeline.phone import (BOARD_RECORD, SFM_RECORD, PhoneConfig, _write_model, phone_input,
+                                     run_board_frame, run_sfm)
+
+VIEWS = 20
+
+
+def run_cli(capsys, *args) -> tuple[int, str, str]:
+    from real2sim.cli import main
+
+    try:
+        code = main(["run", *map(str, args)])
+    except SystemExit as exc:
+        code = exc.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def capture_cli(*args) -> None:
+    from real2sim.cli import main
+
+    assert main(["capture", *map(str, args)]) == 0
+
+
+@pytest.fixture(scope="module")
+def handheld(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("phone") / "photos"
+    capture_cli("can", "--handheld", "--board", "--views", VIEWS, "--width", 320, "--height", 240, "--out", out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def sfm_dir(handheld, tmp_path_factory) -> Path:
+    target = tmp_path_factory.mktemp("sfm") / "sfm"
+    run_sfm(phone_input(handheld), target, PhoneConfig())
+    return target
+
+
+def test_sfm_stage_writes_a_colmap_dataset_with_its_truth(handheld, sfm_dir):
+    from real2sim.formats.colmap_model import read_colmap_model
+
+    ds = read_colmap_model(sfm_dir)
+    assert len(ds.frames) >= VIEWS - 2 and ds.intrinsics.k1 == 0.0
+    record = json.loads((sfm_dir / SFM_RECORD).read_text())
+    assert record["registered"] == len(ds.frames) and record["matching"] == "exhaustive"
+    # the truth relates to the model by the camera centres: a few mm of SfM error at most
+    assert record["ground_truth"]["camera_centre_rms_mm"] < 4.0
+    assert (sfm_dir / "ground_truth" / "model_from_world.json").is_file()
+
+
+def test_board_gives_metres_and_the_table(handheld, sfm_dir, tmp_path):
+    target = tmp_path / "phone"
+    record = run_board_frame(sfm_dir, target, PhoneConfig())
+    assert record["found_in"] >= VIEWS // 2
+    ds, truth = read_dataset(target), read_ground_truth(handheld)
+    true_c2w = {Path(f.file_path).stem: f.transform_matrix for f in truth.frames}
+    est = ds.poses_c2w_gl()
+    ref = np.stack([true_c2w[Path(f.file_path).stem] for f in ds.frames])
+    # the board's frame is the capture's world frame: the poses compare as they are, in metres
+    centre_mm = 1000 * np.linalg.norm(est[:, :3, 3] - ref[:, :3, 3], axis=1)
+    assert np.median(centre_mm) < 4.0 and centre_mm.max() < 10.0, centre_mm
+    assert rotation_angle_deg(est[:, :3, :3], ref[:, :3, :3]).max() < 1.0
+    errors = record["errors_vs_ground_truth"]
+    assert abs(errors["scale_rel_error"]) < 0.02 and errors["table_tilt_deg"] < 0.5
+    assert abs(errors["table_origin_height_mm"]) < 2.0
+    assert (target / "ground_truth" / "mesh.obj").is_file() and (target / BOARD_RECORD).is_file()
+
+
+def _without_board(handheld: Path, sfm_dir: Path, tmp_path: Path, keep: int) -> Path:
+    """The sfm stage's dataset with the board painted out of all but ``keep`` images."""
+    from PIL import Image
+
+    copy = tmp_path / "sfm"
+    shutil.copytree(sfm_dir, copy)
+    for i, path in enumerate(sorted((copy / "images").glob("*.png"))):
+        if i >= keep:
+            Image.new("RGB", Image.open(path).size, (120, 110, 100)).save(path)
+    return copy
+
+
+@pytest.mark.parametrize("keep, message", [(0, "was not found in any of the"), (2, "at least 3 are needed")])
+def test_board_missing_or_in_too_few_views_is_one_line(handheld, sfm_dir, tmp_path, keep, message):
+    with pytest.raises(UserInputError, match=message) as info:
+        run_board_frame(_without_board(handheld, sfm_dir, tmp_path, keep), tmp_path / "phone", PhoneConfig())
+    assert "\n" not in str(info.value) and "--object-height-m" in str(info.value)
+    assert not (tmp_path / "phone").exists()
+
+
+def test_model_written_for_the_robot_frame_stage(tmp_path):
+    """Without the board, the sfm stage's folder is a COLMAP dataset the robot_frame stage reads."""
+    from real2sim.formats.colmap_model import read_colmap_model
+    from real2sim.formats.dataset import CameraIntrinsics
+
+    (tmp_path / "images").mkdir()
+    from PIL import Image
+
+    for name in ("a.png", "b.png"):
+        Image.new("RGB", (40, 30)).save(tmp_path / "images" / name)
+    c2w = np.stack([np.eye(4), np.eye(4)])
+    c2w[1, :3, 3] = [0.5, 0.0, 0.0]
+    _write_model(tmp_path, ("a.png", "b.png"), c2w, CameraIntrinsics(40, 30, 35.0, 35.0, 20.0, 15.0),
+                 np.array([[0.0, 0.0, 2.0], [0.1, 0.0, 2.0]]))
+    ds = read_colmap_model(tmp_path)
+    assert [f.file_path for f in ds.frames] == ["images/a.png", "images/b.png"]
+    assert np.allclose(ds.frames[1].transform_matrix @ CV_FROM_GL, c2w[1], atol=1e-9)
+    from real2sim.pipeline.normalise import _colmap_points
+
+    assert len(_colmap_points(tmp_path / "sparse" / "0")) == 2
+
+
+# ----------------------------------------------------------------------------- the command's bad inputs
+
+
+def _one_line_exit_2(code: int, out: str, err: str, text: str, asset: Path) -> None:
+    assert code == 2, (out, err)
+    lines = [line for line in err.splitlines() if line.startswith("real2sim")]  # the rest: progress
+    assert len(lines) == 1 and text in lines[0] and "error" in lines[0] and "Traceback" not in err, err
+    assert not asset.exists()
+
+
+def test_folder_with_no_images(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty" / "notes.txt").write_text("no photos here")
+    code, out, err = run_cli(capsys, tmp_path / "empty", "--mass", 0.3, "--out", tmp_path / "asset")
+    _one_line_exit_2(code, out, err, "holds no images", tmp_path / "asset")
+
+
+def test_mixed_sizes(tmp_path, capsys):
+    from PIL import Image
+
+    (tmp_path / "photos").mkdir()
+    for i in range(8):
+        Image.new("RGB", (40 + 8 * i, 30 + 4 * i)).save(tmp_path / "photos" / f"p{i}.png")
+    code, out, err = run_cli(capsys, tmp_path / "photos", "--mass", 0.3, "--out", tmp_path / "asset")
+    _one_line_exit_2(code, out, err, "do not form camera groups", tmp_path / "asset")
+
+
+def test_undecodable_video(tmp_path, capsys):
+    (tmp_path / "clip.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42" + b"garbage" * 50)
+    code, out, err = run_cli(capsys, tmp_path / "clip.mp4", "--mass", 0.3, "--out", tmp_path / "asset")
+    _one_line_exit_2(code, out, err, "cannot decode video", tmp_path / "asset")
+
+
+def test_too_few_registered(tmp_path, capsys):
+    from PIL import Image
+
+    (tmp_path / "photos").mkdir()
+    for i in range(9):
+        Image.new("RGB", (64, 48), (128, 128, 128)).save(tmp_path / "photos" / f"IMG_{i:04d}.png")
+    code, out, err = run_cli(capsys, tmp_path / "photos", "--mass", 0.3, "--out", tmp_path / "asset")
+    _one_line_exit_2(code, out, err, "registered 0 of 9 images", tmp_path / "asset")
+
+
+def test_phone_flags_refused_on_a_dataset(tmp_path, capsys):
+    capture_cli("can", "--views", 4, "--width", 32, "--height", 24, "--out", tmp_path / "ds")
+    code, out, err = run_cli(capsys, tmp_path / "ds", "--mass", 0.3, "--out", tmp_path / "asset", "--frames", 20)
+    _one_line_exit_2(code, out, err, "--frames is for photos or a video", tmp_path / "asset")
