@@ -1,0 +1,190 @@
+"""`real2sim batch`: many datasets through `run`, in parallel (local pool or Ray), into one catalogue."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+
+from real2sim.cli import options
+from real2sim.cli.options import integer, positive
+
+WORKERS = integer(1, 1024)
+TIMEOUT_S = positive(3600.0)
+MASS_KG = positive(1000.0)
+#: run's flags that batch sets per object itself, or does not take
+_NOT_FORWARDED = {"dataset", "out", "overwrite", "mass", "help", "frames", "board_square_mm"}
+
+
+def _run_parser() -> argparse.ArgumentParser:
+    from real2sim.cli import OneLineErrorParser
+    from real2sim.cli import run as run_cli
+
+    sub = OneLineErrorParser(prog="real2sim").add_subparsers()
+    run_cli.register(sub)
+    return sub.choices["run"]
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "batch",
+        help="many datasets through `run` in parallel (local pool or Ray), with a catalogue page",
+        description="Run each DATASET through `real2sim run` (same stages, same resumable cache) into "
+        "CATALOGUE/<dataset folder name>/, several objects at once, and write CATALOGUE/catalogue.csv, "
+        "timings.csv and a self-contained index.html (picture, mass, size, recommended representations, "
+        "errors against the truth, stage times, a link to each report; failed objects with their reason). "
+        "One object failing never stops the others; running the same command again skips the finished "
+        "objects and resumes the others from their last finished stage. Every `real2sim run` option "
+        "(see `real2sim run --help`) applies to every object. With --executor ray, DATASETs and CATALOGUE "
+        "must be on a folder every node of the cluster reads and writes at the same path.",
+        epilog="example: real2sim batch can_ds mug_ds --masses masses.csv --out catalogue --backend hull "
+        "--collision spheres:32",
+    )
+    p.add_argument("datasets", type=Path, nargs="+", metavar="DATASET", help="dataset folders (as `run` takes)")
+    p.add_argument("--out", type=Path, required=True, metavar="CATALOGUE",
+                   help="catalogue folder: new, or an earlier batch's (resumed)")
+    masses = p.add_mutually_exclusive_group()
+    masses.add_argument("--masses", type=options.existing_file, metavar="CSV",
+                        help="CSV with the columns name,mass_kg (name: the dataset's folder name); a dataset not "
+                        "in it is reported as failed")
+    masses.add_argument("--mass-from", metavar="NAME.json",
+                        help="a JSON file inside each dataset with its mass_kg; a dataset without it is reported "
+                        "as failed")
+    masses.add_argument("--mass", type=MASS_KG, metavar="KG", help="one mass for every object, kg")
+    p.add_argument("--executor", choices=["local", "ray"], default="local",
+                   help="local: a process pool on this machine (default); ray: one task per object on a Ray cluster")
+    p.add_argument("--address", default=None, metavar="ADDR",
+                   help="--executor ray: the cluster (host:port, ray://host:port, or auto); default: a private "
+                   "Ray on this machine")
+    p.add_argument("--workers", type=WORKERS, default=None, metavar="N",
+                   help="objects at once (default: the CPUs, at most the objects)")
+    p.add_argument("--ray-timeout-s", type=TIMEOUT_S, default=30.0, metavar="S",
+                   help="how long to wait for the Ray cluster at --address, s (default 30)")
+    g = p.add_argument_group("`real2sim run` options, for every object")
+    for action in _run_parser()._actions:
+        if action.dest not in _NOT_FORWARDED:
+            g._add_action(action)  # argparse's own way of sharing actions between parsers (parents=)
+    options.finish(p)
+    p.set_defaults(func=run)
+
+
+def read_masses(path: Path) -> dict[str, float]:
+    """{name: mass_kg} from a name,mass_kg CSV; UserInputError for a missing column, name or mass, or a
+    mass that is not a finite number > 0."""
+    from real2sim.formats.errors import UserInputError
+
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            reader = csv.DictReader(f)
+            rows = list(reader)
+            columns = reader.fieldnames or []
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise UserInputError(f"cannot read masses file {path}: {exc}") from None
+    if "name" not in columns or "mass_kg" not in columns:
+        raise UserInputError(f"masses file {path} needs the columns name,mass_kg (has {','.join(columns) or 'none'})")
+    masses: dict[str, float] = {}
+    for line, row in enumerate(rows, start=2):
+        name, text = (row.get("name") or "").strip(), (row.get("mass_kg") or "").strip()
+        if not name:
+            raise UserInputError(f"masses file {path}, line {line}: no name")
+        try:
+            mass = float(text)
+        except ValueError:
+            raise UserInputError(f"masses file {path}, line {line}: {name} has no mass "
+                                 f"({text!r} is not a number)") from None
+        if not (math.isfinite(mass) and 0 < mass <= 1000.0):
+            raise UserInputError(f"masses file {path}, line {line}: the mass of {name} must be a number > 0 and "
+                                 f"<= 1000 kg (got {text})")
+        if name in masses:
+            raise UserInputError(f"masses file {path}, line {line}: {name} is listed twice")
+        masses[name] = mass
+    return masses
+
+
+def _mass_of(name: str, dataset: Path, args: argparse.Namespace, table: dict[str, float]) -> tuple[float | None, str]:
+    """The object's mass, or None and why not (that object fails; the others go on)."""
+    if args.mass is not None:
+        return args.mass, ""
+    if args.masses is not None:
+        if name in table:
+            return table[name], ""
+        return None, f"no mass: {name} is not in {args.masses.name}"
+    if args.mass_from is not None:
+        path = dataset / args.mass_from
+        try:
+            mass = float(json.loads(path.read_text()).get("mass_kg"))
+        except FileNotFoundError:
+            return None, f"no mass: the dataset has no {args.mass_from}"
+        except (OSError, ValueError, TypeError, AttributeError):
+            return None, f"no mass: {args.mass_from} holds no number mass_kg"
+        if not (math.isfinite(mass) and 0 < mass <= 1000.0):
+            return None, f"no mass: mass_kg in {args.mass_from} must be > 0 and <= 1000 (got {mass:g})"
+        return mass, ""
+    return None, "no mass: give --mass, --masses or --mass-from"
+
+
+def plan(args: argparse.Namespace):
+    """The objects' jobs and the batch's settings; UserInputError for bad input, before anything is written."""
+    from dataclasses import replace
+
+    from real2sim.cli.run import config_from_args
+    from real2sim.formats.errors import UserInputError
+    from real2sim.pipeline.batch import BatchConfig, ObjectJob, check_catalogue, check_names, cpu_count
+
+    if args.address is not None and args.executor != "ray":
+        raise UserInputError("--address is for --executor ray")
+    if args.mass_from is not None and (Path(args.mass_from).name != args.mass_from or not args.mass_from):
+        raise UserInputError(f"--mass-from names a file inside each dataset, not a path (got {args.mass_from!r})")
+    names = check_names(args.datasets)
+    table = read_masses(args.masses) if args.masses is not None else {}
+    out = check_catalogue(args.out, args.datasets)
+    batch = BatchConfig(executor=args.executor, address=args.address, workers=args.workers,
+                        timeout_s=args.ray_timeout_s)
+    workers = max(1, min(args.workers or cpu_count(), len(names)))
+    threads = max(1, cpu_count() // workers) if args.executor == "local" else 0
+    jobs = []
+    for name, dataset in zip(names, args.datasets):
+        mass, reason = _mass_of(name, Path(dataset), args, table)
+        per = argparse.Namespace(**vars(args))  # config_from_args sets some flags on what it is given
+        per.dataset, per.out, per.mass, per.overwrite = Path(dataset), out / name, mass or 1.0, False
+        per.frames = per.board_square_mm = None
+        try:
+            config = config_from_args(per)  # checks the dataset itself: not a dataset -> one line
+        except UserInputError as exc:
+            raise UserInputError(f"{dataset}: {exc}") from None
+        jobs.append(ObjectJob(name=name, dataset=Path(dataset).resolve(), asset_dir=out / name,
+                              config=replace(config, asset=replace(config.asset, mass_kg=mass)) if mass else None,
+                              reason=reason, threads=threads, gpu=config.device.startswith("cuda"),
+                              log=out / ".batch" / f"{name}.log"))
+    return jobs, out, batch
+
+
+def run(args: argparse.Namespace) -> int:
+    from real2sim.cli.progress import progress_display
+    from real2sim.pipeline.batch import run_batch
+
+    jobs, out, batch = plan(args)
+
+    def echo(line: str) -> None:
+        print(line, flush=True)
+
+    try:
+        with progress_display(echo=echo) as progress:  # the batch's count; one line per finished object
+            result = run_batch(jobs, out, batch, progress=progress, echo=progress_line(progress))
+    except KeyboardInterrupt:
+        print(f"real2sim batch: interrupted; the finished objects are kept in {out}: run the same command "
+              "again to resume", file=sys.stderr)
+        return 130
+    print(f"catalogue: {out / 'index.html'} ({len(jobs) - len(result.failed)} of {len(jobs)} objects done"
+          + (f", {len(result.skipped)} finished before" if result.skipped else "") + ")")
+    for name in result.failed:
+        print(f"  FAILED {name}: {result.outcomes[name].get('reason', '')}")
+    return 1 if result.failed else 0
+
+
+def progress_line(progress):
+    """A finished object's line, through the display (above its bar on a terminal)."""
+    return lambda line: progress(line, 0, 0)

@@ -1,0 +1,304 @@
+"""`real2sim batch`: many datasets through `run`, in parallel, into one catalogue folder.
+
+Each object is one task: :func:`run_object` calls :func:`real2sim.pipeline.run.run_pipeline` on its
+dataset into ``CATALOGUE/<name>/`` (an ordinary asset folder, with run's own ``.run/`` cache), so the
+stages of one object keep their order while different objects run side by side. Tasks run on a local
+process pool (:class:`real2sim.evaluate.executors._PoolExecutor`: a worker that dies breaks the pool,
+its jobs are resubmitted, and a job that breaks a second pool is run alone) or on Ray
+(:class:`RayObjects`: one task per object, one CPU, or one GPU where the run uses ``cuda`` and the
+cluster has one; Ray retries a task whose worker died once).
+
+Datasets and results move through paths, which every node must be able to read and write (a shared
+folder): datasets are tens to hundreds of megabytes of images, too big for the object store to be
+the better road, and run's cache lives beside the asset it resumes.
+
+Resume: ``CATALOGUE/.batch/<name>.json`` records an object's outcome under its key (the dataset's
+files and the run settings). A rerun skips an object whose recorded outcome is "done" under the same
+key, and runs every other one again, which resumes it from run's cache. The catalogue
+(:mod:`.catalogue`) is written at the end, also after an interruption.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from real2sim.formats.errors import UserInputError
+from real2sim.formats.outputs import MARKER_NAME, check_output_dir, make_output_dir, output_lock, write_json_atomic
+from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.pipeline import manifest as mf
+
+BATCH_DIRNAME = ".batch"
+MADE_BY = "real2sim batch"
+EXECUTORS = ("local", "ray")
+#: what a worker that died (killed, or a crash in native code) leaves as its object's reason
+WORKER_DIED = "the worker process died (killed, or a crash in native code)"
+
+
+@dataclass(frozen=True)
+class ObjectJob:
+    """One object of the batch. ``config`` None: it cannot run, ``reason`` says why (no mass).
+    ``threads``: torch CPU threads in its worker (0: leave torch's choice); ``gpu``: ask Ray for one."""
+
+    name: str
+    dataset: Path
+    asset_dir: Path
+    config: Any = None  # RunConfig
+    reason: str = ""
+    threads: int = 0
+    gpu: bool = False
+    log: Path | None = None
+
+
+@dataclass(frozen=True)
+class BatchConfig:
+    """executor: "local" (process pool) or "ray"; address: Ray cluster (None: a private local Ray on the
+    loopback address); workers: objects at once (None: the CPUs, at most the objects); timeout_s: how
+    long to wait for the Ray cluster at ``address``, s."""
+
+    executor: str = "local"
+    address: str | None = None
+    workers: int | None = None
+    timeout_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        if self.executor not in EXECUTORS:
+            raise UserInputError(f"unknown executor {self.executor!r}; choose local or ray")
+        if self.address is not None and self.executor != "ray":
+            raise UserInputError("--address is for --executor ray")
+
+
+@dataclass
+class BatchResult:
+    catalogue: Path
+    outcomes: dict[str, dict] = field(default_factory=dict)  # name -> {"status", "reason", ...}
+    skipped: list[str] = field(default_factory=list)  # finished by an earlier batch, not run again
+
+    @property
+    def failed(self) -> list[str]:
+        return [n for n, o in self.outcomes.items() if o.get("status") != "done"]
+
+
+def cpu_count() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def check_names(datasets: list[Path]) -> list[str]:
+    """The objects' names (their datasets' folder names); UserInputError when two are the same."""
+    seen: dict[str, Path] = {}
+    for ds in datasets:
+        name = Path(ds).resolve().name
+        if name.startswith("."):
+            raise UserInputError(f"{ds}: a dataset folder's name becomes its folder in CATALOGUE, and {name!r} "
+                                 "is hidden; rename it")
+        if name in seen:
+            raise UserInputError(f"two datasets are both named {name!r} ({seen[name]} and {ds}); each object's "
+                                 "folder in CATALOGUE is its dataset's name: rename one")
+        seen[name] = Path(ds)
+    return list(seen)
+
+
+def object_key(job: ObjectJob) -> str:
+    """What an object's outcome depends on: every file of its dataset and the run settings."""
+    files = mf.files_digest(job.dataset, mf.tree_files(job.dataset)) if job.dataset.is_dir() else str(job.dataset)
+    return mf.stage_key({"dataset": files}, job.config, None)
+
+
+def run_object(job: ObjectJob) -> dict:
+    """A worker's task: `run` for one object. Never raises for the object's own failure: returns
+    ``{"name", "status": "done"|"failed", "reason", "ran": [stages run now]}``; its progress and
+    warnings go to ``job.log``."""
+    from real2sim.pipeline.run import StageFailed, run_pipeline
+
+    if job.threads:
+        import torch
+
+        torch.set_num_threads(job.threads)  # this worker's own process: several share the CPUs
+    log = open(job.log, "a", encoding="utf-8") if job.log else open(os.devnull, "w")
+    with log, contextlib.redirect_stderr(log):
+        def say(message: str, done: int, total: int) -> None:
+            if total <= 0 or done >= total:
+                print(f"{message}" + (f": {done}/{total}" if total > 0 else ""), file=log, flush=True)
+
+        try:
+            result = run_pipeline(job.dataset, job.asset_dir, job.config, progress=say)
+        except (StageFailed, UserInputError) as exc:
+            return _failed(job.name, str(exc), log)
+        except Exception as exc:  # noqa: BLE001 -- one object's crash is its own row, not the batch's end
+            text = str(exc).splitlines()[0] if str(exc) else ""
+            return _failed(job.name, f"{type(exc).__name__}: {text}".rstrip(": "), log)
+    ran = [stage for stage, status in result.statuses.items() if status == "ran"]
+    return {"name": job.name, "status": "done", "reason": "", "ran": ran,
+            "warnings": len(result.stage_warnings)}
+
+
+def _failed(name: str, reason: str, log) -> dict:
+    print(f"failed: {reason}", file=log, flush=True)
+    return {"name": name, "status": "failed", "reason": reason, "ran": []}
+
+
+class RayObjects:
+    """One Ray task per object: one CPU, or one GPU for an object whose job asks for it (its
+    reconstruction and fitting run on ``cuda``). Ray reruns a task whose worker died once; the rerun
+    resumes from run's cache. ``address`` None starts a private Ray on the loopback address."""
+
+    def __init__(self, workers: int, address: str | None, timeout_s: float) -> None:
+        import logging
+
+        import ray
+
+        from real2sim.evaluate.executors import _init_ray_bounded, _probe_address
+
+        self._ray = ray
+        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.ERROR}
+        if address is None:
+            kwargs.update(num_cpus=workers, _node_ip_address="127.0.0.1")
+        else:
+            _probe_address(address, timeout_s)
+        self._owns = not ray.is_initialized()
+        if self._owns:
+            _init_ray_bounded(ray, address, kwargs, timeout_s if address else max(timeout_s, 120.0))
+        self.gpus = float(ray.cluster_resources().get("GPU", 0.0))
+        self._refs: dict[int, Any] = {}
+        self._next = 0
+
+    def submit(self, fn: Callable, job: ObjectJob, attempt: int = 0) -> int:
+        gpu = 1 if job.gpu and self.gpus >= 1 else 0
+        remote = self._ray.remote(fn).options(num_cpus=0 if gpu else 1, num_gpus=gpu, max_retries=1)
+        self._next += 1
+        self._refs[self._next] = remote.remote(job)
+        return self._next
+
+    def wait(self, handles: set) -> set:
+        by_ref = {self._refs[h]: h for h in handles}
+        done, _ = self._ray.wait(list(by_ref), num_returns=1)
+        return {by_ref[r] for r in done}
+
+    def result(self, handle: int) -> Any:
+        try:
+            return self._ray.get(self._refs.pop(handle))
+        except Exception:  # noqa: BLE001 -- the worker died twice (run_object catches the object's errors)
+            return {"error": WORKER_DIED}
+
+    def shutdown(self, abort: bool = False) -> None:
+        if abort:
+            for ref in self._refs.values():
+                with contextlib.suppress(Exception):
+                    self._ray.cancel(ref, force=True)
+            self._refs.clear()
+        if self._owns:
+            self._ray.shutdown()
+
+
+def make_executor(config: BatchConfig, workers: int):
+    """The executor for ``config``: UserInputError (one line, within ``timeout_s``) when Ray is not reachable."""
+    if config.executor == "ray":
+        return RayObjects(workers, config.address, config.timeout_s)
+    from real2sim.evaluate.executors import _PoolExecutor
+
+    return _PoolExecutor(workers)
+
+
+def check_catalogue(out: Path | str, datasets: list[Path]) -> Path:
+    """CATALOGUE resolved: new, empty, or an earlier batch's (resumed); UserInputError otherwise."""
+    out = check_output_dir(out, overwrite=True, inputs=datasets, what="CATALOGUE")
+    marker = out / MARKER_NAME
+    if marker.is_file():
+        try:
+            made_by = json.loads(marker.read_text()).get("made_by")
+        except (OSError, ValueError, AttributeError):
+            made_by = None
+        if made_by != MADE_BY:
+            raise UserInputError(f"CATALOGUE {out} is a real2sim output but not a batch's ({made_by or 'unknown'}); "
+                                 "choose a new folder")
+    return out
+
+
+def _state_path(out: Path, name: str) -> Path:
+    return out / BATCH_DIRNAME / f"{name}.json"
+
+
+def _finished(out: Path, job: ObjectJob, key: str) -> bool:
+    try:
+        state = json.loads(_state_path(out, job.name).read_text())
+    except (OSError, ValueError):
+        return False
+    return state.get("status") == "done" and state.get("key") == key and (
+        job.asset_dir / mf.RUN_DIRNAME / mf.MANIFEST_NAME).is_file()
+
+
+def run_batch(jobs: list[ObjectJob], out: Path, config: BatchConfig, progress: ProgressFn | None = None,
+              echo: Callable[[str], None] | None = None) -> BatchResult:
+    """Run every job (see the module docstring) and write the catalogue; ``progress`` gets the whole
+    batch's count, ``echo`` one line per finished object. Bad input raises UserInputError before
+    anything is written; an interruption writes the catalogue of what finished, then re-raises."""
+    from real2sim.pipeline.catalogue import write_catalogue
+
+    progress, echo = progress or null_progress, echo or (lambda line: None)
+    out = check_catalogue(out, [j.dataset for j in jobs])
+    with output_lock(out):
+        result = BatchResult(out)
+        keys = {j.name: object_key(j) for j in jobs if j.config is not None}
+        todo = [j for j in jobs if j.config is not None and not _finished(out, j, keys[j.name])]
+        result.skipped = [j.name for j in jobs if j.config is not None and j not in todo]
+        workers = max(1, min(config.workers or cpu_count(), len(todo) or 1))
+        executor = make_executor(config, workers) if todo else None  # Ray's refusal comes before any write
+        make_output_dir(out, made_by=MADE_BY)
+        (out / BATCH_DIRNAME).mkdir(exist_ok=True)
+        for name in result.skipped:
+            result.outcomes[name] = json.loads(_state_path(out, name).read_text())
+            echo(f"{name}: finished before, skipped")
+        try:
+            for job in jobs:
+                if job.config is None:
+                    _record(out, result, {"name": job.name, "status": "failed", "reason": job.reason}, "", echo)
+            if executor is not None:
+                _schedule(executor, todo, keys, out, result, progress, echo, len(jobs))
+        finally:
+            if executor is not None:
+                executor.shutdown(abort=len(result.outcomes) < len(jobs))
+            write_catalogue(out, jobs, result.outcomes)
+    return result
+
+
+def _schedule(executor, todo: list[ObjectJob], keys: dict, out: Path, result: BatchResult, progress: ProgressFn,
+              echo: Callable[[str], None], total: int) -> None:
+    from real2sim.evaluate.executors import _Retry
+
+    handles = {executor.submit(run_object, job): job for job in todo}
+    _show(progress, result, len(handles), total)
+    while handles:
+        for handle in executor.wait(set(handles)):
+            job = handles.pop(handle)
+            outcome = executor.result(handle)
+            if isinstance(outcome, _Retry):  # the pool broke under it: again, resuming from run's cache
+                handles[executor.submit(outcome.fn, outcome.arg, outcome.attempt)] = job
+                continue
+            if "name" not in outcome:  # the executor's own failure row: its worker died
+                outcome = {"name": job.name, "status": "failed", "reason": WORKER_DIED, "ran": []}
+            _record(out, result, outcome, keys[job.name], echo)
+        _show(progress, result, len(handles), total)
+
+
+def _record(out: Path, result: BatchResult, outcome: dict, key: str, echo: Callable[[str], None]) -> None:
+    state = {"name": outcome["name"], "status": outcome["status"], "reason": outcome.get("reason", ""), "key": key}
+    write_json_atomic(_state_path(out, outcome["name"]), state)
+    result.outcomes[outcome["name"]] = state
+    if outcome["status"] == "done":
+        ran = outcome.get("ran") or []
+        echo(f"{outcome['name']}: done ({'ran ' + ', '.join(ran) if ran else 'all stages unchanged'})")
+    else:
+        echo(f"{outcome['name']}: FAILED: {state['reason']}")
+
+
+def _show(progress: ProgressFn, result: BatchResult, running: int, total: int) -> None:
+    finished = len(result.outcomes)
+    failed = len(result.failed)
+    progress(f"batch: {finished - failed} done, {running} running, {failed} failed", finished, total)

@@ -1,0 +1,145 @@
+"""`real2sim batch` (issue 31): objects in parallel on a local process pool, isolation, resume, masses, the
+catalogue, and bad input refused before anything is written.
+
+Tiny captures (8 views at 64x48) through a visual hull on a 48-voxel grid and `spheres:4` fitted for 30
+iterations: one object takes tens of seconds on two loaded cores. The Ray, three-object and
+kill-and-resume tests are in test_batch_ray.py and test_batch_resume.py.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.cli_helpers import run_cli
+
+FAST = ["--backend", "hull", "--voxels", "48", "--max-faces", "2000", "--texture-px", "64", "--max-image-px", "64",
+        "--iterations", "30", "--no-refine-poses", "--collision", "spheres:4"]
+
+
+def capture(out: Path, name: str = "can") -> Path:
+    from real2sim.capture.wrist_camera import CaptureConfig, capture as capture_views
+    from real2sim.geometry.objects import make_textured_object
+
+    capture_views(make_textured_object(name), out, CaptureConfig(views=8, width=64, height=48))
+    return out
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("batch_ds")
+    return {name: capture(root / f"{name}_ds", name) for name in ("can", "mug")}
+
+
+def catalogue_rows(out: Path) -> dict[str, dict]:
+    import csv
+
+    with open(out / "catalogue.csv", newline="") as f:
+        return {row["name"]: row for row in csv.DictReader(f)}
+
+
+def run_json(asset_dir: Path) -> dict:
+    return json.loads((asset_dir / ".run" / "run.json").read_text())
+
+
+def test_one_object_done_one_without_mass_failed_and_a_rerun_skips_the_done(capsys, datasets, tmp_path):
+    can, mug = datasets["can"], datasets["mug"]
+    (can / "mass.json").write_text(json.dumps({"mass_kg": 0.35}))  # the mug has none: failed, not guessed
+    out = tmp_path / "catalogue"
+    try:
+        _done_and_failed_then_skipped(capsys, can, mug, out)
+    finally:
+        (can / "mass.json").unlink()
+
+
+def _done_and_failed_then_skipped(capsys, can: Path, mug: Path, out: Path) -> None:
+    code, stdout, _err = run_cli(capsys, "batch", can, mug, "--mass-from", "mass.json", "--out", out, *FAST)
+    assert code == 1, stdout  # an object failed; the other one is done all the same
+    assert "can_ds: done (ran reconstruct, asset, truth)" in stdout
+    assert "mug_ds: FAILED: no mass: the dataset has no mass.json" in stdout
+    rows = catalogue_rows(out)
+    assert list(rows) == ["can_ds", "mug_ds"]
+    can_row = rows["can_ds"]
+    assert can_row["status"] == "done" and float(can_row["mass_kg"]) == 0.35
+    assert can_row["accuracy_representation"] == can_row["speed_representation"] == "spheres_4"
+    assert can_row["basis"] == "fit" and 0 < float(can_row["accuracy_iou"]) <= 1
+    sizes = [float(can_row[f"size_{a}_m"]) for a in "xyz"]
+    assert 0.05 < sizes[0] < 0.1 and 0.08 < sizes[2] < 0.13  # the can: r 0.034 m, h 0.10 m
+    assert float(can_row["truth_chamfer_mm"]) > 0 and can_row["report"] == "can_ds/truth.json"
+    assert rows["mug_ds"]["status"] == "failed" and "no mass" in rows["mug_ds"]["reason"]
+    assert not (out / "mug_ds").exists()
+    page = (out / "index.html").read_text()
+    assert "data:image/jpeg;base64," in page and "no mass" in page and 'href="can_ds/truth.json"' in page
+    assert "http://" not in page and "https://" not in page  # self-contained
+    assert (out / "can_ds" / "spheres_4" / "model.urdf").is_file()
+    timings = (out / "timings.csv").read_text().splitlines()
+    assert timings[0] == "name,stage,wall_s" and any(t.startswith("can_ds,reconstruct,") for t in timings)
+    before = run_json(out / "can_ds")
+    csv_before = (out / "catalogue.csv").read_bytes()
+
+    # The same command again: the can is not run again (no worker, no stage), the mug fails again.
+    code, stdout, _err = run_cli(capsys, "batch", can, mug, "--mass-from", "mass.json", "--out", out, *FAST)
+    assert code == 1, stdout
+    assert "can_ds: finished before, skipped" in stdout
+    assert run_json(out / "can_ds") == before  # nothing redone, nothing rewritten
+    assert (out / "catalogue.csv").read_bytes() == csv_before
+
+
+def _one_line_exit_2(capsys, *argv) -> str:
+    code, stdout, err = run_cli(capsys, *argv)
+    assert code == 2, (stdout, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_bad_input_is_one_line_exit_2_and_nothing_written(capsys, datasets, tmp_path):
+    can = datasets["can"]
+    out = tmp_path / "cat"
+    not_ds = tmp_path / "photos_of_nothing"
+    not_ds.mkdir()
+    (not_ds / "notes.txt").write_text("not a dataset")
+    assert "photos_of_nothing" in _one_line_exit_2(capsys, "batch", can, not_ds, "--mass", "1", "--out", out, *FAST)
+    twin = tmp_path / "elsewhere" / "can_ds"
+    shutil.copytree(can, twin)
+    assert "both named 'can_ds'" in _one_line_exit_2(capsys, "batch", can, twin, "--mass", "1", "--out", out)
+    for text, expected in (("name,mass_kg\ncan_ds,\n", "can_ds has no mass"),
+                           ("name,mass_kg\ncan_ds,-0.2\n", "must be a number > 0"),
+                           ("name,mass_kg\ncan_ds,0\n", "must be a number > 0"),
+                           ("name\ncan_ds\n", "needs the columns name,mass_kg")):
+        masses = tmp_path / "masses.csv"
+        masses.write_text(text)
+        assert expected in _one_line_exit_2(capsys, "batch", can, "--masses", masses, "--out", out, *FAST)
+    assert "--address is for --executor ray" in _one_line_exit_2(
+        capsys, "batch", can, "--mass", "1", "--out", out, "--address", "127.0.0.1:1")
+    # nothing listens on port 1 of the loopback: refused at once, well within the 30 s bound
+    line = _one_line_exit_2(capsys, "batch", can, "--mass", "1", "--out", out, "--executor", "ray",
+                            "--address", "127.0.0.1:1", *FAST)
+    assert "could not reach the Ray cluster at 127.0.0.1:1" in line
+    asset = tmp_path / "an_asset"
+    asset.mkdir()
+    (asset / ".real2sim").write_text(json.dumps({"made_by": "real2sim run"}))
+    assert "not a batch's" in _one_line_exit_2(capsys, "batch", can, "--mass", "1", "--out", asset, *FAST)
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["an_asset", "elsewhere", "masses.csv", "photos_of_nothing"]
+
+
+def test_a_second_batch_on_the_same_catalogue_is_refused(capsys, datasets, tmp_path):
+    out = tmp_path / "cat"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\nfrom real2sim.formats.outputs import output_lock\n"
+         f"with output_lock({str(out)!r}):\n    print('held', flush=True)\n    time.sleep(120)"],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        line = _one_line_exit_2(capsys, "batch", datasets["can"], "--mass", "1", "--out", out, *FAST)
+        assert "another real2sim process is writing" in line
+    finally:
+        holder.kill()
+        holder.wait()
+    assert not out.exists()
