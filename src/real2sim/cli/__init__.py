@@ -28,7 +28,7 @@ THREADS = integer(1, 1024)
 THREADS_ENV = "REAL2SIM_THREADS"
 
 # Order is the order of `real2sim --help`.
-_VERB_MODULES = ("demo", "objects", "capture", "board", "reconstruct", "asset", "run", "evaluate", "view")
+_VERB_MODULES = ("demo", "objects", "capture", "board", "reconstruct", "asset", "run", "batch", "evaluate", "view")
 
 
 class OneLineErrorParser(argparse.ArgumentParser):
