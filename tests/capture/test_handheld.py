@@ -152,7 +152,7 @@ def test_video_rotation_metadata_turns_the_stored_frames_upright(tmp_path):
             return img.reshape(18, 4, 24, 4, 3).mean(axis=(1, 3))
 
         right, wrong = (np.abs(coarse(u) - coarse(plain)).mean() for u in (upright, np.rot90(upright, 2)))
-        assert right < 4 and right < 0.3 * wrong, (right, wrong)
+        assert right < 8 and right < 0.2 * wrong, (right, wrong)  # measured: about 3.3 against 43-61
 
 
 @pytest.mark.parametrize("argv, says", [
