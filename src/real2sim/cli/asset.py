@@ -61,9 +61,10 @@ def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX)
     p.add_argument("--keep-up", action="store_true",
                    help="keep the input's +z as the asset's up axis instead of the longest principal axis "
                    "(for squat objects such as mugs)")
-    p.add_argument("--format", action="append", choices=["urdf", "sdf", "mjcf"], dest="formats",
-                   help="model formats to write (repeatable; URDF always): sdf writes model.sdf, "
-                   "mjcf writes model.xml for MuJoCo")
+    p.add_argument("--format", action="append", choices=["urdf", "sdf", "mjcf", "usd"], dest="formats",
+                   help="model formats to write (repeatable; model.urdf for Drake and model_portable.urdf for "
+                   "PyBullet and other URDF readers always): sdf writes model.sdf, mjcf model.xml + scene.xml "
+                   "for MuJoCo, usd model.usda for Isaac Sim (docs/formats.md)")
     p.add_argument("--seed", type=seed(seed_max), default=0, help="random seed of sampling and fitting (default 0)")
     p.add_argument("--device", type=device, default="cpu", help="torch device for primitive fitting: cpu, cuda, cuda:N (default cpu)")
     g = p.add_argument_group("primitive fitting (paper IV-C3)")

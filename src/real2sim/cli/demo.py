@@ -72,7 +72,7 @@ def register(sub) -> None:
         description="The paper's system on the bundled mustard-like bottle, judged against the true object: "
         "a simulated robot wrist-camera capture (100 views, 320x240 px, robot poses with 5 mm / 1 deg "
         "calibration noise, rendered masks) -> COLMAP pose refinement -> radiance-field reconstruction -> "
-        "an asset with several collision representations plus CoACD (URDF and MuJoCo model.xml) -> Drake "
+        "an asset with several collision representations plus CoACD (URDF, MuJoCo model.xml, USD model.usda) -> Drake "
         "evaluation of each representation (planar pushing, actuated ramp; point and hydroelastic contact; "
         "one run each) against the reconstruction and against the true bottle -> OUT/bottle_asset/truth.json "
         "(pose, mask, reconstruction, mass-property and dynamics errors against the true bottle) -> Pareto "
@@ -112,7 +112,7 @@ def run_config(plan: DemoPlan):
 
         refine = RefineConfig()
     asset = AssetConfig(mass_kg=OBJECTS["bottle"].mass_kg, specs=tuple(parse_spec(s) for s in plan.specs),
-                        formats=("urdf", "mjcf"))
+                        formats=("urdf", "mjcf", "usd"))
     return RunConfig(asset=asset, reconstruct=recon, refine=refine)
 
 
