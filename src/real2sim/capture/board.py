@@ -41,6 +41,8 @@ MARKER_FRACTION = 0.75
 METADATA_KEY = "real2sim_board"
 #: Fewest ChArUco corners for a pose: fewer is too easily a wrong or ill-conditioned PnP solution.
 MIN_CORNERS = 6
+#: A corner further than this from where the others put it (or 3x their median, px) is left out.
+OUTLIER_CORNER_PX = 1.0
 #: A pose whose corners reproject worse than this (RMS, px) is not a detection of this board.
 MAX_REPROJECTION_PX = 3.0
 
@@ -335,14 +337,26 @@ def board_view_from_corners(ids: np.ndarray, corners_px: np.ndarray, spec: Board
     # Corners along one line leave the pose undetermined.
     if np.linalg.matrix_rank(board_pts[:, :2] - board_pts[:, :2].mean(0), tol=1e-3 * spec.square_m) < 2:
         return None
-    ok, rvec, tvec = cv2.solvePnP(board_pts, image_px, K_cv, dist_cv, flags=cv2.SOLVEPNP_IPPE)
-    if not ok:
+    keep = np.ones(len(ids), dtype=bool)
+    for _ in range(3):
+        ok, rvec, tvec = cv2.solvePnP(board_pts[keep], image_px[keep], K_cv, dist_cv, flags=cv2.SOLVEPNP_IPPE)
+        if not ok:
+            return None
+        rvec, tvec = cv2.solvePnPRefineLM(board_pts[keep], image_px[keep], K_cv, dist_cv, rvec, tvec)
+        proj, _ = cv2.projectPoints(board_pts, rvec, tvec, K_cv, dist_cv)
+        err = np.linalg.norm(proj.reshape(-1, 2) - image_px, axis=1)
+        # A corner the object hides is still "found" next to its visible marker, snapped onto the object's
+        # edge: it disagrees with the others by pixels. Leave such corners out and solve again.
+        now = err <= max(OUTLIER_CORNER_PX, 3.0 * float(np.median(err[keep])))
+        if (now == keep).all() or now.sum() < MIN_CORNERS:
+            break
+        keep = now
+    if keep.sum() < MIN_CORNERS:
         return None
-    rvec, tvec = cv2.solvePnPRefineLM(board_pts, image_px, K_cv, dist_cv, rvec, tvec)
-    proj, _ = cv2.projectPoints(board_pts, rvec, tvec, K_cv, dist_cv)
-    rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - image_px) ** 2, axis=1))))
+    rms = float(np.sqrt(np.mean(err[keep] ** 2)))
     if not np.isfinite(rms) or rms > MAX_REPROJECTION_PX:
         return None
+    ids, image_px, board_pts = ids[keep], image_px[keep], board_pts[keep]
     T = np.eye(4)
     T[:3, :3] = cv2.Rodrigues(rvec)[0]
     T[:3, 3] = tvec.ravel()
