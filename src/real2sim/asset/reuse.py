@@ -20,7 +20,7 @@ from real2sim.formats.errors import UserInputError
 #: under other values of these is still valid (its model files are rewritten, see rewrite_models).
 NOT_GEOMETRY = ("mass_kg", "collision", "contact", "formats")
 #: What write_representation writes into a representation folder.
-MODEL_FILES = ("model.urdf", "model.sdf", "model.xml")
+MODEL_FILES = ("model.urdf", "model.sdf", "model.xml", "model_portable.urdf", "scene.xml", "model.usda")
 
 
 def reusable_representations(previous_dir: Path | str, config_path: Path) -> dict[str, Path]:

@@ -1,4 +1,9 @@
-"""URDF and SDFormat files for one collision representation (paper IV-E).
+"""URDF and SDFormat files for one collision representation (paper IV-E), written for Drake.
+
+Other simulators get their own files from the same data (docs/formats.md):
+``model_portable.urdf`` (always; :mod:`real2sim.asset.portable_urdf`), ``model.xml`` and
+``scene.xml`` (:mod:`real2sim.asset.mjcf`), ``model.usda`` (:mod:`real2sim.asset.usd`);
+:func:`write_representation` writes them all.
 
 An asset folder holds the textured visual mesh once (``visual/model.obj``) and one
 folder per collision representation; this module writes that folder's
