@@ -13,7 +13,8 @@ from PIL import ExifTags, Image
 
 from real2sim.capture.board import DEFAULT_BOARD, detect_board
 from real2sim.capture.board_frame import world_from_board_views
-from real2sim.capture.handheld import HandheldConfig, capture_handheld, handheld_poses, motion_blur
+from real2sim.capture.handheld import HandheldConfig, capture_handheld, handheld_poses
+from real2sim.capture.phone_media import motion_blur
 from real2sim.formats.dataset import CV_FROM_GL, load_image_rgb, load_mask, read_ground_truth
 from tests.cli_helpers import run_cli
 
@@ -128,7 +129,7 @@ def test_video_capture_writes_a_decodable_mp4(tmp_path, capsys):
     gt = read_ground_truth(out)
     assert len(gt.frames) == 16 and gt.frames[5].extra["real2sim_video_frame"] == 5
     assert gt.frames[5].extra["real2sim_time_s"] == pytest.approx(5 / 24)
-    assert gt.extra["real2sim"]["video"] == {"file": "clip.mp4", "fps": 24.0, "frames": 16}
+    assert gt.extra["real2sim"]["video"] == {"file": "clip.mp4", "fps": 24.0, "frames": 16, "display_rotation_deg": 0}
 
 
 def test_video_rotation_metadata_turns_the_stored_frames_upright(tmp_path):

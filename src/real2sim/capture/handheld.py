@@ -38,6 +38,7 @@ import trimesh
 from real2sim.capture.board import BoardSpec, board_centre_on_page_dots, page_image
 from real2sim.capture.capture_output import save_png
 from real2sim.capture.hard_rigs import apply_colour_gains, colour_gains
+from real2sim.capture.phone_media import VideoWriter, motion_blur, phone_exif, photo_name
 from real2sim.capture.render_scene import OBJECT_LABEL, RenderScene
 from real2sim.capture.textures import export_textured_obj, has_texture, procedural_texture, with_procedural_texture
 from real2sim.capture.wrist_camera import CaptureResult, look_at_c2w_gl, object_frame
@@ -280,23 +281,6 @@ class _Renderer:
         return rgb, depth, label
 
 
-def motion_blur(image: np.ndarray, streak_px: np.ndarray) -> np.ndarray:
-    """``image`` (H, W, C float) averaged along the straight streak ``streak_px`` (dx, dy), centred
-    on each pixel: the camera moving at constant speed while the shutter is open."""
-    import cv2
-
-    length = float(np.hypot(*streak_px))
-    if length < 0.25:
-        return image
-    steps = int(np.ceil(length)) + 1
-    out = np.zeros_like(image)
-    for f in np.linspace(-0.5, 0.5, steps):
-        shift = np.array([[1.0, 0.0, f * streak_px[0]], [0.0, 1.0, f * streak_px[1]]])
-        out += cv2.warpAffine(image, shift, (image.shape[1], image.shape[0]), flags=cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_REFLECT).reshape(image.shape)  # OpenCV drops a lone channel
-    return out / steps
-
-
 def _blur_streaks(config: HandheldConfig) -> np.ndarray:
     """(views, 2) motion-blur streaks, px: independent hand shake per photo, a smooth one in a video."""
     rng = np.random.default_rng((config.seed, 30))
@@ -317,54 +301,6 @@ def _exposure_gains(config: HandheldConfig) -> np.ndarray:
         stops = _smooth_noise(np.random.default_rng((config.seed, 31)), t, config.exposure_jitter_stops)
         return np.repeat((2.0 ** stops)[:, None], 3, axis=1)
     return colour_gains(config.views, config.exposure_jitter_stops, 0.0, config.seed)
-
-
-# ----------------------------------------------------------------------------- writing
-
-
-def photo_name(i: int) -> str:
-    return f"IMG_{i + 1:04d}.jpg"
-
-
-def _exif(config: HandheldConfig):
-    """EXIF a phone writes and SfM tools read: make, model and the 35 mm-equivalent focal length."""
-    from PIL import ExifTags, Image
-
-    exif = Image.Exif()
-    exif[ExifTags.Base.Make] = "real2sim"
-    exif[ExifTags.Base.Model] = "simulated phone"
-    exif.get_ifd(ExifTags.IFD.Exif)[ExifTags.Base.FocalLengthIn35mmFilm] = int(round(18.0 / np.tan(np.radians(config.fov_deg) / 2)))
-    return exif
-
-
-class _VideoWriter:
-    """H.264 MP4 through PyAV (FFmpeg inside its wheel), yuv420p as phones write."""
-
-    def __init__(self, path: Path, config: HandheldConfig):
-        import av
-        from fractions import Fraction
-
-        self.container = av.open(str(path), mode="w")
-        self.stream = self.container.add_stream("libx264", rate=Fraction(config.fps).limit_denominator(1001))
-        self.turns = config.video_rotation_deg // 90  # counter-clockwise quarter turns that display a stored frame
-        w, h = (config.height, config.width) if self.turns % 2 else (config.width, config.height)
-        self.stream.width, self.stream.height, self.stream.pix_fmt = w, h, "yuv420p"
-        if self.turns:
-            self.stream.set_display_rotation(config.video_rotation_deg if config.video_rotation_deg <= 180 else -90)
-        # quality from the JPEG setting: crf 18 (q 100) .. 33 (q 1); keyframes every second
-        self.stream.options = {"crf": str(int(round(33 - 15 * config.jpeg_quality / 100))), "g": str(int(config.fps))}
-
-    def write(self, rgb: np.ndarray) -> None:
-        import av
-
-        stored = np.rot90(rgb, k=-self.turns)  # turned back by the player
-        for packet in self.stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(stored), format="rgb24")):
-            self.container.mux(packet)
-
-    def close(self) -> None:
-        for packet in self.stream.encode():
-            self.container.mux(packet)
-        self.container.close()
 
 
 def _write_truth_files(gt: Path, config: HandheldConfig, cam: CameraIntrinsics, world_from_mesh: np.ndarray,
@@ -423,8 +359,9 @@ def capture_handheld(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, co
         export_textured_obj(trimesh.graph.smooth_shade(mesh, angle=np.radians(30)), work / "object.obj")
         renderer = _Renderer(_build_scene(config, work / "object.obj", world_from_mesh, work, cam, far_m), cam,
                              config.supersample, far_m)
-        video = _VideoWriter(tmp / VIDEO_NAME, config) if config.video else None
-        exif = None if config.video else _exif(config)
+        video = VideoWriter(tmp / VIDEO_NAME, config.width, config.height, config.fps, config.jpeg_quality,
+                            config.video_rotation_deg) if config.video else None
+        exif = None if config.video else phone_exif(config.fov_deg)
         frames = []
         t_render = time.perf_counter()
         for i, c2w in enumerate(poses):
