@@ -169,3 +169,53 @@ def test_phone_flags_refused_on_a_dataset(tmp_path, capsys):
     capture_cli("can", "--views", 4, "--width", 32, "--height", 24, "--out", tmp_path / "ds")
     code, out, err = run_cli(capsys, tmp_path / "ds", "--mass", 0.3, "--out", tmp_path / "asset", "--frames", 20)
     _one_line_exit_2(code, out, err, "--frames is for photos or a video", tmp_path / "asset")
+
+
+# ----------------------------------------------------------------------------- end to end (slow)
+
+
+def _stages_run(out: str) -> str:
+    return next(line for line in out.splitlines() if line.startswith("asset:"))
+
+
+@pytest.mark.slow
+def test_run_photos_with_the_board(tmp_path, capsys):
+    """About 3 minutes on 2 cores: 24 photos, the board, the visual hull; then a rerun skips every stage."""
+    photos = tmp_path / "photos"
+    capture_cli("can", "--handheld", "--board", "--views", 24, "--width", 320, "--height", 240, "--out", photos)
+    args = (photos, "--mass", 0.35, "--out", tmp_path / "asset", "--backend", "hull", "--collision", "boxes:8")
+    code, out, err = run_cli(capsys, *args)
+    assert code == 0, err
+    assert "sfm" in _stages_run(out) and "board_frame" in _stages_run(out)
+    truth = json.loads((tmp_path / "asset" / "truth.json").read_text())
+    assert truth["reconstruction"]["chamfer_mm"] < 4.0
+    code, out, err = run_cli(capsys, *args)
+    assert code == 0 and "none, all unchanged" in _stages_run(out)
+
+
+@pytest.mark.slow
+def test_run_without_the_board_asks_for_the_height_and_resumes(tmp_path, capsys):
+    photos = tmp_path / "photos"
+    capture_cli("can", "--handheld", "--views", 24, "--width", 320, "--height", 240, "--out", photos)
+    args = (photos, "--mass", 0.35, "--out", tmp_path / "asset", "--backend", "hull", "--collision", "boxes:8")
+    code, out, err = run_cli(capsys, *args)
+    assert code == 2
+    lines = [line for line in err.splitlines() if line.startswith("real2sim")]
+    assert len(lines) == 1 and "was not found" in lines[0] and "--object-height-m" in lines[0], err
+    assert (tmp_path / "asset" / ".run" / "sfm" / "sparse" / "0").is_dir()  # kept for the next run
+    code, out, err = run_cli(capsys, *args, "--object-height-m", 0.10)
+    assert code == 0, err
+    assert "sfm" not in _stages_run(out) and "robot_frame" in _stages_run(out)
+
+
+@pytest.mark.slow
+def test_run_video_with_the_board(tmp_path, capsys):
+    clip_dir = tmp_path / "clip"
+    capture_cli("can", "--handheld", "--board", "--video", "--views", 90, "--width", 320, "--height", 240,
+                "--out", clip_dir)
+    code, out, err = run_cli(capsys, clip_dir / "clip.mp4", "--frames", 24, "--mass", 0.35, "--out", tmp_path / "asset",
+                             "--backend", "hull", "--collision", "boxes:8")
+    assert code == 0, err
+    record = json.loads((tmp_path / "asset" / ".run" / "sfm" / SFM_RECORD).read_text())
+    assert len(record["video"]["chosen"]) == 24 and record["registered"] >= 20
+    assert "sequential" in record["matching"]
