@@ -86,3 +86,13 @@ def test_undecodable_video_is_one_line(tmp_path, content):
     with pytest.raises(UserInputError) as info:
         decode_frames(clip, 10)
     assert "broken.mp4" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_frames_written_to_a_folder_are_not_kept(tmp_path):
+    clip = tmp_path / "clip.mp4"
+    write_clip(clip)
+    frames = decode_frames(clip, 5, folder=tmp_path / "frames")
+    assert frames.images == () and [p.name for p in frames.paths] == [f"frame_{i:06d}.png" for i in frames.indices]
+    from real2sim.formats.dataset import load_image_rgb
+
+    assert np.abs(load_image_rgb(frames.paths[0]).astype(float) - _frame(frames.indices[0])).mean() < 6

@@ -199,6 +199,12 @@ def _features_and_matches(work: Path, image_dir: Path, names: list[str], sequent
         progress(f"structure from motion: matching all {len(names) * (len(names) - 1) // 2} pairs", 1, 3)
         pycolmap.match_exhaustive(db_path, matching_options=matching, device=pycolmap.Device.cpu)
         return "exhaustive"
+    if not sequential:
+        import warnings
+
+        warnings.warn(f"{len(names)} photos are more than {config.exhaustive_max_images} to match all against all: each "
+                      "is matched with the photos taken just before and after it (by file name) and with key photos; "
+                      "photos not taken in order around the object may not register", RuntimeWarning, stacklevel=2)
     pairs = match_pairs(len(names), config.sequential_overlap, config.loop_every)
     (work / "pairs.txt").write_text("".join(f"{names[i]} {names[j]}\n" for i, j in pairs))
     pairing = pycolmap.ImportedPairingOptions()

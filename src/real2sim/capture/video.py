@@ -8,7 +8,8 @@ the object at a roughly steady pace, so even spacing in time is even spacing alo
 within each run the frame least smeared by motion wins.
 
 Two passes over the file: the first scores every frame (keeping no images, so a long clip needs no
-memory), the second keeps the chosen ones.
+memory), the second keeps the chosen ones (in memory, or written to a folder as they come: 80 frames
+of a 4K clip would hold 2 GB).
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ SCORE_SIDE_PX = 480
 
 @dataclass(frozen=True)
 class VideoFrames:
-    """``images``: the chosen frames, upright RGB uint8 (H, W, 3); ``indices``: their frame numbers in
+    """``images``: the chosen frames, upright RGB uint8 (H, W, 3) (empty when they were written to ``paths``
+instead); ``indices``: their frame numbers in
     the clip (0-based, decoding order); ``sharpness``: their variance of the Laplacian; ``total``:
     frames in the clip; ``rotation_deg``: the rotation applied (the clip's metadata, counter-clockwise)."""
 
@@ -40,6 +42,7 @@ class VideoFrames:
     total: int
     rotation_deg: int
     fps: float
+    paths: tuple[Path, ...] = ()
 
     def to_json(self) -> dict:
         return {"frames_in_clip": self.total, "chosen": list(self.indices),
@@ -105,9 +108,13 @@ def _frames(path: Path):
         container.close()
 
 
-def decode_frames(path: Path | str, count: int = DEFAULT_FRAMES, progress: ProgressFn | None = None) -> VideoFrames:
-    """The ``count`` frames of the video at ``path`` chosen as the module docstring says. UserInputError
-    (one line) for a file that does not decode or holds fewer than 2 frames."""
+def decode_frames(path: Path | str, count: int = DEFAULT_FRAMES, progress: ProgressFn | None = None,
+                  folder: Path | None = None) -> VideoFrames:
+    """The ``count`` frames of the video at ``path`` chosen as the module docstring says; with ``folder``
+    written there as ``frame_<clip index>.png`` instead of kept. UserInputError (one line) for a file that
+    does not decode or holds fewer than 2 frames."""
+    from PIL import Image
+
     progress = progress or null_progress
     path = Path(path)
     if count < 1:
@@ -127,16 +134,24 @@ def decode_frames(path: Path | str, count: int = DEFAULT_FRAMES, progress: Progr
         raise UserInputError(f"video {path} has {len(scores)} decodable frame{'s' * (len(scores) != 1)}; "
                              "a walk around the object needs many")
     chosen = select_frames(np.asarray(scores), count)
-    wanted, images, rotation = set(chosen), [], 0
+    wanted, images, paths, rotation = set(chosen), [], [], 0
+    if folder is not None:
+        Path(folder).mkdir(parents=True, exist_ok=True)
     for index, rgb, rotation in _frames(path):
         if index in wanted:
-            images.append(rgb)
-            progress("video: decoding the chosen frames", len(images), len(chosen))
+            if folder is None:
+                images.append(rgb)
+            else:
+                paths.append(Path(folder) / f"frame_{index:06d}.png")
+                Image.fromarray(rgb).save(paths[-1])
+            progress("video: decoding the chosen frames", len(images) + len(paths), len(chosen))
         if index >= chosen[-1]:
             break
-    if len(images) != len(chosen):  # the file changed between the passes
-        raise UserInputError(f"video {path} decoded differently on a second pass ({len(images)} of {len(chosen)} frames)")
-    return VideoFrames(tuple(images), tuple(chosen), tuple(scores[i] for i in chosen), len(scores), rotation, fps)
+    if len(images) + len(paths) != len(chosen):  # the file changed between the passes
+        raise UserInputError(f"video {path} decoded differently on a second pass ({len(images) + len(paths)} of "
+                             f"{len(chosen)} frames)")
+    return VideoFrames(tuple(images), tuple(chosen), tuple(scores[i] for i in chosen), len(scores), rotation, fps,
+                       tuple(paths))
 
 
 def write_frames(frames: VideoFrames, folder: Path) -> list[Path]:

@@ -158,10 +158,10 @@ def run_sfm(phone: PhoneInput, target: Path, config: PhoneConfig, progress: Prog
         record: dict = {"input": str(phone.path), "kind": phone.kind}
         frame_index = None
         if phone.kind == "video":
-            from real2sim.capture.video import decode_frames, write_frames
+            from real2sim.capture.video import decode_frames
 
-            frames = decode_frames(phone.path, config.frames, progress)
-            paths = write_frames(frames, tmp / "frames")
+            frames = decode_frames(phone.path, config.frames, progress, folder=tmp / "frames")
+            paths = list(frames.paths)
             frame_index = {p.name: i for p, i in zip(paths, frames.indices)}
             record["video"] = frames.to_json()
         else:
