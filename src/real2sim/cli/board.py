@@ -28,7 +28,7 @@ def register(sub) -> None:
         "board",
         help="write the printable ChArUco board (PDF + PNG) that phone captures lie on",
         description="A ChArUco board (chessboard squares with ArUco markers, OpenCV) as a one-page landscape PDF and "
-        "a PNG beside it (same name, .png), both at 609.6 dpi. Print it at 100 %% (no 'fit to page'), lay it flat "
+        "a PNG beside it (same name, .png), both at 609.6 dpi. Print it at 100 % (no 'fit to page'), lay it flat "
         "on the table under the object, and photograph the object standing on it: `run` finds it and sets metres, "
         "the table plane (z = 0) and the world frame (origin at the board's centre, x along its long side). The "
         "square size is printed on the page and stored in the files' metadata.",
