@@ -83,6 +83,41 @@ def test_board_is_found_in_most_views_where_the_truth_says(photos):
     assert abs(m[2, 3]) < 1e-3 and np.linalg.norm(m[:3, 3]) < 2e-3  # 1 mm, origin 2 mm
 
 
+def test_lens_distortion_is_the_one_ground_truth_states(tmp_path):
+    """A barrel lens: ground_truth/ states k1, the board's pose comes out right only when the
+    detection is told it, and the masks are the distorted silhouettes."""
+    cfg = HandheldConfig(views=4, width=320, height=240, board=DEFAULT_BOARD, distortion_k1=-0.12, seed=1,
+                         close_fraction=0.0, motion_blur_px=0.0)
+    capture_handheld(_bottle(), tmp_path / "lens", cfg)
+    gt = read_ground_truth(tmp_path / "lens")
+    assert gt.intrinsics.k1 == pytest.approx(-0.12) and gt.intrinsics.k2 == 0.0
+    told, untold = [], []
+    for f in gt.frames:
+        c2w = f.transform_matrix @ CV_FROM_GL
+        image = load_image_rgb(tmp_path / "lens" / f.file_path)
+        for dist, out in (((-0.12, 0.0, 0.0, 0.0), told), (None, untold)):
+            view = detect_board(image, DEFAULT_BOARD, gt.intrinsics.matrix(), dist)
+            if view is not None:
+                out.append((view.reprojection_px, np.linalg.norm(np.linalg.inv(view.camera_from_board)[:3, 3] - c2w[:3, 3])))
+    # measured: told 0.9-3.7 mm, untold 4.7-7.4 mm (the board lies near the middle, where the lens bends least)
+    assert len(told) >= 3 and max(e for _, e in told) < 0.005 and max(r for r, _ in told) < 0.5
+    assert not untold or np.median([e for _, e in untold]) > 2 * np.median([e for _, e in told])
+    # the mask's outline follows the lens: project the mesh's vertices with k1 and compare extents
+    import trimesh
+
+    mesh = trimesh.load(tmp_path / "lens/ground_truth/mesh.obj", force="mesh")
+    pose = np.array(json.loads((tmp_path / "lens/ground_truth/object_pose.json").read_text())["world_from_mesh"])
+    pts = trimesh.transform_points(mesh.vertices, pose)
+    f = gt.frames[0]
+    w2c = np.linalg.inv(f.transform_matrix @ CV_FROM_GL)
+    pc = pts @ w2c[:3, :3].T + w2c[:3, 3]
+    x, y = pc[:, 0] / pc[:, 2], pc[:, 1] / pc[:, 2]
+    factor = 1 - 0.12 * (x * x + y * y)
+    u = gt.intrinsics.fl_x * x * factor + gt.intrinsics.cx
+    cols = np.flatnonzero(load_mask(tmp_path / "lens" / f.mask_path).any(axis=0))
+    assert abs(cols.min() - u.min()) < 1.5 and abs(cols.max() + 1 - u.max()) < 1.5
+
+
 def test_handheld_path_is_a_persons():
     cfg = HandheldConfig(views=60)
     target, radius = np.array([0.0, 0.0, 0.09]), 0.1
@@ -166,6 +201,8 @@ def test_video_rotation_metadata_turns_the_stored_frames_upright(tmp_path):
     (["--handheld", "--ring-elevation-deg", "20"], "--ring-elevation-deg"),
     (["--handheld", "--fov-deg", "150"], "--fov-deg"),
     (["--handheld", "--fps", "0"], "--fps"),
+    (["--distortion-k1", "-0.1"], "--distortion-k1 needs --handheld"),
+    (["--handheld", "--distortion-k1", "0.9"], "--distortion-k1"),
     (["--handheld", "--video-rotation-deg", "90"], "--video-rotation-deg needs --video"),
     (["--video-rotation-deg", "90"], "--video-rotation-deg needs --handheld"),
     (["--handheld", "--video", "--video-rotation-deg", "45"], "--video-rotation-deg"),

@@ -38,7 +38,7 @@ import trimesh
 from real2sim.capture.board import BoardSpec, board_centre_on_page_dots, page_image
 from real2sim.capture.capture_output import save_png
 from real2sim.capture.hard_rigs import apply_colour_gains, colour_gains
-from real2sim.capture.phone_media import VideoWriter, motion_blur, phone_exif, photo_name
+from real2sim.capture.phone_media import LensWarp, VideoWriter, motion_blur, phone_exif, photo_name
 from real2sim.capture.render_scene import OBJECT_LABEL, RenderScene
 from real2sim.capture.textures import export_textured_obj, has_texture, procedural_texture, with_procedural_texture
 from real2sim.capture.wrist_camera import CaptureResult, look_at_c2w_gl, object_frame
@@ -76,6 +76,8 @@ class HandheldConfig:
     ``video_rotation_deg`` (0, 90, 180, 270): the video's frames are stored turned and the stream's
     display matrix says to turn them back by this much, counter-clockwise, as a phone held upright
     records (270: portrait); ``width`` x ``height`` and ground_truth/ are the picture as displayed.
+    ``distortion_k1``, ``distortion_k2``: the lens's radial distortion (OpenCV's; phones mostly
+    correct it, so 0 by default; k1 < 0 is barrel), stated in ground_truth/'s intrinsics.
     """
 
     views: int = 60
@@ -98,13 +100,16 @@ class HandheldConfig:
     exposure_jitter_stops: float = 0.1
     supersample: int = 2
     video_rotation_deg: int = 0
+    distortion_k1: float = 0.0
+    distortion_k2: float = 0.0
     table_size_m: float = 2.4
     texture_seed: int = 7
 
     def camera(self) -> CameraIntrinsics:
         fl = 0.5 * self.width / np.tan(np.radians(self.fov_deg) / 2)
         return CameraIntrinsics(width=self.width, height=self.height, fl_x=float(fl), fl_y=float(fl),
-                                cx=self.width / 2.0, cy=self.height / 2.0)
+                                cx=self.width / 2.0, cy=self.height / 2.0, k1=float(self.distortion_k1),
+                                k2=float(self.distortion_k2))
 
     def validate(self) -> None:
         if int(self.views) < 1:
@@ -117,6 +122,9 @@ class HandheldConfig:
             raise UserInputError(f"--fov-deg must be in 20..120 for a handheld capture (got {self.fov_deg})")
         if not (np.isfinite(self.fps) and 1.0 <= self.fps <= 240.0):
             raise UserInputError(f"--fps must be in 1..240 (got {self.fps})")
+        for name in ("distortion_k1", "distortion_k2"):
+            if not (np.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 0.5):
+                raise UserInputError(f"--{name.replace('_', '-')} must be in -0.5..0.5 (got {getattr(self, name)})")
         if self.video_rotation_deg not in (0, 90, 180, 270):
             raise UserInputError(f"--video-rotation-deg must be 0, 90, 180 or 270 (got {self.video_rotation_deg})")
         if self.video_rotation_deg and not self.video:
@@ -250,17 +258,27 @@ def _build_scene(config: HandheldConfig, mesh_obj: Path, world_from_mesh: np.nda
 
 
 class _Renderer:
-    """Colour at ``supersample`` times the size (averaged down), depth and labels at the image's size."""
+    """Colour at ``supersample`` times the size (averaged down), depth and labels at the image's size,
+    each rendered on the lens's pinhole canvas and seen through its distortion (:class:`LensWarp`)."""
 
     def __init__(self, scene: RenderScene, cam: CameraIntrinsics, supersample: int, far_m: float):
-        from pydrake.geometry import ClippingRange, ColorRenderCamera, RenderCameraCore
+        from pydrake.geometry import ClippingRange, ColorRenderCamera, DepthRange, DepthRenderCamera, RenderCameraCore
         from pydrake.math import RigidTransform
         from pydrake.systems.sensors import CameraInfo
 
         k = int(supersample)
-        # Pixel centres at u + 0.5 on both grids: a k x k block's mean lands on the small pixel's centre.
-        info = CameraInfo(cam.width * k, cam.height * k, cam.fl_x * k, cam.fl_y * k, cam.cx * k, cam.cy * k)
-        self.big = ColorRenderCamera(RenderCameraCore("vtk", info, ClippingRange(0.01, far_m), RigidTransform()), False)
+        self.lens = LensWarp(cam, cam.k1, cam.k2)
+        c = self.lens.canvas
+
+        def core(scale: int):
+            # Pixel centres at u + 0.5 on both grids: a k x k block's mean lands on the small pixel's centre.
+            info = CameraInfo(c.width * scale, c.height * scale, c.fl_x * scale, c.fl_y * scale, c.cx * scale,
+                              c.cy * scale)
+            return RenderCameraCore("vtk", info, ClippingRange(0.01, far_m), RigidTransform())
+
+        self.big = ColorRenderCamera(core(k), False)
+        self.small = ColorRenderCamera(core(1), False)
+        self.depth = DepthRenderCamera(core(1), DepthRange(0.02, 0.9 * far_m))
         self.scene, self.k, self._RigidTransform = scene, k, RigidTransform
 
     def render(self, c2w_gl: np.ndarray, blur_px: np.ndarray, truth: bool):
@@ -272,12 +290,13 @@ class _Renderer:
         big = query.RenderColorImage(self.big, world, x_wc).data[:, :, :3].astype(np.float32)
         big = motion_blur(big, np.asarray(blur_px, dtype=float) * self.k)
         h, w = big.shape[0] // self.k, big.shape[1] // self.k
-        rgb = big.reshape(h, self.k, w, self.k, 3).mean(axis=(1, 3))
+        rgb = self.lens.apply(big.reshape(h, self.k, w, self.k, 3).mean(axis=(1, 3)))
         rgb = np.clip(np.round(rgb), 0, 255).astype(np.uint8)
         if not truth:
             return rgb, None, None
-        depth = query.RenderDepthImage(s.depth_cam, world, x_wc).data[:, :, 0].copy()
-        label = query.RenderLabelImage(s.color_cam, world, x_wc).data[:, :, 0].copy()
+        # depth along the optical axis belongs to the 3D point, which the lens only moves in the image
+        depth = self.lens.apply(query.RenderDepthImage(self.depth, world, x_wc).data[:, :, 0].copy(), nearest=True)
+        label = self.lens.apply(query.RenderLabelImage(self.small, world, x_wc).data[:, :, 0].copy(), nearest=True)
         return rgb, depth, label
 
 

@@ -71,3 +71,43 @@ class VideoWriter:
         for packet in self.stream.encode():
             self.container.mux(packet)
         self.container.close()
+
+
+class LensWarp:
+    """Radial lens distortion (OpenCV's k1, k2) applied to a pinhole render.
+
+    The pinhole image is rendered on a ``canvas`` (intrinsics of the same focal length, larger
+    where barrel distortion (k1 < 0) reaches beyond the output's pinhole field) and resampled onto
+    the output grid: each output pixel's centre, undistorted (fixed-point iteration), says where to
+    sample. Without distortion the canvas is the output and nothing is resampled."""
+
+    def __init__(self, cam, k1: float, k2: float):
+        from dataclasses import replace
+
+        self.identity = k1 == 0.0 and k2 == 0.0
+        u, v = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
+        xd, yd = (u - cam.cx) / cam.fl_x, (v - cam.cy) / cam.fl_y
+        xu, yu = xd.copy(), yd.copy()
+        for _ in range(30):  # x_d = x_u (1 + k1 r^2 + k2 r^4), r from the undistorted point
+            r2 = xu * xu + yu * yu
+            f = 1.0 + k1 * r2 + k2 * r2 * r2
+            xu, yu = xd / f, yd / f
+        pu, pv = cam.fl_x * xu + cam.cx, cam.fl_y * yu + cam.cy  # pinhole pixel coordinates (centres +0.5)
+        x0, y0 = (int(np.floor(min(p.min(), 0.0))) - 2 for p in (pu, pv))
+        x1 = int(np.ceil(max(pu.max(), cam.width))) + 2
+        y1 = int(np.ceil(max(pv.max(), cam.height))) + 2
+        if self.identity:
+            x0, y0, x1, y1 = 0, 0, cam.width, cam.height
+        self.canvas = replace(cam, width=x1 - x0, height=y1 - y0, cx=cam.cx - x0, cy=cam.cy - y0, k1=0.0, k2=0.0)
+        # cv2.remap's coordinates put pixel centres at integers
+        self.map_x = (pu - x0 - 0.5).astype(np.float32)
+        self.map_y = (pv - y0 - 0.5).astype(np.float32)
+
+    def apply(self, image: np.ndarray, nearest: bool = False) -> np.ndarray:
+        """The canvas image (H, W[, C]) seen through the lens, on the output grid."""
+        import cv2
+
+        if self.identity:
+            return image
+        flags = cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR
+        return cv2.remap(image, self.map_x, self.map_y, flags, borderMode=cv2.BORDER_REPLICATE)

@@ -166,13 +166,17 @@ def _add_handheld_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--video", action="store_true",
                    help="with --handheld: write DATASET/clip.mp4 (H.264) of --views frames at --fps instead of photos")
     g.add_argument("--fps", type=FPS, default=30.0, help="with --video: frames per second (default 30)")
+    g.add_argument("--distortion-k1", type=DISTORTION, default=0.0, metavar="K1",
+                   help="with --handheld: the lens's radial distortion, OpenCV's k1 (default 0: phones correct it; "
+                   "-0.1 is a visible barrel), stated in ground_truth/")
     g.add_argument("--video-rotation-deg", choices=["0", "90", "180", "270"], default="0",
                    help="with --video: store the frames turned, with rotation metadata that turns them back by this "
                    "much counter-clockwise, as phones do (270: held upright); --width x --height is the upright picture")
 
 
-#: --fps of a handheld video.
+#: --fps of a handheld video; --distortion-k1 of its lens.
 FPS = number(1.0, 240.0)
+DISTORTION = number(-0.5, 0.5)
 
 
 def _resolve_mesh(text: str):
@@ -200,6 +204,8 @@ def run_capture(args: argparse.Namespace) -> int:
             raise UserInputError(f"--{flag} needs --handheld")
     if args.video_rotation_deg != "0":
         raise UserInputError("--video-rotation-deg needs --handheld --video")
+    if args.distortion_k1 != 0.0:
+        raise UserInputError("--distortion-k1 needs --handheld")
     if args.jpeg_quality is not None and not args.jpeg:
         raise UserInputError("--jpeg-quality needs --jpeg")
     args.views = 200 if args.views is None else args.views
@@ -295,7 +301,7 @@ def _run_handheld(args: argparse.Namespace) -> int:
     cfg = HandheldConfig(views=60 if args.views is None else args.views, width=args.width, height=args.height,
                          fov_deg=65.0 if args.fov_deg is None else args.fov_deg, seed=args.seed,
                          board=DEFAULT_BOARD if args.board else None, video=args.video, fps=args.fps,
-                         video_rotation_deg=int(args.video_rotation_deg),
+                         video_rotation_deg=int(args.video_rotation_deg), distortion_k1=args.distortion_k1,
                          jpeg_quality=args.jpeg_quality or DEFAULT_JPEG_QUALITY)
     cfg.validate()
     check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
