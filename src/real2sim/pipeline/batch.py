@@ -158,20 +158,39 @@ class RayObjects:
 
         self._ray = ray
         kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.ERROR}
-        if address is None:
-            kwargs.update(num_cpus=workers, _node_ip_address="127.0.0.1")
-        else:
-            _probe_address(address, timeout_s)
+        self._temp_dir = None
         self._owns = not ray.is_initialized()
+        if address is not None:
+            _probe_address(address, timeout_s)
+        elif self._owns:
+            import tempfile
+
+            # Its own session folder: Ray's shared default (/tmp/ray) holds other users' sessions; short,
+            # because Ray's socket paths must fit in 107 characters.
+            self._temp_dir = tempfile.mkdtemp(prefix="r2s_ray_", dir="/tmp" if os.path.isdir("/tmp") else None)
+            kwargs.update(num_cpus=workers, _node_ip_address="127.0.0.1", _temp_dir=self._temp_dir)
         if self._owns:
-            _init_ray_bounded(ray, address, kwargs, timeout_s if address else max(timeout_s, 120.0))
+            try:
+                if address is not None:
+                    _init_ray_bounded(ray, address, kwargs, timeout_s)
+                else:  # in this thread: Ray's processes die with the thread that started them (PR_SET_PDEATHSIG)
+                    ray.init(**kwargs)
+            except UserInputError:
+                self._remove_temp_dir()
+                raise
+            except Exception as exc:
+                self._remove_temp_dir()
+                raise UserInputError(f"could not start a local Ray: {str(exc).splitlines()[0] if str(exc) else exc!r}")
         self.gpus = float(ray.cluster_resources().get("GPU", 0.0))
+        self._remote: dict[Callable, Any] = {}
         self._refs: dict[int, Any] = {}
         self._next = 0
 
     def submit(self, fn: Callable, job: ObjectJob, attempt: int = 0) -> int:
         gpu = 1 if job.gpu and self.gpus >= 1 else 0
-        remote = self._ray.remote(fn).options(num_cpus=0 if gpu else 1, num_gpus=gpu, max_retries=1)
+        if fn not in self._remote:
+            self._remote[fn] = self._ray.remote(fn)
+        remote = self._remote[fn].options(num_cpus=1, num_gpus=gpu, max_retries=1)
         self._next += 1
         self._refs[self._next] = remote.remote(job)
         return self._next
@@ -195,6 +214,13 @@ class RayObjects:
             self._refs.clear()
         if self._owns:
             self._ray.shutdown()
+        self._remove_temp_dir()
+
+    def _remove_temp_dir(self) -> None:
+        if self._temp_dir is not None:
+            import shutil
+
+            shutil.rmtree(self._temp_dir, ignore_errors=True)
 
 
 def make_executor(config: BatchConfig, workers: int):

@@ -1,0 +1,131 @@
+"""`real2sim batch` throughput: 6 small captures with 1, 2 and 4 workers, local pool and a local Ray.
+
+The 6 captures: the bundled can, mug and bottle, each twice (pose-noise seeds 0 and 1), small views
+(the sizes below). Every object: visual hull, 2 representations (spheres:8 and boxes:4), no evaluation,
+no pose refinement. Measured, each on a fresh CATALOGUE, as the wall time of the whole command:
+
+* one by one: `real2sim run` on each object, one after another (the baseline a batch replaces);
+* `real2sim batch --executor local|ray --workers N` for each N.
+
+Reported: objects per hour, speed-up against one worker of the same executor, overhead of the
+one-worker local batch against one by one, Ray against the local pool with the same workers, and the
+mean stage times (from timings.csv), which docs/scaling.md turns into the cost of a 100-object batch.
+
+    python benchmarks/bench_batch.py                       # 6 captures, 1 2 4 workers, local and ray
+    python benchmarks/bench_batch.py --workers 1 2 --executors local   # what a loaded machine allows
+
+Writes docs/benchmarks/batch.md (machine and date included).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import markdown_table, write_section  # noqa: E402
+
+OBJECTS = ("can", "mug", "bottle")
+SEEDS = (0, 1)
+RUN_FLAGS = ["--backend", "hull", "--voxels", "64", "--max-faces", "5000", "--texture-px", "128",
+             "--iterations", "200", "--no-refine-poses", "--collision", "spheres:8", "--collision", "boxes:4"]
+MASSES_KG = {"can": 0.35, "mug": 0.3, "bottle": 0.6}
+
+
+def _cli(*argv) -> float:
+    """Wall seconds of ``real2sim ARGV`` in its own process; raises when it fails."""
+    start = time.monotonic()
+    done = subprocess.run([sys.executable, "-m", "real2sim", *map(str, argv)], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"real2sim {' '.join(map(str, argv[:2]))} failed:\n{done.stdout}\n{done.stderr}")
+    return time.monotonic() - start
+
+
+def make_captures(root: Path, views: int, width: int, height: int) -> list[Path]:
+    datasets = []
+    for name in OBJECTS:
+        for seed in SEEDS:
+            ds = root / f"{name}_{seed}"
+            _cli("capture", name, "--out", ds, "--views", views, "--width", width, "--height", height, "--seed", seed)
+            datasets.append(ds)
+    return datasets
+
+
+def _masses(root: Path, datasets: list[Path]) -> Path:
+    path = root / "masses.csv"
+    path.write_text("name,mass_kg\n" + "".join(f"{d.name},{MASSES_KG[d.name.split('_')[0]]}\n" for d in datasets))
+    return path
+
+
+def stage_means(catalogue: Path) -> dict[str, float]:
+    with open(catalogue / "timings.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    stages: dict[str, list[float]] = {}
+    for row in rows:
+        stages.setdefault(row["stage"], []).append(float(row["wall_s"]))
+    return {stage: statistics.mean(values) for stage, values in stages.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
+    parser.add_argument("--executors", nargs="+", default=["local", "ray"], choices=["local", "ray"])
+    parser.add_argument("--views", type=int, default=24)
+    parser.add_argument("--width", type=int, default=160)
+    parser.add_argument("--height", type=int, default=120)
+    parser.add_argument("--no-serial", action="store_true", help="skip the one-by-one baseline")
+    parser.add_argument("--tag", default="batch", help="section name in docs/benchmarks/")
+    args = parser.parse_args()
+
+    with tempfile.TemporaryDirectory(prefix="bench_batch_") as tmp:
+        root = Path(tmp)
+        datasets = make_captures(root, args.views, args.width, args.height)
+        masses = _masses(root, datasets)
+        n = len(datasets)
+        results: dict[tuple[str, int], float] = {}
+        serial_s = None
+        if not args.no_serial:
+            serial_s = sum(_cli("run", ds, "--mass", MASSES_KG[ds.name.split("_")[0]], "--out", root / "serial" / ds.name,
+                                *RUN_FLAGS) for ds in datasets)
+            print(f"one by one: {serial_s:.0f} s", flush=True)
+        means = {}
+        for executor in args.executors:
+            for workers in args.workers:
+                out = root / f"{executor}_{workers}"
+                results[executor, workers] = _cli("batch", *datasets, "--masses", masses, "--out", out,
+                                                  "--executor", executor, "--workers", workers, *RUN_FLAGS)
+                means = means or stage_means(out)
+                print(f"{executor} x{workers}: {results[executor, workers]:.0f} s", flush=True)
+    rows = []
+    for (executor, workers), wall_s in results.items():
+        one = results.get((executor, 1))
+        local = results.get(("local", workers))
+        rows.append([executor, workers, round(wall_s), round(n * 3600 / wall_s, 1),
+                     f"{one / wall_s:.2f}x" if one else "-",
+                     f"{100 * (wall_s / local - 1):+.0f} %" if local and executor == "ray" else "-"])
+    body = [f"{n} captures ({', '.join(OBJECTS)} x seeds {SEEDS}; {args.views} views at {args.width}x{args.height}), "
+            f"`{' '.join(RUN_FLAGS)}`, no evaluation; each row a fresh CATALOGUE, the whole command's wall time "
+            "(Ray's start included).", "",
+            markdown_table(["executor", "workers", "wall s", "objects / h", "vs 1 worker", "vs local pool"], rows)]
+    if serial_s is not None:
+        body += ["", f"One by one (`real2sim run` x {n}): {serial_s:.0f} s, {n * 3600 / serial_s:.1f} objects / h."]
+        if ("local", 1) in results:
+            body.append(f"Overhead of the one-worker local batch against one by one: "
+                        f"{100 * (results['local', 1] / serial_s - 1):+.0f} %.")
+    if means:
+        body += ["", "Mean stage times per object (timings.csv of the first batch): "
+                 + ", ".join(f"{s} {t:.1f} s" for s, t in means.items()) + "."]
+    command = "python benchmarks/bench_batch.py " + " ".join(sys.argv[1:])
+    path = write_section(args.tag, "real2sim batch: throughput with workers (issue 31)", "\n".join(body), command)
+    print("\n".join(body))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
