@@ -143,3 +143,40 @@ def test_a_second_batch_on_the_same_catalogue_is_refused(capsys, datasets, tmp_p
         holder.kill()
         holder.wait()
     assert not out.exists()
+
+
+def test_the_catalogue_row_of_an_evaluated_asset_takes_the_reports_recommendations(tmp_path):
+    """The evaluation's summary.csv (written here in its own layout) decides the recommendations; a
+    representation whose runs all failed (empty OCAE) is passed over, and numbers keep 6 digits."""
+    from real2sim.formats.results import SUMMARY_COLUMNS, write_csv_atomic
+    from real2sim.pipeline.catalogue import object_row
+
+    asset = tmp_path / "can_ds"
+    (asset / "visual").mkdir(parents=True)
+    (asset / "visual" / "model.obj").write_text("v 0 0 0\nv 0.07 0.068 0.1\nv 0.01 0.02 0.03\n")
+    (asset / "physical_properties.json").write_text(json.dumps({"mass_kg": 0.35}))
+    fits = {"spheres_64": 0.95, "cylinders_1": 0.97, "boxes_4": 0.8}
+    for name, iou in fits.items():
+        (asset / name).mkdir()
+        (asset / name / "fit_report.json").write_text(json.dumps({"iou": iou, "num_primitives": 4}))
+    (asset / "results").mkdir()
+    (asset / "results" / "report.html").write_text("<html></html>")
+    summary = [  # accuracy: cylinders (OCAE within x1.1 of the best, faster); speed: boxes
+        {"representation": "spheres_64_point", "collision": "spheres_64", "contact_model": "point",
+         "ocae_m": 0.0100, "ate_m": 0.001, "sim_time_s": 2.0, "cpd_m_per_s": 0.1},
+        {"representation": "cylinders_1_point", "collision": "cylinders_1", "contact_model": "point",
+         "ocae_m": 0.0105, "ate_m": 0.001, "sim_time_s": 0.5, "cpd_m_per_s": 0.1},
+        {"representation": "boxes_4_point", "collision": "boxes_4", "contact_model": "point",
+         "ocae_m": 0.0301234567, "ate_m": 0.003, "sim_time_s": 0.2, "cpd_m_per_s": 0.1},
+        {"representation": "boxes_4_hydroelastic", "collision": "boxes_4", "contact_model": "hydroelastic",
+         "ocae_m": "", "ate_m": "", "sim_time_s": "", "cpd_m_per_s": ""},
+    ]
+    write_csv_atomic(asset / "results" / "summary.csv", summary, SUMMARY_COLUMNS)
+    row = object_row("can_ds", asset, {"status": "done", "reason": ""})
+    assert row["basis"] == "evaluation" and row["report"] == "can_ds/results/report.html"
+    assert (row["accuracy_representation"], row["accuracy_ocae_m"], row["accuracy_sim_time_s"]) == (
+        "cylinders_1_point", "0.0105", "0.5")
+    assert (row["speed_representation"], row["speed_ocae_m"], row["speed_iou"]) == ("boxes_4_point", "0.0301235", "0.8")
+    assert row["accuracy_iou"] == "0.97" and row["mass_kg"] == "0.35"
+    assert (row["size_x_m"], row["size_y_m"], row["size_z_m"]) == ("0.07", "0.068", "0.1")
+    assert row["representations"] == "boxes_4;cylinders_1;spheres_64"

@@ -42,6 +42,13 @@ def _num(value: Any) -> str:
     return f"{x:.6g}" if math.isfinite(x) else ""
 
 
+def _float(value: Any) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
 def _json(path: Path) -> dict:
     try:
         data = json.loads(path.read_text())
@@ -83,8 +90,12 @@ def _from_fits(fits: dict[str, dict]) -> dict:
 def _from_evaluation(summary_csv: Path, fits: dict[str, dict]) -> dict:
     from real2sim.report.pareto import recommend
 
-    with open(summary_csv, newline="", encoding="utf-8") as f:
-        rows = list(csv.DictReader(f))
+    try:
+        with open(summary_csv, newline="", encoding="utf-8") as f:
+            raw = list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return {}
+    rows = [{**r, **{k: _float(r.get(k)) for k in ("ocae_m", "ate_m", "sim_time_s", "cpd_m_per_s")}} for r in raw]
     found = {}
     for preference in ("accuracy", "speed"):
         row = recommend(rows, preference)
