@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -286,7 +287,7 @@ def run_batch(jobs: list[ObjectJob], out: Path, config: BatchConfig, progress: P
                 if job.config is None:
                     _record(out, result, {"name": job.name, "status": "failed", "reason": job.reason}, "", echo)
             if executor is not None:
-                _schedule(executor, todo, keys, out, result, progress, echo, len(jobs))
+                _schedule(executor, todo, keys, out, result, progress, echo, len(jobs), workers)
         finally:
             if executor is not None:
                 executor.shutdown(abort=len(result.outcomes) < len(jobs))
@@ -295,11 +296,14 @@ def run_batch(jobs: list[ObjectJob], out: Path, config: BatchConfig, progress: P
 
 
 def _schedule(executor, todo: list[ObjectJob], keys: dict, out: Path, result: BatchResult, progress: ProgressFn,
-              echo: Callable[[str], None], total: int) -> None:
+              echo: Callable[[str], None], total: int, workers: int) -> None:
     from real2sim.evaluate.executors import _Retry
 
+    started, before = time.monotonic(), len(result.outcomes)
     handles = {executor.submit(run_object, job): job for job in todo}
-    _show(progress, result, len(handles), total)
+    show = lambda: _show(progress, result, len(handles), total, workers, time.monotonic() - started,  # noqa: E731
+                         len(result.outcomes) - before)
+    show()
     while handles:
         for handle in executor.wait(set(handles)):
             job = handles.pop(handle)
@@ -310,7 +314,7 @@ def _schedule(executor, todo: list[ObjectJob], keys: dict, out: Path, result: Ba
             if "name" not in outcome:  # the executor's own failure row: its worker died
                 outcome = {"name": job.name, "status": "failed", "reason": WORKER_DIED, "ran": []}
             _record(out, result, outcome, keys[job.name], echo)
-        _show(progress, result, len(handles), total)
+        show()
 
 
 def _record(out: Path, result: BatchResult, outcome: dict, key: str, echo: Callable[[str], None]) -> None:
@@ -324,7 +328,11 @@ def _record(out: Path, result: BatchResult, outcome: dict, key: str, echo: Calla
         echo(f"{outcome['name']}: FAILED: {state['reason']}")
 
 
-def _show(progress: ProgressFn, result: BatchResult, running: int, total: int) -> None:
-    finished = len(result.outcomes)
-    failed = len(result.failed)
-    progress(f"batch: {finished - failed} done, {running} running, {failed} failed", finished, total)
+def _show(progress: ProgressFn, result: BatchResult, left: int, total: int, workers: int, elapsed_s: float,
+          finished_now: int) -> None:
+    """The whole batch on one line: done, running, queued, failed, and an ETA from this run's pace."""
+    finished, failed = len(result.outcomes), len(result.failed)
+    running = min(left, workers)
+    eta = f", about {elapsed_s / finished_now * left / 60:.0f} min left" if finished_now and left else ""
+    progress(f"batch: {finished - failed} done, {running} running, {left - running} queued, {failed} failed{eta}",
+             finished, total)
