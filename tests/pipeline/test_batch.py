@@ -145,13 +145,10 @@ def test_a_second_batch_on_the_same_catalogue_is_refused(capsys, datasets, tmp_p
     assert not out.exists()
 
 
-def test_the_catalogue_row_of_an_evaluated_asset_takes_the_reports_recommendations(tmp_path):
-    """The evaluation's summary.csv (written here in its own layout) decides the recommendations; a
-    representation whose runs all failed (empty OCAE) is passed over, and numbers keep 6 digits."""
+def evaluated_asset(asset: Path) -> Path:
+    """An asset folder with what the catalogue reads of an evaluated asset, summary.csv in its own layout."""
     from real2sim.formats.results import SUMMARY_COLUMNS, write_csv_atomic
-    from real2sim.pipeline.catalogue import object_row
 
-    asset = tmp_path / "can_ds"
     (asset / "visual").mkdir(parents=True)
     (asset / "visual" / "model.obj").write_text("v 0 0 0\nv 0.07 0.068 0.1\nv 0.01 0.02 0.03\n")
     (asset / "physical_properties.json").write_text(json.dumps({"mass_kg": 0.35}))
@@ -172,6 +169,15 @@ def test_the_catalogue_row_of_an_evaluated_asset_takes_the_reports_recommendatio
          "ocae_m": "", "ate_m": "", "sim_time_s": "", "cpd_m_per_s": ""},
     ]
     write_csv_atomic(asset / "results" / "summary.csv", summary, SUMMARY_COLUMNS)
+    return asset
+
+
+def test_the_catalogue_row_of_an_evaluated_asset_takes_the_reports_recommendations(tmp_path):
+    """The evaluation's summary.csv decides the recommendations; a representation whose runs all failed
+    (empty OCAE) is passed over, and numbers keep 6 digits."""
+    from real2sim.pipeline.catalogue import object_row
+
+    asset = evaluated_asset(tmp_path / "can_ds")
     row = object_row("can_ds", asset, {"status": "done", "reason": ""})
     assert row["basis"] == "evaluation" and row["report"] == "can_ds/results/report.html"
     assert (row["accuracy_representation"], row["accuracy_ocae_m"], row["accuracy_sim_time_s"]) == (
@@ -180,3 +186,26 @@ def test_the_catalogue_row_of_an_evaluated_asset_takes_the_reports_recommendatio
     assert row["accuracy_iou"] == "0.97" and row["mass_kg"] == "0.35"
     assert (row["size_x_m"], row["size_y_m"], row["size_z_m"]) == ("0.07", "0.068", "0.1")
     assert row["representations"] == "boxes_4;cylinders_1;spheres_64"
+
+
+def test_the_catalogue_page_opens_offline_in_a_browser(datasets, tmp_path):
+    """index.html in headless chromium: both pictures load (one of a failed object), and no request
+    leaves the machine."""
+    from tests.report.test_browser import CHROMIUM, _open, _remote
+
+    if CHROMIUM is None:
+        pytest.skip("no chromium on PATH (make test installs Debian's chromium where apt-get runs as root)")
+    from real2sim.pipeline.batch import ObjectJob
+    from real2sim.pipeline.catalogue import write_catalogue
+
+    out = tmp_path / "cat"
+    evaluated_asset(out / "can_ds")
+    jobs = [ObjectJob("can_ds", datasets["can"], out / "can_ds"), ObjectJob("mug_ds", datasets["mug"], out / "mug_ds")]
+    write_catalogue(out, jobs, {"can_ds": {"status": "done", "reason": ""},
+                                "mug_ds": {"status": "failed", "reason": "no mass: <b>none</b>"}})
+    page = (out / "index.html").read_text()
+    assert "no mass: &lt;b&gt;none&lt;/b&gt;" in page  # escaped
+    found, urls = _open(out / "index.html", tmp_path)
+    assert found["images"] == 2 and found["broken"] == []
+    assert {"catalogue.csv", "timings.csv", "can_ds/results/report.html"} <= set(found["links"])
+    assert _remote(urls) == []
