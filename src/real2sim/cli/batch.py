@@ -132,7 +132,7 @@ def plan(args: argparse.Namespace):
 
     from real2sim.cli.run import config_from_args
     from real2sim.formats.errors import UserInputError
-    from real2sim.pipeline.batch import BatchConfig, ObjectJob, check_catalogue, check_names, cpu_count
+    from real2sim.pipeline.batch import BatchConfig, ObjectJob, check_catalogue, check_names, cpu_count, dataset_folder
 
     if args.address is not None and args.executor != "ray":
         raise UserInputError("--address is for --executor ray")
@@ -147,7 +147,7 @@ def plan(args: argparse.Namespace):
     threads = max(1, cpu_count() // workers) if args.executor == "local" else 0
     jobs = []
     for name, dataset in zip(names, args.datasets):
-        mass, reason = _mass_of(name, Path(dataset), args, table)
+        mass, reason = _mass_of(name, dataset_folder(dataset), args, table)
         per = argparse.Namespace(**vars(args))  # config_from_args sets some flags on what it is given
         per.dataset, per.out, per.mass, per.overwrite = Path(dataset), out / name, mass or 1.0, False
         per.frames = per.board_square_mm = None
@@ -155,7 +155,7 @@ def plan(args: argparse.Namespace):
             config = config_from_args(per)  # checks the dataset itself: not a dataset -> one line
         except UserInputError as exc:
             raise UserInputError(f"{dataset}: {exc}") from None
-        jobs.append(ObjectJob(name=name, dataset=Path(dataset).resolve(), asset_dir=out / name,
+        jobs.append(ObjectJob(name=name, dataset=dataset_folder(dataset), asset_dir=out / name,
                               config=replace(config, asset=replace(config.asset, mass_kg=mass)) if mass else None,
                               reason=reason, threads=threads, gpu=config.device.startswith("cuda"),
                               log=out / ".batch" / f"{name}.log"))

@@ -91,11 +91,17 @@ def cpu_count() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def dataset_folder(dataset: Path | str) -> Path:
+    """The dataset's folder, resolved (``run`` also takes the path of its transforms.json)."""
+    dataset = Path(dataset).resolve()
+    return dataset.parent if dataset.name == "transforms.json" and dataset.is_file() else dataset
+
+
 def check_names(datasets: list[Path]) -> list[str]:
     """The objects' names (their datasets' folder names); UserInputError when two are the same."""
     seen: dict[str, Path] = {}
     for ds in datasets:
-        name = Path(ds).resolve().name
+        name = dataset_folder(ds).name
         if name.startswith("."):
             raise UserInputError(f"{ds}: a dataset folder's name becomes its folder in CATALOGUE, and {name!r} "
                                  "is hidden; rename it")
