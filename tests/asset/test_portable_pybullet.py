@@ -149,6 +149,10 @@ def test_round_pieces_have_the_shapes_volume_and_pose(can_asset):
             np.testing.assert_allclose(piece.bounds.mean(axis=0), 0.0, atol=1e-9)
             axis_half = s[2] if kind == "ellipsoid" else s[0] + s[1] / 2
             assert piece.bounds[1, 2] == pytest.approx(axis_half, rel=0.02)
+            # no pole vertex: each end is a flat facet across the axis, on which an upright piece stands
+            for sign in (-1.0, 1.0):
+                cap = piece.area_faces[piece.face_normals[:, 2] * sign > 1.0 - 1e-9].sum()
+                assert cap > 1e-3 * piece.area, (name, k, sign)  # a pole vertex gives 0
 
 
 def _connect():
