@@ -64,6 +64,9 @@ class AssetConfig:
         paper does, which tilts squat objects such as a mug.
     fit_config / coacd_config / vhacd_config: None means each stage's defaults
         (the paper's settings, documented in those modules).
+    given_properties: mass, CoM and inertia measured rather than assumed (`real2sim identify`,
+        ``--properties``), in the input mesh's frame when ``given_properties_frame`` is "mesh", else
+        in the asset frame; ``mass_kg`` must be their mass. None: uniform density.
     sdf_cache_dir: where signed-distance samples are cached across builds ("auto":
         $REAL2SIM_CACHE or ~/.cache/real2sim); None caches them for this build only,
         so several primitive SPECs of one build sample the mesh once.
@@ -83,12 +86,19 @@ class AssetConfig:
     coacd_config: object | None = None
     vhacd_config: object | None = None
     sdf_cache_dir: Path | str | None = None
+    given_properties: PhysicalProperties | None = None
+    given_properties_frame: str = "asset"
+    given_properties_source: str = ""
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.mass_kg) and self.mass_kg > 0):
             raise UserInputError(f"mass must be a finite number > 0 kg, got {self.mass_kg}")
         if not self.specs:
             raise UserInputError("no collision SPEC given (e.g. --collision cylinders:10)")
+        if self.given_properties is not None and not np.isclose(self.given_properties.mass_kg, self.mass_kg,
+                                                                rtol=1e-9, atol=0.0):
+            raise UserInputError(f"--mass {self.mass_kg} kg disagrees with the properties' mass "
+                                 f"{self.given_properties.mass_kg} kg: give one of them")
         names = [s.name for s in self.specs]
         if len(set(names)) != len(names):
             raise UserInputError(f"a collision SPEC is given twice: {names}")
@@ -148,8 +158,21 @@ def config_record(config: AssetConfig) -> dict:
         "fit_config": config.fit_config or FitConfig(),
         "coacd_config": config.coacd_config or CoacdConfig(),
         "vhacd_config": config.vhacd_config or VhacdConfig(),
+        "properties": ({"source": config.given_properties_source, "frame": config.given_properties_frame,
+                        "method": config.given_properties.method} if config.given_properties else "uniform density"),
         "software": {"python": platform.python_version(), **_software_versions()},
     }
+
+
+def given_in_asset_frame(config: AssetConfig, transform: np.ndarray) -> PhysicalProperties:
+    """``config.given_properties`` in the asset frame (``transform``: asset from input mesh)."""
+    from real2sim.formats.physical import MESH_FRAME, moved_properties
+
+    given = config.given_properties
+    method = f"{given.method} [given: {config.given_properties_source or 'properties'}]"
+    if config.given_properties_frame == MESH_FRAME:
+        return moved_properties(given, transform, method)
+    return moved_properties(given, np.eye(4), method)
 
 
 def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str = "mesh") -> None:
@@ -312,7 +335,11 @@ def build_asset(
 
         say(f"estimating inertia for {config.mass_kg} kg (uniform density)", 0, 0)
         props = estimate_physical_properties(solid, config.mass_kg, seed=config.seed)
-        write_physical_properties(props, tmp / "physical_properties.json")
+        extra = None
+        if config.given_properties is not None:
+            uniform, props = props, given_in_asset_frame(config, transform)
+            extra = {"source": config.given_properties_source, "uniform_density": uniform.to_json()}
+        write_physical_properties(props, tmp / "physical_properties.json", extra)
         results = _write_representations(solid, props, tmp, out_dir, config, say, reusable)
 
     return AssetResult(Path(out_dir), props, transform, tuple(results))

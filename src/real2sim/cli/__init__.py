@@ -28,7 +28,8 @@ THREADS = integer(1, 1024)
 THREADS_ENV = "REAL2SIM_THREADS"
 
 # Order is the order of `real2sim --help`.
-_VERB_MODULES = ("demo", "objects", "capture", "board", "reconstruct", "asset", "run", "batch", "evaluate", "view")
+_VERB_MODULES = ("demo", "objects", "capture", "board", "reconstruct", "asset", "run", "batch", "excite", "identify",
+                 "evaluate", "view")
 
 
 class OneLineErrorParser(argparse.ArgumentParser):

@@ -47,7 +47,12 @@ def add_mesh_units_argument(p: argparse.ArgumentParser) -> None:
 
 def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX) -> None:
     """Flags shared by `asset` and verbs that build assets (demo, run); ``seed_max``: the largest --seed."""
-    p.add_argument("--mass", type=positive(1000.0), required=True, metavar="KG", help="measured mass of the object, kg")
+    p.add_argument("--mass", type=positive(1000.0), metavar="KG",
+                   help="measured mass of the object, kg (required unless --properties gives it)")
+    p.add_argument("--properties", type=Path, metavar="FILE",
+                   help="mass, centre of mass and inertia measured rather than assumed: the props.json of "
+                   "`real2sim identify` (object mesh frame) or a physical_properties.json (asset frame); "
+                   "default: uniform density for --mass")
     p.add_argument("--collision", action="append", metavar="SPEC",
                    help="collision representation, repeatable: spheres:128, boxes:100, rotated_boxes:50, "
                    "cylinders:10, ellipsoids:64, capsules:16, superquadrics:2 (written as convex mesh pieces), "
@@ -158,8 +163,19 @@ def config_from_args(args: argparse.Namespace):
 
         vhacd_config = VhacdConfig(max_convex_hulls=args.vhacd_max_hulls)
     formats = tuple(dict.fromkeys(["urdf", *(args.formats or [])]))
+    from real2sim.formats.errors import UserInputError
+
+    given, frame, source = None, "asset", ""
+    if getattr(args, "properties", None) is not None:
+        from real2sim.formats.physical import read_given_properties
+
+        given, frame = read_given_properties(args.properties)
+        source = str(args.properties)
+    if args.mass is None and given is None:
+        raise UserInputError("--mass KG is required (or --properties FILE with the measured mass properties)")
     return AssetConfig(
-        mass_kg=args.mass,
+        mass_kg=args.mass if args.mass is not None else given.mass_kg,
+        given_properties=given, given_properties_frame=frame, given_properties_source=source,
         specs=specs,
         flat_bottom=args.flat_bottom,
         support_height_m=args.support_height,
