@@ -50,6 +50,17 @@ def test_identified_properties_go_into_the_asset_frame(tmp_path, capsys):
     uniform = written["uniform_density"]  # side by side with what uniform density would have said
     assert uniform["mass_kg"] == pytest.approx(0.45) and not np.allclose(uniform["com_m"], written["com_m"], atol=1e-3)
     assert json.loads((tmp_path / "asset" / "asset_config.json").read_text())["properties"]["frame"] == "mesh"
+    # truth.json and the report put uniform density's errors beside the given properties' errors
+    from real2sim.formats.physical import read_physical_properties
+    from real2sim.pipeline.truth import _uniform_beside
+    from real2sim.report.sections import _truth_table
+
+    true_props = read_physical_properties(tmp_path / "asset" / "physical_properties.json")  # the given are true here
+    beside = _uniform_beside(tmp_path / "asset", true_props)
+    assert beside["com_error_mm"] > 5.0  # uniform density puts the CoM 10 mm from where it was given
+    page = _truth_table({"physical_properties": {"com_error_mm": 0.0, "inertia_eigenvalue_max_rel_error": 0.0},
+                         "physical_properties_uniform_density": beside})
+    assert "uniform density instead" in page
     # a different --mass beside the properties is a contradiction
     code, _, err = run_cli(capsys, "asset", mesh_path, "--properties", props_path, "--mass", "0.3", "--out",
                            tmp_path / "asset2", "--collision", "mesh")

@@ -104,6 +104,17 @@ def physical_errors(est: PhysicalProperties, true: PhysicalProperties) -> dict:
     }
 
 
+def _uniform_beside(asset_dir: Path, true_props: PhysicalProperties) -> dict | None:
+    """When the asset was given measured properties (``--properties``), the errors uniform density
+    would have had, for the side-by-side comparison; None otherwise."""
+    record = json.loads((asset_dir / "physical_properties.json").read_text()).get("uniform_density")
+    if not record:
+        return None
+    uniform = PhysicalProperties(mass_kg=float(record["mass_kg"]), com_m=tuple(record["com_m"]),
+                                 inertia_kg_m2=tuple(map(tuple, record["inertia_kg_m2"])))
+    return physical_errors(uniform, true_props)
+
+
 def build_truth(dataset: Path, used_dataset: Path, asset_dir: Path, reconstruct_report: dict, *,
                 refinement: dict | None, seed: int, robot_frame: dict | None = None,
                 true_properties: PhysicalProperties | None = None) -> dict:
@@ -130,6 +141,7 @@ def build_truth(dataset: Path, used_dataset: Path, asset_dir: Path, reconstruct_
         "masks_iou": mask_iou(used_dataset),
         "reconstruction": reconstruct_report.get("truth"),
         "physical_properties": physical_errors(est, true_props),
+        "physical_properties_uniform_density": _uniform_beside(asset_dir, true_props),
         "frames": {
             "true_mesh": "ground_truth/mesh.obj moved by object_pose.json world_from_mesh (dataset world frame), "
                          "then by canonical_transform.json T_asset_from_input (asset frame)",

@@ -95,6 +95,11 @@ def _truth_table(truth: Mapping) -> str:
     lines.append(("inertia: largest relative error of the principal moments",
                   f"{100 * float(phys['inertia_eigenvalue_max_rel_error']):.2f} %"
                   if "inertia_eigenvalue_max_rel_error" in phys else "&ndash;"))
+    uniform = truth.get("physical_properties_uniform_density")
+    if uniform:  # the asset was given measured properties: what uniform density would have said, beside them
+        lines.append(("uniform density instead: centre of mass error [mm]", _f(uniform.get("com_error_mm"))))
+        lines.append(("uniform density instead: inertia, largest relative error",
+                      f"{100 * float(uniform['inertia_eigenvalue_max_rel_error']):.2f} %"))
     return ("<table><tbody>" + "".join(f"<tr><td>{label}</td><td>{value}</td></tr>" for label, value in lines)
             + "</tbody></table>")
 
