@@ -19,13 +19,13 @@ from real2sim.identify.stage import ExciteConfig, errors_against_truth, run_exci
 def small_log(tmp_path_factory):
     """The can (0.3 kg) with 0.1 kg off-centre inside, one 6 s period of the exciting motion."""
     root = tmp_path_factory.mktemp("identify")
-    import os
-
-    os.environ["REAL2SIM_CACHE"] = str(root / "cache")  # the trajectory's cache stays in the test's folder
     mesh = make_object("can")
     config = ExciteConfig(mass_kg=0.3, extra_mass_kg=0.1, extra_at_m=(0.02, 0.0, 0.03), torque_noise_n_m=0.05,
                           periods=1)
-    truth = run_excite(mesh, config, root / "log", say=lambda *_: None)
+    with pytest.MonkeyPatch.context() as env:
+        env.setenv("REAL2SIM_CACHE", str(root / "cache"))  # the trajectory's cache stays in the test's folder
+        truth = run_excite(mesh, config, root / "log", say=lambda *_: None)
+    assert (root / "cache" / "excitation").is_dir()
     return root / "log", truth
 
 

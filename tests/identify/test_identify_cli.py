@@ -128,3 +128,20 @@ def test_bad_excite_inputs_are_one_line_and_exit_2(tmp_path, capsys):
         code, _, err = run_cli(capsys, "excite", *argv)
         _one_line(code, err)
     assert not any((tmp_path / n).exists() for n in "abcde")
+
+
+@pytest.mark.slow
+def test_excite_then_identify_from_the_command_line_meets_the_mass_and_com_targets(tmp_path, capsys, monkeypatch):
+    """The verbs as typed, with the default 20 s trajectory and noise: mass within 2 %, CoM within 2 mm."""
+    monkeypatch.setenv("REAL2SIM_CACHE", str(tmp_path / "cache"))
+    code, out, err = run_cli(capsys, "excite", "bottle", "--mass", "0.4", "--extra-mass", "0.2", "--extra-mass-at",
+                             "0.01", "0.01", "0.05", "--out", tmp_path / "log")
+    assert code == 0, err
+    code, out, err = run_cli(capsys, "identify", tmp_path / "log", "--out", tmp_path / "props.json")
+    assert code == 0, err
+    assert "against LOG/truth.json" in out
+    from real2sim.identify.stage import errors_against_truth
+
+    props = json.loads((tmp_path / "props.json").read_text())
+    err = errors_against_truth(props, json.loads((tmp_path / "log" / "truth.json").read_text()))
+    assert err["mass_rel"] < 0.02 and err["com_m"] < 2e-3
