@@ -72,46 +72,27 @@ def stage_means(catalogue: Path) -> dict[str, float]:
     return {stage: statistics.mean(values) for stage, values in stages.items()}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
-    parser.add_argument("--executors", nargs="+", default=["local", "ray"], choices=["local", "ray"])
-    parser.add_argument("--views", type=int, default=24)
-    parser.add_argument("--width", type=int, default=160)
-    parser.add_argument("--height", type=int, default=120)
-    parser.add_argument("--no-serial", action="store_true", help="skip the one-by-one baseline")
-    parser.add_argument("--tag", default="batch", help="section name in docs/benchmarks/")
-    args = parser.parse_args()
+def passes(executors: list[str], workers: list[int], serial: bool) -> list[tuple[str, int]]:
+    """The order the passes run in: the pool's 1 and 2 workers and Ray's 2 first (the issue's targets),
+    then one by one, then the rest; each pass's numbers are written as soon as it ends."""
+    wanted = [(e, w) for e in executors for w in workers] + ([("one by one", 1)] if serial else [])
+    first = [p for p in (("local", 1), ("local", 2), ("ray", 2), ("one by one", 1)) if p in wanted]
+    return first + [p for p in wanted if p not in first]
 
-    with tempfile.TemporaryDirectory(prefix="bench_batch_") as tmp:
-        root = Path(tmp)
-        datasets = make_captures(root, args.views, args.width, args.height)
-        masses = _masses(root, datasets)
-        n = len(datasets)
-        results: dict[tuple[str, int], float] = {}
-        serial_s = None
-        if not args.no_serial:
-            serial_s = sum(_cli("run", ds, "--mass", MASSES_KG[ds.name.split("_")[0]], "--out", root / "serial" / ds.name,
-                                *RUN_FLAGS) for ds in datasets)
-            print(f"one by one: {serial_s:.0f} s", flush=True)
-        means = {}
-        for executor in args.executors:
-            for workers in args.workers:
-                out = root / f"{executor}_{workers}"
-                results[executor, workers] = _cli("batch", *datasets, "--masses", masses, "--out", out,
-                                                  "--executor", executor, "--workers", workers, *RUN_FLAGS)
-                means = means or stage_means(out)
-                print(f"{executor} x{workers}: {results[executor, workers]:.0f} s", flush=True)
+
+def report(results: dict, n: int, means: dict, args, views: str) -> None:
     rows = []
+    serial_s = results.get(("one by one", 1))
     for (executor, workers), wall_s in results.items():
+        if executor == "one by one":
+            continue
         one = results.get((executor, 1))
         local = results.get(("local", workers))
         rows.append([executor, workers, round(wall_s), round(n * 3600 / wall_s, 1),
                      f"{one / wall_s:.2f}x" if one else "-",
                      f"{100 * (wall_s / local - 1):+.0f} %" if local and executor == "ray" else "-"])
-    body = [f"{n} captures ({', '.join(OBJECTS)} x seeds {SEEDS}; {args.views} views at {args.width}x{args.height}), "
-            f"`{' '.join(RUN_FLAGS)}`, no evaluation; each row a fresh CATALOGUE, the whole command's wall time "
-            "(Ray's start included).", "",
+    body = [f"{n} captures ({views}), `{' '.join(RUN_FLAGS)}`, no evaluation; each row a fresh CATALOGUE, the "
+            "whole command's wall time (Ray's start included).", "",
             markdown_table(["executor", "workers", "wall s", "objects / h", "vs 1 worker", "vs local pool"], rows)]
     if serial_s is not None:
         body += ["", f"One by one (`real2sim run` x {n}): {serial_s:.0f} s, {n * 3600 / serial_s:.1f} objects / h."]
@@ -124,7 +105,39 @@ def main() -> None:
     command = "python benchmarks/bench_batch.py " + " ".join(sys.argv[1:])
     path = write_section(args.tag, "real2sim batch: throughput with workers (issue 31)", "\n".join(body), command)
     print("\n".join(body))
-    print(f"wrote {path}")
+    print(f"wrote {path}", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
+    parser.add_argument("--executors", nargs="+", default=["local", "ray"], choices=["local", "ray"])
+    parser.add_argument("--views", type=int, default=24)
+    parser.add_argument("--width", type=int, default=160)
+    parser.add_argument("--height", type=int, default=120)
+    parser.add_argument("--no-serial", action="store_true", help="skip the one-by-one baseline")
+    parser.add_argument("--tag", default="batch", help="section name in docs/benchmarks/")
+    args = parser.parse_args()
+    views = (f"{', '.join(OBJECTS)} x seeds {SEEDS}; {args.views} views at {args.width}x{args.height}")
+
+    with tempfile.TemporaryDirectory(prefix="bench_batch_") as tmp:
+        root = Path(tmp)
+        datasets = make_captures(root, args.views, args.width, args.height)
+        masses = _masses(root, datasets)
+        results: dict[tuple[str, int], float] = {}
+        means: dict[str, float] = {}
+        for executor, workers in passes(args.executors, args.workers, not args.no_serial):
+            if executor == "one by one":
+                results[executor, 1] = sum(
+                    _cli("run", ds, "--mass", MASSES_KG[ds.name.split("_")[0]], "--out", root / "serial" / ds.name,
+                         *RUN_FLAGS) for ds in datasets)
+            else:
+                out = root / f"{executor}_{workers}"
+                results[executor, workers] = _cli("batch", *datasets, "--masses", masses, "--out", out,
+                                                  "--executor", executor, "--workers", workers, *RUN_FLAGS)
+                means = means or stage_means(out)
+            print(f"{executor} x{workers}: {results[executor, workers]:.0f} s", flush=True)
+            report(results, len(datasets), means, args, views)
 
 
 if __name__ == "__main__":
