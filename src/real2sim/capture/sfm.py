@@ -63,6 +63,9 @@ class SfmConfig:
     #: image (a few hundred features) or of close views of an orbit
     init_min_num_inliers: int = 50
     init_min_tri_angle_deg: float = 8.0
+    #: the matches to the model's points an image needs to be registered: COLMAP's 30 left 12 of 24
+    #: photos of a 320x240 handheld capture without the board (about 250 features each) out, 15 took 23
+    abs_pose_min_num_inliers: int = 15
     num_threads: int = -1
     seed: int = 0
 
@@ -226,6 +229,7 @@ def _map(work: Path, image_dir: Path, config: SfmConfig, progress: ProgressFn):
     options.ba_refine_extra_params = True
     options.mapper.init_min_num_inliers = config.init_min_num_inliers
     options.mapper.init_min_tri_angle = config.init_min_tri_angle_deg
+    options.mapper.abs_pose_min_num_inliers = config.abs_pose_min_num_inliers
     progress("structure from motion: mapping", 2, 3)
     (work / "sparse").mkdir()
     models = pycolmap.incremental_mapping(work / "database.db", image_dir, work / "sparse", options=options)

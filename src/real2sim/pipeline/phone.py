@@ -254,10 +254,6 @@ def run_board_frame(source: Path, target: Path, config: PhoneConfig, progress: P
     return record
 
 
-def read_record(folder: Path, name: str) -> dict:
-    return json.loads((Path(folder) / name).read_text())
-
-
 def phone_stages(runner, phone: PhoneInput, run_dir: Path, config) -> Path:
     """Run (or skip, when current) the sfm and board_frame stages with ``runner``
     (:class:`real2sim.pipeline.runner.Runner`) for `run`'s ``config`` (a RunConfig); the dataset the
