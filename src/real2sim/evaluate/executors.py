@@ -240,8 +240,12 @@ def _init_ray_bounded(ray, address: str | None, kwargs: dict, timeout_s: float) 
     thread.join(timeout_s)
     where = address or "a local Ray"
     if thread.is_alive():
-        raise UserInputError(f"could not start or reach Ray at {where} within {timeout_s:g} s; check --ray-address "
-                             "/ $RAY_ADDRESS, or raise --ray-timeout-s")
+        error = UserInputError(f"could not start or reach Ray at {where} within {timeout_s:g} s; check --ray-address "
+                               "/ $RAY_ADDRESS, or raise --ray-timeout-s")
+        # The abandoned call's C++ client keeps retrying, and warns on stderr a few seconds later if
+        # the process is still finalising (slow on a loaded machine): the command line exits at once.
+        error.exit_now = True
+        raise error
     if outcome.get("error") is not None:
         raise UserInputError(f"could not start or reach Ray at {where}: {_one_line(outcome['error'])}")
 
