@@ -194,18 +194,34 @@ def test_run_photos_with_the_board(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_run_without_the_board_asks_for_the_height_and_resumes(tmp_path, capsys):
+def test_run_without_the_board_asks_for_the_height(tmp_path, capsys):
+    """The board never found and no --object-height-m: one line, exit 2, the SfM kept for the next run."""
     photos = tmp_path / "photos"
     capture_cli("can", "--handheld", "--views", 24, "--width", 320, "--height", 240, "--out", photos)
-    args = (photos, "--mass", 0.35, "--out", tmp_path / "asset", "--backend", "hull", "--collision", "boxes:8")
-    code, out, err = run_cli(capsys, *args)
+    code, out, err = run_cli(capsys, photos, "--mass", 0.35, "--out", tmp_path / "asset", "--backend", "hull")
     assert code == 2
     lines = [line for line in err.splitlines() if line.startswith("real2sim")]
     assert len(lines) == 1 and "was not found" in lines[0] and "--object-height-m" in lines[0], err
     assert (tmp_path / "asset" / ".run" / "sfm" / "sparse" / "0").is_dir()  # kept for the next run
+
+
+@pytest.mark.slow
+def test_run_by_height_then_by_the_board_reuses_the_sfm(tmp_path, capsys):
+    """--object-height-m takes the COLMAP route (robot_frame: table plane from the sparse points, scale from
+    the height); the same photos then without it take the board's frame, the SfM not redone."""
+    photos = tmp_path / "photos"
+    capture_cli("can", "--handheld", "--board", "--views", 24, "--width", 320, "--height", 240, "--out", photos)
+    args = (photos, "--mass", 0.35, "--out", tmp_path / "asset", "--backend", "hull", "--collision", "boxes:8")
     code, out, err = run_cli(capsys, *args, "--object-height-m", 0.10)
     assert code == 0, err
-    assert "sfm" not in _stages_run(out) and "robot_frame" in _stages_run(out)
+    assert "robot_frame" in _stages_run(out) and "board_frame" not in _stages_run(out)
+    record = json.loads((tmp_path / "asset" / ".run" / "robot_frame" / "robot_frame.json").read_text())
+    errors = record["errors_vs_ground_truth"]
+    assert abs(errors["scale_rel_error"]) < 0.15 and errors["table_tilt_deg"] < 1.0
+    code, out, err = run_cli(capsys, *args)
+    assert code == 0, err
+    assert "sfm" not in _stages_run(out) and "board_frame" in _stages_run(out)
+    assert not (tmp_path / "asset" / ".run" / "robot_frame").exists()
 
 
 @pytest.mark.slow
