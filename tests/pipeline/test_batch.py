@@ -209,3 +209,18 @@ def test_the_catalogue_page_opens_offline_in_a_browser(datasets, tmp_path):
     assert found["images"] == 2 and found["broken"] == []
     assert {"catalogue.csv", "timings.csv", "can_ds/results/report.html"} <= set(found["links"])
     assert _remote(urls) == []
+
+
+@pytest.mark.slow
+def test_an_evaluated_batch_recommends_from_the_simulations(capsys, datasets, tmp_path):
+    """`--evaluate` reaches every object's run; its row takes OCAE and simulation time from results/ (a
+    minute or two; the row's reading of summary.csv is checked quickly above)."""
+    out = tmp_path / "cat"
+    code, stdout, err = run_cli(capsys, "batch", datasets["can"], "--mass", "0.35", "--out", out, *FAST,
+                                "--evaluate", "--tasks", "push", "--contact", "point", "--runs", "1", "--jobs", "2",
+                                "--duration-scale", "0.2")
+    assert code == 0, (stdout, err)
+    row = catalogue_rows(out)["can_ds"]
+    assert row["basis"] == "evaluation" and row["report"] == "can_ds/results/report.html"
+    assert row["accuracy_representation"].startswith(("spheres_4", "mesh"))
+    assert float(row["accuracy_ocae_m"]) >= 0 and float(row["accuracy_sim_time_s"]) > 0
