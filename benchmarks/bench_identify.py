@@ -67,6 +67,9 @@ def one_case(obj: str, extra: bool, noise: float, work: Path, seed: int = 0) -> 
     extra_kg = body / 2.0 if extra else 0.0  # a third of the total
     at = tuple(_extra_point(mesh)) if extra else None
     log_dir = work / f"{obj}_{'point' if extra else 'uniform'}_{noise:g}"
+    saved = work / f"{log_dir.name}.json"
+    if saved.is_file():  # --work of an earlier run: its results are kept, not recomputed
+        return json.loads(saved.read_text())
     start = time.perf_counter()
     truth = run_excite(mesh, ExciteConfig(mass_kg=body, extra_mass_kg=extra_kg, extra_at_m=at, torque_noise_n_m=noise,
                                           seed=seed), log_dir, overwrite=True, say=lambda *_: None)
@@ -76,9 +79,11 @@ def one_case(obj: str, extra: bool, noise: float, work: Path, seed: int = 0) -> 
     identify_s = time.perf_counter() - start
     err = errors_against_truth(props, truth)
     u_com, u_inertia = _uniform_errors(mesh, truth["mass_kg"], truth)
-    return {"object": obj, "case": "point mass" if extra else "uniform", "noise": noise, **err,
+    case = {"object": obj, "case": "point mass" if extra else "uniform", "noise": noise, **err,
             "uniform_com_m": u_com, "uniform_inertia_rel": u_inertia, "excite_s": excite_s, "identify_s": identify_s,
             "condition": result.condition_number, "log": str(log_dir), "props": props, "truth": truth}
+    saved.write_text(json.dumps(case))
+    return case
 
 
 def evaluate_case(case: dict, work: Path, runs: int) -> list[list]:
@@ -96,7 +101,7 @@ def evaluate_case(case: dict, work: Path, runs: int) -> list[list]:
                                tuple(map(tuple, case["props"]["inertia_kg_m2"])), "identified")
     rows = []
     for label, props in (("identified", given), ("uniform density", None)):
-        config = AssetConfig(mass_kg=truth["mass_kg"], specs=(parse_spec("cylinders:10"),),
+        config = AssetConfig(mass_kg=props.mass_kg if props else truth["mass_kg"], specs=(parse_spec("cylinders:10"),),
                              given_properties=props, given_properties_frame="mesh", given_properties_source="bench")
         asset = work / f"asset_{label.replace(' ', '_')}"
         build_asset(mesh_path, asset, config, overwrite=True)
@@ -119,9 +124,12 @@ def main() -> int:
     parser.add_argument("--evaluate", action="store_true", help="also the Drake evaluation of the non-uniform can")
     parser.add_argument("--runs", type=int, default=3, help="evaluation runs per task (with --evaluate)")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a shared machine)")
+    parser.add_argument("--work", type=Path, default=None,
+                        help="working folder (default: a new temporary one); cases already done there are reused")
     args = parser.parse_args()
 
-    work = Path(tempfile.mkdtemp(prefix="bench_identify_"))
+    work = args.work or Path(tempfile.mkdtemp(prefix="bench_identify_"))
+    work.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("REAL2SIM_CACHE", str(work / "cache"))
     cases = [one_case(obj, extra, 0.05, work) for obj in args.objects.split(",") for extra in (False, True)]
     sweep = [] if args.no_sweep else [one_case("can", True, noise, work) for noise in (0.01, 0.2)]
@@ -131,7 +139,7 @@ def main() -> int:
              f"{100 * c['uniform_inertia_rel']:.1f}", f"{c['excite_s']:.0f} + {c['identify_s']:.0f}",
              "yes" if target(c) else "no"] for c in cases]
     body = ("Identified against the truth (default torque noise 0.05 N m RMS, 1 kHz, friction, 2^20-count encoders; "
-            "a 20 s exciting trajectory). Uniform density: what `asset --mass` assumes, at the payload's true mass. "
+            "a 32 s exciting trajectory, torques from a 4 kHz controller averaged over each 1 ms sample). Uniform density: what `asset --mass` assumes, at the payload's true mass. "
             "Target: mass within 2 %, CoM within 2 mm, inertia within 15 %." + (f" {args.note}" if args.note else "")
             + "\n\n" + markdown_table(["object", "case", "mass kg", "mass err %", "CoM err mm", "inertia err %",
                                        "uniform CoM err mm", "uniform inertia err %", "excite + identify s",
@@ -143,13 +151,14 @@ def main() -> int:
                                       key=lambda c: c["noise"])]
         body += ("\nHow the errors grow with torque noise (the can with its point mass):\n\n"
                  + markdown_table(["torque noise N m", "mass err %", "CoM err mm", "inertia err %"], noise_rows) + "\n")
+    command = "python benchmarks/bench_identify.py " + " ".join(sys.argv[1:])
+    write_section("identify", "Mass properties identified from joint torques (issue #30)", body, command)
     if args.evaluate:
         can = next(c for c in cases if c["object"] == "can" and c["case"] == "point mass")
         body += ("\nThe non-uniform can in the evaluation (cylinders:10, hydroelastic, push and ramp, "
                  f"{args.runs} runs each) against a reference with the true mass properties:\n\n"
                  + markdown_table(["properties", "representation", "OCAE m", "ATE m"], evaluate_case(can, work, args.runs))
                  + "\n")
-    command = "python benchmarks/bench_identify.py " + " ".join(sys.argv[1:])
     print(write_section("identify", "Mass properties identified from joint torques (issue #30)", body, command))
     return 0
 

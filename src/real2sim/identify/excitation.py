@@ -136,7 +136,7 @@ def clearance_ok(arm: ArmWithPayload, traj: FourierTrajectory, clearance_m: floa
 
 
 def design_excitation(arm: ArmWithPayload, *, seed: int = 0, harmonics: int = 6, period_s: float = 6.0,
-                      periods: int = 3, ramp_s: float = 1.0, candidates: int = 24, refinements: int = 24,
+                      periods: int = 5, ramp_s: float = 1.0, candidates: int = 24, refinements: int = 24,
                       margin: float = 0.8, accel_limit_rad_per_s2=DEFAULT_ACCEL_LIMITS_RAD_PER_S2, clearance_m: float = 0.2,
                       q0_rad: tuple[float, ...] = DEFAULT_Q0_RAD) -> tuple[FourierTrajectory, ExcitationQuality]:
     """The best-conditioned feasible trajectory found (module docstring) and its quality."""
@@ -168,7 +168,7 @@ def design_excitation(arm: ArmWithPayload, *, seed: int = 0, harmonics: int = 6,
 
 
 def cached_excitation(arm: ArmWithPayload, robot_key: str, grasp: np.ndarray, cache_dir: Path | None,
-                      seed: int = 0, periods: int = 3) -> tuple[FourierTrajectory, ExcitationQuality]:
+                      seed: int = 0, periods: int = 5) -> tuple[FourierTrajectory, ExcitationQuality]:
     """:func:`design_excitation`, computed once per robot model, grasp, seed and length and kept in
     ``cache_dir`` (None: not kept)."""
     key = hashlib.sha256(json.dumps([robot_key, np.round(grasp, 9).tolist(), seed, periods, 1]).encode()).hexdigest()[:16]

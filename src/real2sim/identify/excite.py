@@ -1,6 +1,7 @@
 """`excite`: a simulated arm holds the object, follows the exciting trajectory, and logs its joints.
 
-Drake simulates the arm (1 ms discrete steps) with the payload welded to the flange at the grasp.
+Drake simulates the arm (a continuous plant, error-controlled integration) with the payload welded to
+the flange at the grasp.
 A computed-torque controller tracks the trajectory with the arm's nominal model, which knows
 nothing of the payload (the tracking error absorbs it, as on a real robot). The joints feel
 Coulomb and viscous friction. What is logged is what a
@@ -67,14 +68,24 @@ def payload_truth(mesh, mass_kg: float, extra_mass_kg: float = 0.0, extra_at_m=N
 
 
 def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: FourierTrajectory, truth: PayloadTruth,
-                        measurement: Measurement = Measurement(), *, seed: int = 0, time_step_s: float = 1e-3,
-                        progress=None) -> JointLog:
-    """Run ``traj`` on ``arm`` (a plant built with ``time_step_s``) carrying ``truth``; ``nominal`` is
-    the controller's model (same arm, no payload). Returns the measured log."""
+                        measurement: Measurement = Measurement(), *, seed: int = 0, log_period_s: float = 1e-3,
+                        control_period_s: float = 2.5e-4, progress=None) -> JointLog:
+    """Run ``traj`` on ``arm`` (a continuous plant: ``time_step_s`` 0) carrying ``truth``; ``nominal`` is
+    the controller's model (same arm, no payload). Returns the measured log, sampled every
+    ``log_period_s``.
+
+    The controller updates every ``control_period_s`` (a whole fraction of the log period) and holds
+    its torque in between, as a real joint controller does; a log sample's torque is the mean of
+    what was applied over the log period centred on it (what a torque reading averaged over one
+    period gives), so that it goes with the motion at that instant.
+    """
     from pydrake.systems.analysis import Simulator
 
     from real2sim.identify.regressor import joint_torques
 
+    sub = int(round(log_period_s / control_period_s))
+    if sub < 2 or sub % 2 or abs(sub * control_period_s - log_period_s) > 1e-12:
+        raise ValueError("control_period_s must divide log_period_s an even number of times")
     rng = np.random.default_rng(seed)
     plant, ctx = arm.plant, arm.context
     arm.payload.SetSpatialInertiaInBodyFrame(ctx, spatial_inertia(phi_from_properties(
@@ -82,8 +93,9 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
     n = arm.num_joints
     coulomb = np.resize(np.asarray(measurement.coulomb_n_m, float), n)
     viscous = np.resize(np.asarray(measurement.viscous_n_m_s, float), n)
-    steps = int(round(traj.duration_s / time_step_s))
-    times = np.arange(steps + 1) * time_step_s
+    samples = int(round(traj.duration_s / log_period_s))
+    steps = samples * sub
+    times = np.arange(steps + 1) * control_period_s
     q_d, v_d, a_d = traj.sample(times)
     plant.SetPositions(ctx, q_d[0])
     plant.SetVelocities(ctx, v_d[0])
@@ -93,30 +105,34 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
     # stiff joint-level tracking, as an industrial arm has; the controller compensates 80 % of the
     # friction it was told about (a real one never knows it exactly)
     kp, kd = 2500.0, 100.0
-    q_log, tau_log = np.empty((steps + 1, n)), np.empty((steps + 1, n))
+    q_log = np.empty((samples + 1, n))
+    tau_applied = np.empty((steps + 1, n))
     for i in range(steps + 1):
         q, v = plant.GetPositions(ctx), plant.GetVelocities(ctx)
+        if i % sub == 0:
+            q_log[i // sub] = q
         nominal.plant.SetPositions(nominal.context, q)
         nominal.plant.SetVelocities(nominal.context, v)
         command = a_d[i] + kp * (q_d[i] - q) + kd * (v_d[i] - v)
         friction = coulomb * np.tanh(v / measurement.stiction_band_rad_per_s) + viscous * v
-        tau_motor = joint_torques(nominal.plant, nominal.context, command) + 0.8 * friction
-        q_log[i], tau_log[i] = q, tau_motor
+        tau_applied[i] = joint_torques(nominal.plant, nominal.context, command) + 0.8 * friction
         if i == steps:
             break
-        port.FixValue(ctx, tau_motor - friction)
+        port.FixValue(ctx, tau_applied[i] - friction)
         simulator.AdvanceTo(times[i + 1])
-        if progress is not None and i % 500 == 0:
+        if progress is not None and i % (500 * sub) == 0:
             progress(i, steps)
     res = measurement.encoder_resolution_rad
     q_meas = np.round(q_log / res) * res if res > 0 else q_log
-    # The plant steps semi-implicitly (q_i = q_{i-1} + dt v_i, a_i = (v_{i+1} - v_i) / dt drives
-    # tau_i): the central differences of q (velocity) and of those (acceleration) are the motion
-    # at sample i, what a real log's central differences are.
-    v_meas = np.gradient(q_meas, time_step_s, axis=0)
-    tau_meas = tau_log + rng.normal(scale=measurement.torque_noise_n_m, size=tau_log.shape)
-    return JointLog(time_s=times, q_rad=q_meas, v_rad_per_s=v_meas, tau_n_m=tau_meas, a_rad_per_s2=None,
-                    flange_from_object=_grasp_of(arm), flange_frame=arm.flange_frame)
+    v_meas = np.gradient(q_meas, log_period_s, axis=0)
+    # the torque over [t - T/2, t + T/2): control steps i*sub - sub/2 ... i*sub + sub/2 - 1
+    padded = np.concatenate([np.repeat(tau_applied[:1], sub // 2, axis=0), tau_applied[:-1],
+                             np.repeat(tau_applied[-1:], sub // 2 + 1, axis=0)])
+    windows = padded[: (samples + 1) * sub].reshape(samples + 1, sub, n)
+    tau_meas = windows.mean(axis=1) + rng.normal(scale=measurement.torque_noise_n_m, size=(samples + 1, n))
+    return JointLog(time_s=np.arange(samples + 1) * log_period_s, q_rad=q_meas, v_rad_per_s=v_meas,
+                    tau_n_m=tau_meas, a_rad_per_s2=None, flange_from_object=_grasp_of(arm),
+                    flange_frame=arm.flange_frame)
 
 
 def _grasp_of(arm: ArmWithPayload) -> np.ndarray:
@@ -124,3 +140,4 @@ def _grasp_of(arm: ArmWithPayload) -> np.ndarray:
     plant, ctx = arm.plant, arm.context
     flange = plant.GetFrameByName(arm.flange_frame)
     return plant.CalcRelativeTransform(ctx, flange, arm.payload.body_frame()).GetAsMatrix4()
+

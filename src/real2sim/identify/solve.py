@@ -157,38 +157,84 @@ def _moving(v: np.ndarray, dt: float, min_speed: float, cutoff_hz: float) -> np.
 
 def _constrained_least_squares(rows: np.ndarray, rhs: np.ndarray, n: int, shape: ShapePrior | None,
                                solver: str) -> np.ndarray:
-    from pydrake.solvers import ClarabelSolver, MathematicalProgram, ScsSolver
+    """argmin |rows x - rhs|^2 (+ the shape's prior) subject to the constraints of the module docstring.
+
+    The parameters span six orders of magnitude (a mass near 1 kg, inertias near 1e-4 kg m^2), which
+    a solver's tolerances do not: it solves for ``w = x / d - x0 / d``, each parameter in units of its
+    own size ``d`` (mass m, first moments m L, inertias m L^2, with m and L from the unconstrained
+    minimum ``x0``) and centred there, and takes the pseudo-inertia in units of L and m (a congruence
+    and a positive factor, which keep it semidefinite).
+    """
+    from pydrake.solvers import ClarabelSolver, MathematicalProgram, ScsSolver, SolverOptions
 
     p = rows.shape[1]
-    prog = MathematicalProgram()
-    x = prog.NewContinuousVariables(p, "x")
     hessian = rows.T @ rows
     gradient = -rows.T @ rhs
     if shape is not None:
         # a weak Gaussian prior on phi around the uniform-density estimate: std half its scale
         m = max(float(shape.uniform_phi[0]), 1e-6)
-        scale = np.array([m] + [m * shape.size_m] * 3 + [m * shape.size_m ** 2] * 6) * 0.5
+        size = max(shape.size_m, 1e-3)
+        scale = np.array([m] + [m * size] * 3 + [m * size ** 2] * 6) * 0.5
         weight = 1.0 / scale ** 2
         hessian[:10, :10] += np.diag(weight)
         gradient[:10] -= weight * shape.uniform_phi
-    # normalise the cost so the solver's tolerances mean the same for every log
-    norm = float(np.trace(hessian)) / p
-    prog.AddQuadraticCost(hessian / norm, gradient / norm, x, is_convex=True)
-    prog.AddLinearMatrixInequalityConstraint(_pseudo_inertia_basis(p), x)
-    prog.AddBoundingBoxConstraint(0.0, np.inf, x[10:])
+    x0 = np.linalg.lstsq(hessian, -gradient, rcond=None)[0]  # the unconstrained minimum
+    # each parameter in units of its own size: mass m, first moments m L, inertias m L^2
+    m = max(abs(float(x0[0])), 1e-3)
+    length = float(np.clip(np.sqrt(abs(float(np.sum(x0[4:7]))) / (2.0 * m)), 0.01, 1.0))
+    d = np.concatenate([[m], [m * length] * 3, [m * length ** 2] * 6, np.maximum(np.abs(x0[10:]), 1e-2)])
+    q = d[:, None] * hessian * d[None, :]
+    q = q / np.abs(np.diag(q)).max()
+    # centred on the unconstrained minimum, so the cost is 1/2 w^T Q w: z = x / d = x0 / d + w
+    z0 = x0 / d
+    prog = MathematicalProgram()
+    w = prog.NewContinuousVariables(p, "w")
+    prog.AddQuadraticCost(q, np.zeros(p), w, is_convex=True)
+    units = np.diag([1.0 / length] * 3 + [1.0])
+    basis = [units @ f @ units / m * (d[i - 1] if i else 1.0) for i, f in enumerate(_pseudo_inertia_basis(p))]
+    constant = sum(z0[i] * basis[i + 1] for i in range(p))
+    prog.AddLinearMatrixInequalityConstraint([constant] + basis[1:], w)
+    prog.AddBoundingBoxConstraint(-z0[10:], np.full(p - 10, np.inf), w[10:])
     if shape is not None:
-        q_mat = np.zeros((4, 4))
-        e, c = shape.ellipsoid_matrix, shape.ellipsoid_centre_m
-        q_mat[:3, :3], q_mat[:3, 3], q_mat[3, :3], q_mat[3, 3] = -e, e @ c, e @ c, 1.0 - c @ e @ c
-        coeffs = np.array([np.trace(q_mat @ basis) for basis in _pseudo_inertia_basis(p)[1:11]])
-        prog.AddLinearConstraint(coeffs[None, :], [0.0], [np.inf], x[:10])
+        q_mat = _inside_ellipsoid(shape)
+        coeffs = np.array([np.trace(q_mat @ f) for f in _pseudo_inertia_basis(p)[1:11]]) * d[:10]
+        coeffs = coeffs / np.abs(coeffs).max()
+        prog.AddLinearConstraint(coeffs[None, :], [-float(coeffs @ z0[:10])], [np.inf], w[:10])
     chosen = {"clarabel": ClarabelSolver, "scs": ScsSolver}.get(solver)
     if chosen is None:
         raise UserInputError(f"unknown solver {solver!r}: clarabel or scs")
-    result = chosen().Solve(prog)
+    if _feasible(x0, shape):
+        return x0  # the constraints are not active: the unconstrained minimum is the answer, exactly
+    options = SolverOptions()
+    if solver == "clarabel":
+        for name in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
+            options.SetOption(chosen.id(), name, 1e-10)
+    result = chosen().Solve(prog, None, options)
     if not result.is_success():
         raise RuntimeError(f"the identification program did not solve ({result.get_solution_result()})")
-    return np.asarray(result.GetSolution(x))
+    return d * (z0 + np.asarray(result.GetSolution(w)))
+
+
+def _inside_ellipsoid(shape: ShapePrior) -> np.ndarray:
+    """Q with ``tr(Q J) >= 0`` for a pseudo-inertia J whose mass lies in the shape's bounding
+    ellipsoid ``(x - c)^T E (x - c) <= 1``: ``tr(Q J)`` integrates ``1 - (x - c)^T E (x - c)`` over
+    the mass (Wensing et al., 2017)."""
+    e, c = shape.ellipsoid_matrix, shape.ellipsoid_centre_m
+    q_mat = np.zeros((4, 4))
+    q_mat[:3, :3], q_mat[:3, 3], q_mat[3, :3], q_mat[3, 3] = -e, e @ c, e @ c, 1.0 - c @ e @ c
+    return q_mat
+
+
+def _feasible(x: np.ndarray, shape: ShapePrior | None) -> bool:
+    """Whether ``x`` meets the constraints of :func:`_constrained_least_squares` (with a margin)."""
+    from real2sim.identify.arm import pseudo_inertia
+
+    j = pseudo_inertia(x[:10])
+    if np.linalg.eigvalsh(j).min() < 1e-9 * max(float(x[0]), 1e-12) or np.any(x[10:] < 0):
+        return False
+    if shape is not None:
+        return float(np.trace(_inside_ellipsoid(shape) @ j)) >= 0.0
+    return True
 
 
 def _pseudo_inertia_basis(p: int) -> list[np.ndarray]:

@@ -29,7 +29,7 @@ class ExciteConfig:
     torque_noise_n_m: float = 0.05
     seed: int = 0
     robot_urdf: Path | None = None
-    periods: int = 3
+    periods: int = 5
 
 
 def default_grasp(mesh) -> np.ndarray:
@@ -64,7 +64,7 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
         raise UserInputError("the object's mesh must be a closed solid for its true mass properties")
     urdf = Path(config.robot_urdf) if config.robot_urdf else default_arm_urdf()
     grasp = default_grasp(mesh)
-    arm = load_arm(urdf, "flange", grasp, time_step_s=1e-3)
+    arm = load_arm(urdf, "flange", grasp)  # continuous: the controller's own period sets the steps
     nominal = load_arm(urdf, "flange", grasp)
     urdf_text = urdf.read_text()
     say("designing the exciting trajectory (cached per robot and grasp)")
@@ -73,7 +73,7 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
     say(f"trajectory: {traj.duration_s:.0f} s, regressor condition number {quality.condition_number:.2f}, "
         f"smallest singular value {quality.smallest_singular_value:.3f}")
     truth = payload_truth(mesh, config.mass_kg, config.extra_mass_kg, config.extra_at_m)
-    say(f"simulating the arm holding {truth.mass_kg:.3f} kg at 1 kHz")
+    say(f"simulating the arm holding {truth.mass_kg:.3f} kg for {traj.duration_s:.0f} s, logged at 1 kHz")
     log = simulate_excitation(arm, nominal, traj, truth, Measurement(torque_noise_n_m=config.torque_noise_n_m),
                               seed=config.seed)
     record = {**truth.to_json(), "mass_body_kg": config.mass_kg, "extra_mass_kg": config.extra_mass_kg,
