@@ -7,6 +7,10 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
+# The default suite runs on every core (at most 4 workers, one test file per worker at a time, so a
+# module's fixtures are made once); TEST_PARALLEL= runs it in one process.
+TEST_PARALLEL ?= -n auto --maxprocesses 4 --dist loadfile
+
 .PHONY: install demo demo-quick test test-slow bench clean
 
 $(PY):
@@ -33,7 +37,7 @@ demo-quick: $(STAMP)
 test: $(STAMP)
 	@command -v chromium >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && \
 		apt-get install -y -q chromium >/dev/null 2>&1; } || echo "note: no chromium; the browser test will be skipped"
-	$(PY) -m pytest -q -m "not slow" tests
+	$(PY) -m pytest -q -m "not slow" $(TEST_PARALLEL) tests
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow tests

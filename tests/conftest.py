@@ -6,6 +6,11 @@ import os
 
 # Torch's default OpenMP spin-wait stalls small ops on 2-core machines (DESIGN.md).
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# Several test workers (make test: pytest-xdist) share the cores: each one's torch, and the command
+# lines its tests start, get their share instead of every core each.
+_WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+if _WORKERS > 1:
+    os.environ.setdefault("OMP_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // _WORKERS)))
 
 import pytest
 

@@ -63,6 +63,7 @@ def test_carving_opens_the_mug_cavity_and_keeps_its_walls(mug_capture):
     assert not (result.solid & ~hull).any()  # carving only removes
 
 
+@pytest.mark.slow
 def test_the_hollow_prior_empties_the_mugs_flat_coloured_lower_cavity(mug_capture):
     """The first pass stops where the cup's inside is one flat colour (measured at 160x120, 48 voxels:
     63 % of the filled cavity left); the second pass (the hollow prior) takes most of the rest (25 %
@@ -105,6 +106,7 @@ def test_carving_leaves_the_can_alone(can_capture):
     assert result.carved_voxels <= 0.01 * np.count_nonzero(hull)
 
 
+@pytest.mark.slow
 def test_carving_on_poses_a_few_mm_off_is_undone_by_the_silhouettes(can_capture, tmp_path):
     """The can with 5 mm / 1 degree RMS pose noise (unrefined robot poses): every textured surface then
     disagrees between views, and carving alone ate 83 % of the hull from the top down (21338 of 25791
@@ -160,6 +162,7 @@ def test_row_quantile_matches_numpys_nanquantile(quantile):
                                atol=1e-6)
 
 
+@pytest.mark.slow
 def test_the_fields_start_leaves_the_opened_cavity_empty(mug_capture):
     """train_field's starting density: nearly nothing where either pass carved, and the hollow prior's
     count carried out (the stage reports it as ``photo_carving_opened_voxels``)."""

@@ -9,6 +9,7 @@ points back near where the true cameras see them, and a view whose mask no small
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from real2sim.reconstruct.silhouette_poses import align_unrefined
@@ -42,6 +43,7 @@ def _with_moved_views(views: PosedViews, seed: int = 0) -> PosedViews:
                       tuple(views.names[i] for i in MOVED))
 
 
+@pytest.mark.slow
 def test_unrefined_views_are_moved_onto_the_hull(can_capture, truth):
     views = load_views(can_capture)
     noisy = _with_moved_views(views)
@@ -60,6 +62,7 @@ def test_unrefined_views_are_moved_onto_the_hull(can_capture, truth):
     np.testing.assert_array_equal(aligned.c2w_cv[untouched], views.c2w_cv[untouched])
 
 
+@pytest.mark.slow
 def test_a_mask_no_small_motion_explains_is_left_out(can_capture):
     views = load_views(can_capture)
     noisy = _with_moved_views(views)

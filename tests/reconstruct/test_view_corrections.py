@@ -64,6 +64,7 @@ def _perturbed(c2w: np.ndarray, index: np.ndarray, deg: float, mm: float, seed: 
     return out
 
 
+@pytest.mark.slow
 def test_wrong_poses_move_toward_the_true_ones(views, region):
     """Nine of 60 views a degree and 4 mm off (about 3 px here): their corrected poses see the object
     at least twice as close to where the true cameras see it; the right views stay within a pixel."""
