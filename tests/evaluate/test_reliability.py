@@ -493,3 +493,24 @@ def test_pool_abort_ends_busy_workers_at_once():
     executor.shutdown(abort=True)
     assert time.monotonic() - t0 < 10 and handles
     assert not any(p.is_alive() for p in workers)
+
+
+def test_a_local_ray_started_for_the_sweep_stays_up():
+    """Ray ties the processes it starts to the starting thread (a parent-death signal): a local Ray
+    started in a helper thread died as soon as that thread ended, and the sweep failed a minute later."""
+    ray = pytest.importorskip("ray")
+    from ray._private import worker
+
+    from real2sim.evaluate.executors import _RayExecutor
+
+    if ray.is_initialized():
+        ray.shutdown()
+    _RayExecutor(1, None, 30.0)
+    try:
+        time.sleep(2.0)
+        node = worker._global_node
+        processes = [p.process for group in node.all_processes.values() for p in group]
+        assert processes and all(p.poll() is None for p in processes)
+        assert ray.get(ray.remote(lambda: 41 + 1).remote(), timeout=60) == 42
+    finally:
+        ray.shutdown()

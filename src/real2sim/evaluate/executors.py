@@ -253,8 +253,7 @@ def _init_ray_bounded(ray, address: str | None, kwargs: dict, timeout_s: float) 
 class _RayExecutor:
     """Ray tasks, one CPU each; ``address`` None starts (or joins) a local Ray.
 
-    ``timeout_s`` bounds joining a cluster; starting a local Ray (processes on this
-    machine, slow on a loaded one) gets at least 120 s.
+    ``timeout_s`` bounds joining a cluster; a local Ray is started in the calling thread, unbounded.
     """
 
     def __init__(self, jobs: int, address: str | None, timeout_s: float = 30.0) -> None:
@@ -271,10 +270,14 @@ class _RayExecutor:
             kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
                                       "logging_level": logging.ERROR}
             if address is None:
+                # A local Ray is started in this thread: Ray ties the processes it starts to the
+                # thread that starts them (they get a parent-death signal), so a helper thread's
+                # exit would take the cluster down a minute into the sweep.
                 kwargs["num_cpus"] = jobs
+                ray.init(**kwargs)
             else:
                 _probe_address(address, timeout_s)
-            _init_ray_bounded(ray, address, kwargs, timeout_s if address else max(timeout_s, 120.0))
+                _init_ray_bounded(ray, address, kwargs, timeout_s)
             self._owns_ray = True
         else:
             self._owns_ray = False
