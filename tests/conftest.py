@@ -34,3 +34,14 @@ def mug_mesh():
     from real2sim.geometry.objects import make_object
 
     return make_object("mug")
+
+
+# With the suite spread over workers one file at a time (make test), a long file that starts last
+# keeps one worker busy alone at the end: the longest files (minutes each on 2 cores) go first.
+_LONGEST_FIRST = ("tests/cli/test_demo.py", "tests/pipeline/test_robot_frame.py", "tests/pipeline/test_parallax_run.py",
+                  "tests/pipeline/test_phone.py", "tests/pipeline/test_batch.py", "tests/evaluate/test_reliability.py")
+
+
+def pytest_collection_modifyitems(session, config, items):
+    rank = {path: i for i, path in enumerate(_LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0], len(rank)))  # stable: the rest keep their order
