@@ -31,6 +31,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from real2sim.asset.round_pieces import round_polytope
+from real2sim.asset.writers import _num, _nums, standard_urdf_geometry, urdf_link
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.physical import PhysicalProperties
@@ -47,14 +48,6 @@ PORTABLE_ELEMENTS = {
     "geometry": ("visual", "collision"), "box": ("geometry",), "sphere": ("geometry",),
     "cylinder": ("geometry",), "mesh": ("geometry",), "contact": ("link",), "lateral_friction": ("contact",),
 }
-
-
-def _num(x: float) -> str:
-    return repr(float(x))
-
-
-def _nums(values) -> str:
-    return " ".join(_num(v) for v in values)
 
 
 def portable_mesh_file(shape: CollisionShape, index: int) -> str | None:
@@ -85,30 +78,12 @@ def build_portable_urdf(geometry: CollisionGeometry, props: PhysicalProperties, 
                         link_name: str = "base_link") -> ET.Element:
     """The ``<robot>`` element of the portable URDF (module docstring); mesh files are named,
     not written (:func:`write_round_pieces` writes the round ones)."""
-    robot = ET.Element("robot", name=model_name)
-    link = ET.SubElement(robot, "link", name=link_name)
-    inertial = ET.SubElement(link, "inertial")
-    ET.SubElement(inertial, "origin", xyz=_nums(props.com_m), rpy="0.0 0.0 0.0")
-    ET.SubElement(inertial, "mass", value=_num(props.mass_kg))
-    i = props.inertia
-    ET.SubElement(inertial, "inertia", ixx=_num(i[0, 0]), ixy=_num(i[0, 1]), ixz=_num(i[0, 2]),
-                  iyy=_num(i[1, 1]), iyz=_num(i[1, 2]), izz=_num(i[2, 2]))
-    if visual_mesh_relpath:
-        visual = ET.SubElement(link, "visual", name="visual")
-        ET.SubElement(visual, "origin", xyz="0.0 0.0 0.0", rpy="0.0 0.0 0.0")
-        ET.SubElement(ET.SubElement(visual, "geometry"), "mesh", filename=visual_mesh_relpath)
+    robot, link = urdf_link(props, visual_mesh_relpath, model_name, link_name)
     for k, shape in enumerate(geometry.shapes):
         col = ET.SubElement(link, "collision", name=f"collision_{k:04d}")
         ET.SubElement(col, "origin", xyz=_nums(shape.position_m), rpy=_nums(quaternion_to_rpy(shape.quaternion_wxyz)))
         geom = ET.SubElement(col, "geometry")
-        s = shape.size_m
-        if shape.kind == "box":
-            ET.SubElement(geom, "box", size=_nums(s))
-        elif shape.kind == "sphere":
-            ET.SubElement(geom, "sphere", radius=_num(s[0]))
-        elif shape.kind == "cylinder":
-            ET.SubElement(geom, "cylinder", radius=_num(s[0]), length=_num(s[1]))
-        else:
+        if not standard_urdf_geometry(geom, shape):
             ET.SubElement(geom, "mesh", filename=portable_mesh_file(shape, k))
     contact_el = ET.SubElement(link, "contact")
     ET.SubElement(contact_el, "lateral_friction", value=_num(contact.mu_dynamic))

@@ -159,8 +159,9 @@ def _urdf_proximity(parent: ET.Element, hydro: str, contact: ContactProperties, 
     ET.SubElement(prox, _d("mu_static"), value=_num(contact.mu_static))
 
 
-def _urdf_geometry(parent: ET.Element, shape: CollisionShape) -> None:
-    geom = ET.SubElement(parent, "geometry")
+def standard_urdf_geometry(geom: ET.Element, shape: CollisionShape) -> bool:
+    """Write ``shape`` into ``<geometry>`` ``geom`` if URDF itself has it (box, sphere, cylinder);
+    whether it did."""
     s = shape.size_m
     if shape.kind == "box":
         ET.SubElement(geom, "box", size=_nums(s))
@@ -168,7 +169,17 @@ def _urdf_geometry(parent: ET.Element, shape: CollisionShape) -> None:
         ET.SubElement(geom, "sphere", radius=_num(s[0]))
     elif shape.kind == "cylinder":
         ET.SubElement(geom, "cylinder", radius=_num(s[0]), length=_num(s[1]))
-    elif shape.kind == "ellipsoid":
+    else:
+        return False
+    return True
+
+
+def _urdf_geometry(parent: ET.Element, shape: CollisionShape) -> None:
+    geom = ET.SubElement(parent, "geometry")
+    s = shape.size_m
+    if standard_urdf_geometry(geom, shape):
+        return
+    if shape.kind == "ellipsoid":
         ET.SubElement(geom, _d("ellipsoid"), a=_num(s[0]), b=_num(s[1]), c=_num(s[2]))
     elif shape.kind == "capsule":
         ET.SubElement(geom, _d("capsule"), radius=_num(s[0]), length=_num(s[1]))
@@ -182,19 +193,12 @@ def _urdf_origin(parent: ET.Element, xyz, rpy) -> None:
     ET.SubElement(parent, "origin", xyz=_nums(xyz), rpy=_nums(rpy))
 
 
-def build_urdf(
-    geometry: CollisionGeometry,
-    props: PhysicalProperties,
-    contact: ContactProperties,
-    visual_mesh_relpath: str = VISUAL_MESH_RELPATH,
-    model_name: str = "object",
-    link_name: str = LINK_NAME,
-) -> ET.Element:
-    """The ``<robot>`` element of the URDF (see the module docstring for the content)."""
-    _check_inputs(geometry, props)
+def urdf_link(props: PhysicalProperties, visual_mesh_relpath: str | None, model_name: str,
+              link_name: str) -> tuple[ET.Element, ET.Element]:
+    """``(<robot>, <link>)``: the one link with its inertial (module docstring) and, given a path, the
+    visual mesh; collision elements are the caller's."""
     robot = ET.Element("robot", name=model_name)
     link = ET.SubElement(robot, "link", name=link_name)
-
     inertial = ET.SubElement(link, "inertial")
     _urdf_origin(inertial, props.com_m, (0.0, 0.0, 0.0))
     ET.SubElement(inertial, "mass", value=_num(props.mass_kg))
@@ -205,12 +209,25 @@ def build_urdf(
         ixx=_num(i[0, 0]), ixy=_num(i[0, 1]), ixz=_num(i[0, 2]),
         iyy=_num(i[1, 1]), iyz=_num(i[1, 2]), izz=_num(i[2, 2]),
     )  # fmt: skip
-
     if visual_mesh_relpath:
         visual = ET.SubElement(link, "visual", name="visual")
         _urdf_origin(visual, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         vgeom = ET.SubElement(visual, "geometry")
         ET.SubElement(vgeom, "mesh", filename=visual_mesh_relpath)
+    return robot, link
+
+
+def build_urdf(
+    geometry: CollisionGeometry,
+    props: PhysicalProperties,
+    contact: ContactProperties,
+    visual_mesh_relpath: str = VISUAL_MESH_RELPATH,
+    model_name: str = "object",
+    link_name: str = LINK_NAME,
+) -> ET.Element:
+    """The ``<robot>`` element of the URDF (see the module docstring for the content)."""
+    _check_inputs(geometry, props)
+    robot, link = urdf_link(props, visual_mesh_relpath, model_name, link_name)
 
     for k, shape in enumerate(geometry.shapes):
         col = ET.SubElement(link, "collision", name=f"collision_{k:04d}")

@@ -40,8 +40,8 @@ from real2sim.capture.capture_output import save_png
 from real2sim.capture.hard_rigs import apply_colour_gains, colour_gains
 from real2sim.capture.phone_media import LensWarp, VideoWriter, motion_blur, phone_exif, photo_name
 from real2sim.capture.render_scene import OBJECT_LABEL, RenderScene
-from real2sim.capture.textures import export_textured_obj, has_texture, procedural_texture, with_procedural_texture
-from real2sim.capture.wrist_camera import CaptureResult, look_at_c2w_gl, object_frame
+from real2sim.capture.textures import export_textured_obj, procedural_texture
+from real2sim.capture.wrist_camera import CaptureResult, look_at_c2w_gl, object_frame, render_ready
 from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics, Dataset, Frame, write_transforms
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import atomic_output_dir
@@ -349,16 +349,9 @@ def capture_handheld(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, co
     """Render a handheld phone capture of ``mesh`` on a table (with the board under it when
     ``config.board``) into ``out_dir``: photos or a video plus ``ground_truth/`` (module docstring).
     The folder appears whole or not at all; ``progress("rendering", done, total)`` after each view."""
-    from real2sim.formats.mesh_io import check_object_size, load_mesh, validate_mesh
-
     t_start = time.perf_counter()
     config.validate()
-    if not isinstance(mesh, trimesh.Trimesh):
-        mesh = load_mesh(mesh)
-    validate_mesh(mesh)
-    check_object_size(mesh)
-    if not has_texture(mesh):
-        mesh = with_procedural_texture(mesh, seed=config.texture_seed + 1)
+    mesh = render_ready(mesh, config.texture_seed)
     cam = config.camera()
     world_from_mesh, target, radius = object_frame(mesh)
     if config.board is not None:  # a person frames the board too, most of it

@@ -196,6 +196,20 @@ def look_at_c2w_gl(positions_m: np.ndarray, target_m: np.ndarray) -> np.ndarray:
     return c2w
 
 
+def render_ready(mesh: trimesh.Trimesh | Path | str, texture_seed: int) -> trimesh.Trimesh:
+    """The object as the captures render it: loaded (metres) when a path, checked (a valid mesh of an
+    object's size), and given a procedural texture when it has none."""
+    from real2sim.formats.mesh_io import check_object_size, load_mesh, validate_mesh
+
+    if not isinstance(mesh, trimesh.Trimesh):
+        mesh = load_mesh(mesh)
+    validate_mesh(mesh)
+    check_object_size(mesh)
+    if not has_texture(mesh):
+        mesh = with_procedural_texture(mesh, seed=texture_seed + 1)
+    return mesh
+
+
 def object_frame(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, float]:
     """(world_from_mesh 4x4, look-at target in world, bounding radius m): footprint centre at origin, bottom at z=0."""
     lo, hi = mesh.bounds
@@ -308,16 +322,9 @@ def capture(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: Cap
     is called after each rendered view. ``config.no_table``: on a thin stand instead, and the
     dataset's transforms.json says ``"table_plane": false`` (``formats.dataset.TABLE_PLANE_KEY``).
     """
-    from real2sim.formats.mesh_io import check_object_size, load_mesh, validate_mesh
-
     t_start = time.perf_counter()
     config.validate()
-    if not isinstance(mesh, trimesh.Trimesh):
-        mesh = load_mesh(mesh)
-    validate_mesh(mesh)
-    check_object_size(mesh)
-    if not has_texture(mesh):
-        mesh = with_procedural_texture(mesh, seed=config.texture_seed + 1)
+    mesh = render_ready(mesh, config.texture_seed)
     cam = config.camera()
     world_from_mesh, target, radius = object_frame(mesh)
     exact, cut = rig_poses(config, mesh, world_from_mesh, target, radius)

@@ -190,11 +190,24 @@ def _resolve_mesh(text: str):
     return path
 
 
+def _checked_input(args: argparse.Namespace):
+    """The object to capture, after the output folder is checked (never the mesh's own folder): a
+    bundled object, or the mesh file loaded in ``--mesh-units`` and of an object's size."""
+    from real2sim.formats.outputs import check_output_dir
+
+    check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
+    mesh = _resolve_mesh(args.mesh)
+    if isinstance(mesh, Path):
+        from real2sim.formats.mesh_io import check_object_size, load_mesh
+
+        mesh_path, mesh = mesh, load_mesh(mesh, args.mesh_units)
+        check_object_size(mesh, str(mesh_path), args.mesh_units)
+    return mesh
+
+
 def run_capture(args: argparse.Namespace) -> int:
     from real2sim.capture.wrist_camera import CaptureConfig, capture
     from real2sim.cli.progress import progress_display
-    from real2sim.formats.outputs import check_output_dir
-
     from real2sim.formats.errors import UserInputError
 
     if args.handheld:
@@ -216,13 +229,7 @@ def run_capture(args: argparse.Namespace) -> int:
                         exposure_jitter_stops=args.exposure_jitter, white_balance_jitter=args.white_balance_jitter,
                         jpeg_quality=(args.jpeg_quality or DEFAULT_JPEG_QUALITY) if args.jpeg else None)
     cfg.validate()
-    check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
-    mesh = _resolve_mesh(args.mesh)
-    if isinstance(mesh, Path):
-        from real2sim.formats.mesh_io import check_object_size, load_mesh
-
-        mesh_path, mesh = mesh, load_mesh(mesh, args.mesh_units)
-        check_object_size(mesh, str(mesh_path), args.mesh_units)
+    mesh = _checked_input(args)
     with progress_display() as progress:
         result = capture(mesh, args.out, cfg, progress=progress, overwrite=args.overwrite)
     print(f"dataset: {result.out_dir} ({result.num_views} views, rendered in {result.render_seconds:.1f} s)")
@@ -291,7 +298,6 @@ def _run_handheld(args: argparse.Namespace) -> int:
     from real2sim.capture.handheld import HandheldConfig, capture_handheld
     from real2sim.cli.progress import progress_display
     from real2sim.formats.errors import UserInputError
-    from real2sim.formats.outputs import check_output_dir
 
     for name, default in _NOT_HANDHELD.items():
         if getattr(args, name) != default:
@@ -304,13 +310,7 @@ def _run_handheld(args: argparse.Namespace) -> int:
                          video_rotation_deg=int(args.video_rotation_deg), distortion_k1=args.distortion_k1,
                          jpeg_quality=args.jpeg_quality or DEFAULT_JPEG_QUALITY)
     cfg.validate()
-    check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
-    mesh = _resolve_mesh(args.mesh)
-    if isinstance(mesh, Path):
-        from real2sim.formats.mesh_io import check_object_size, load_mesh
-
-        mesh_path, mesh = mesh, load_mesh(mesh, args.mesh_units)
-        check_object_size(mesh, str(mesh_path), args.mesh_units)
+    mesh = _checked_input(args)
     with progress_display() as progress:
         result = capture_handheld(mesh, args.out, cfg, progress=progress, overwrite=args.overwrite)
     what = "frames in clip.mp4" if cfg.video else "photos"
