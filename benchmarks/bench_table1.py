@@ -26,7 +26,7 @@ QUICK_SPECS = ("boxes:10", "cylinders:10", "spheres:64", "coacd")
 OBJECTS = ("bottle", "can")
 
 
-def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None) -> list[Path]:
+def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fit_config=None) -> list[Path]:
     """One asset folder per object holding every SPEC.
 
     Each SPEC is built alone into work/build/<object>/<SPEC> (so an interrupted run
@@ -34,7 +34,8 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None) ->
     work/assets/<object>; the shared files are identical across builds (same mesh,
     same seed), so one evaluation reference serves them all. Every URDF is then
     rewritten with ``contact`` (default: ``ContactProperties()``), so the gathered
-    copies never keep the contact settings of an earlier run.
+    copies never keep the contact settings of an earlier run. ``fit_config``: the primitive
+    fits' settings (default: ``FitConfig()``); a work folder holds builds of one setting only.
     """
     import shutil
 
@@ -53,8 +54,8 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None) ->
             build = work / "build" / name / spec.name
             if not (build / spec.name / "model.urdf").exists():
                 start = time.perf_counter()
-                build_asset(mesh, build, AssetConfig(mass_kg=BUNDLED[name].mass_kg, specs=(spec,), seed=seed),
-                            overwrite=True)
+                build_asset(mesh, build, AssetConfig(mass_kg=BUNDLED[name].mass_kg, specs=(spec,), seed=seed,
+                                                     fit_config=fit_config), overwrite=True)
                 print(f"built {name} {spec_text} in {time.perf_counter() - start:.1f} s", flush=True)
             if not asset.exists():
                 shutil.copytree(build, asset, ignore=shutil.ignore_patterns(spec.name))
@@ -115,6 +116,9 @@ def main() -> int:
                         "ContactProperties'); the reference keeps the default")
     parser.add_argument("--cylinder-flat-depth", type=float, default=None, metavar="M",
                         help="ContactProperties.cylinder_flat_depth_m of the candidates (default: off)")
+    parser.add_argument("--box-init", choices=["cover", "kmeans"], default=None,
+                        help="FitConfig.box_init of boxes:N fits (default: FitConfig's); 'kmeans' is the fit "
+                        "before issue 32. Use a --work folder of its own: builds there are reused as they are")
     parser.add_argument("--tag", default=None,
                         help="results in <work>/results_<tag>, section docs/benchmarks/table1_<tag>.md")
     args = parser.parse_args()
@@ -130,7 +134,10 @@ def main() -> int:
     contact = ContactProperties(
         **({} if args.dissipation is None else {"hunt_crossley_dissipation_s_per_m": args.dissipation}),
         cylinder_flat_depth_m=args.cylinder_flat_depth)
-    asset_dirs = build_assets(args.work, specs, args.seed, contact)
+    from real2sim.collision.fit.config import FitConfig
+
+    fit_config = None if args.box_init is None else FitConfig(box_init=args.box_init)
+    asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config)
     build_s = time.perf_counter() - start
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=tuple(args.contact), runs=runs,
                               seed=args.seed, **({"jobs": args.jobs} if args.jobs else {}))
@@ -194,6 +201,7 @@ def main() -> int:
            f"{ContactProperties().hunt_crossley_dissipation_s_per_m:g} s/m). " if args.dissipation is not None else "")
         + (f"Candidates' compliant cylinders meshed with flats at most {args.cylinder_flat_depth:g} m deep "
            "(`--cylinder-flat-depth`). " if args.cylinder_flat_depth is not None else "")
+        + (f"Boxes fitted with `--box-init {args.box_init}`. " if args.box_init else "")
         + f"Assets built in {build_s / 60:.1f} min, sweep {eval_s / 60:.1f} min "
         f"({len(result.runs)} rows, {result.failed} failed"
         + (f"; {result.skipped} rows were already in runs.csv from an interrupted or earlier run of this sweep, "

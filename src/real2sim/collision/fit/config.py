@@ -20,6 +20,9 @@ class FitConfig:
 
     parameterization: str = "direct"  # "direct" or "network" (the paper's eq. 10, Fig. 3); see docs/benchmarks/fitting.md
     init: str = "kmeans"  # "kmeans" (beyond the paper) or "random"
+    # Axis-aligned boxes alone (boxes:N) start from a greedy cover of the solid by maximal boxes
+    # ("cover", fit/box_cover.py) rather than k-means patches ("kmeans"); needs init="kmeans".
+    box_init: str = "cover"
     learning_rate: float | None = None
     lr_schedule: str = "cosine"  # "cosine" (to final_lr_fraction * lr) or "constant"
     final_lr_fraction: float = 0.02
@@ -61,6 +64,8 @@ class FitConfig:
             raise ValueError(f"parameterization must be 'network' or 'direct', got {self.parameterization!r}")
         if self.init not in ("kmeans", "random"):
             raise ValueError(f"init must be 'kmeans' or 'random', got {self.init!r}")
+        if self.box_init not in ("cover", "kmeans"):
+            raise ValueError(f"box_init must be 'cover' or 'kmeans', got {self.box_init!r}")
         if self.lr_schedule not in ("cosine", "constant"):
             raise ValueError(f"lr_schedule must be 'cosine' or 'constant', got {self.lr_schedule!r}")
         if self.inside_loss not in ("hinge", "squared"):

@@ -117,6 +117,8 @@ def _initial_packed(
     n = layout.total
     dev, dt = points.device, points.dtype
     floor = 2.0 * config.min_size
+    if config.init == "kmeans" and config.box_init == "cover" and layout.kinds == ("box",):
+        return [_cover_packed(points, sdf, n, config, generator)]
     if config.init == "kmeans":
         inside = points[sdf < 0]
         if len(inside) < n:  # too few interior samples: fall back to all near-surface ones
@@ -151,3 +153,23 @@ def _initial_packed(
             packed[:, -4:] += 0.05 * torch.randn(count, 4, generator=generator).to(dev, dt)
         out.append(packed)
     return out
+
+
+def _cover_packed(points: torch.Tensor, sdf: torch.Tensor, n: int, config: FitConfig,
+                  generator: torch.Generator) -> torch.Tensor:
+    """Packed rows of ``n`` axis-aligned boxes from the greedy cover (:mod:`.box_cover`). When the
+    cover needs fewer boxes (a carton is one), the rest start as the smallest boxes at random
+    interior samples: they are dead from the start, so revival moves them to the worst-covered
+    samples and the end of the fit drops those still dead."""
+    from real2sim.collision.fit.box_cover import greedy_box_cover
+
+    seed = int(torch.randint(2**31 - 1, (1,), generator=generator))
+    centres, half = greedy_box_cover(points.cpu().numpy(), sdf.cpu().numpy(), n, config.fill_resolution, seed)
+    centres = torch.as_tensor(centres, dtype=points.dtype, device=points.device)
+    half = torch.as_tensor(half, dtype=points.dtype, device=points.device)
+    if len(centres) < n:
+        inside = (sdf < 0).nonzero().squeeze(1)
+        pick = inside[torch.randint(len(inside), (n - len(centres),), generator=generator).to(points.device)]
+        centres = torch.cat((centres, points[pick]))
+        half = torch.cat((half, torch.zeros(n - len(half), 3, dtype=points.dtype, device=points.device)))
+    return torch.cat((centres, half.clamp(min=2.0 * config.min_size)), 1)
