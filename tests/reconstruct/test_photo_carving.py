@@ -26,14 +26,27 @@ def mug_capture(tmp_path_factory):
     return out
 
 
-def _hull_and_carving(dataset, config=None):
+def _views_and_hull(dataset):
+    """The dataset's views, the carving grid over its object region and the visual hull on it."""
     from real2sim.reconstruct.hull import VoxelGrid, carve, object_region
-    from real2sim.reconstruct.photo_carving import CarvingConfig, photo_carve
     from real2sim.reconstruct.views import load_views
 
     views = load_views(dataset)
     grid = VoxelGrid.covering(*object_region(views), VOXELS, 0.0)
-    hull = carve(views, grid) >= 0.5
+    return views, grid, carve(views, grid) >= 0.5
+
+
+@pytest.fixture(scope="module")
+def mug_hull(mug_capture):
+    """The mug's views, grid and hull, made once: each test carves it with its own settings (photo_carve
+    works on a copy)."""
+    return _views_and_hull(mug_capture)
+
+
+def _hull_and_carving(dataset, config=None, views_and_hull=None):
+    from real2sim.reconstruct.photo_carving import CarvingConfig, photo_carve
+
+    views, grid, hull = views_and_hull or _views_and_hull(dataset)
     return grid, hull, photo_carve(views, grid, hull, config or CarvingConfig())
 
 
@@ -49,8 +62,8 @@ def _truth_labels(dataset, grid):
     return inside, in_hull & ~inside
 
 
-def test_carving_opens_the_mug_cavity_and_keeps_its_walls(mug_capture):
-    grid, hull, result = _hull_and_carving(mug_capture)
+def test_carving_opens_the_mug_cavity_and_keeps_its_walls(mug_capture, mug_hull):
+    grid, hull, result = _hull_and_carving(mug_capture, views_and_hull=mug_hull)
     inside, concave = _truth_labels(mug_capture, grid)
     # the hull fills the cavity: most of the concave space is inside it
     filled_by_hull = np.count_nonzero(hull & concave) / np.count_nonzero(concave)
@@ -64,7 +77,7 @@ def test_carving_opens_the_mug_cavity_and_keeps_its_walls(mug_capture):
 
 
 @pytest.mark.slow
-def test_the_hollow_prior_empties_the_mugs_flat_coloured_lower_cavity(mug_capture):
+def test_the_hollow_prior_empties_the_mugs_flat_coloured_lower_cavity(mug_capture, mug_hull):
     """The first pass stops where the cup's inside is one flat colour (measured at 160x120, 48 voxels:
     63 % of the filled cavity left); the second pass (the hollow prior) takes most of the rest (25 %
     left) and nothing of the wall the silhouettes vouch for (within ``min_wall_voxels`` of the
@@ -73,8 +86,8 @@ def test_the_hollow_prior_empties_the_mugs_flat_coloured_lower_cavity(mug_captur
 
     from real2sim.reconstruct.photo_carving import CarvingConfig
 
-    grid, hull, first_pass = _hull_and_carving(mug_capture, CarvingConfig(hollow_prior=False))
-    _, _, opened = _hull_and_carving(mug_capture)
+    grid, hull, first_pass = _hull_and_carving(mug_capture, CarvingConfig(hollow_prior=False), mug_hull)
+    _, _, opened = _hull_and_carving(mug_capture, views_and_hull=mug_hull)
     inside, concave = _truth_labels(mug_capture, grid)
     left = lambda result: np.count_nonzero(result.solid & concave) / np.count_nonzero(hull & concave)
     assert first_pass.opened_voxels == 0
@@ -138,12 +151,12 @@ def test_carving_on_poses_a_few_mm_off_is_undone_by_the_silhouettes(can_capture,
     assert capped.carved_voxels <= 0.01 * np.count_nonzero(hull)
 
 
-def test_small_carved_pockets_are_put_back(mug_capture):
+def test_small_carved_pockets_are_put_back(mug_capture, mug_hull):
     """Carved parts smaller than ``min_component_fraction`` of the hull are filled again: at 0.99 even the
     cavity (less than half the hull's voxels) is."""
     from real2sim.reconstruct.photo_carving import CarvingConfig
 
-    grid, hull, result = _hull_and_carving(mug_capture, CarvingConfig(min_component_fraction=0.99))
+    grid, hull, result = _hull_and_carving(mug_capture, CarvingConfig(min_component_fraction=0.99), mug_hull)
     assert result.carved_voxels == 0
 
 

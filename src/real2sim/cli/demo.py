@@ -31,7 +31,9 @@ class DemoPlan:
     """What the demo captures, how it reconstructs, what it builds and how hard it evaluates.
 
     ``pose_noise``: the capture's default robot-pose noise (5 mm, 1 deg RMS) or none;
-    ``max_faces`` / ``texture_px`` None: the reconstruct stage's defaults.
+    ``max_faces`` / ``texture_px`` None: the reconstruct stage's defaults. ``fit_iterations`` (None: the
+    fit's default) and ``duration_scale`` (the tasks' simulated seconds times this) exist for the test
+    suite's smaller demo, which runs every stage of ``--quick`` in less time.
     """
 
     specs: tuple[str, ...]
@@ -46,6 +48,8 @@ class DemoPlan:
     backend: str
     texture_px: int | None = None
     max_faces: int | None = None
+    fit_iterations: int | None = None
+    duration_scale: float = 1.0
 
 
 # Measured by benchmarks/bench_demo.py (docs/benchmarks/demo.md): full at most 15 min on 2 cores,
@@ -111,8 +115,13 @@ def run_config(plan: DemoPlan):
         from real2sim.capture.pose_refinement import RefineConfig
 
         refine = RefineConfig()
+    fit = None
+    if plan.fit_iterations is not None:
+        from real2sim.collision.fit.config import FitConfig
+
+        fit = FitConfig(max_iterations=plan.fit_iterations, min_iterations=min(plan.fit_iterations, 300))
     asset = AssetConfig(mass_kg=OBJECTS["bottle"].mass_kg, specs=tuple(parse_spec(s) for s in plan.specs),
-                        formats=("urdf", "mjcf", "usd"))
+                        formats=("urdf", "mjcf", "usd"), fit_config=fit)
     return RunConfig(asset=asset, reconstruct=recon, refine=refine)
 
 
@@ -147,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, args.overwrite)  # bad --out: one line before any work
     cap_cfg, config = capture_config(plan), run_config(plan)
     eval_config = EvaluationConfig(tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs,
-                                   **({"jobs": args.jobs} if args.jobs else {}))
+                                   scene=_scene(plan.duration_scale), **({"jobs": args.jobs} if args.jobs else {}))
     start, cpu_start = time.perf_counter(), _cpu_seconds()
     out: Path = args.out
     try:
@@ -169,6 +178,19 @@ def run(args: argparse.Namespace) -> int:
     for line in stage_warning_lines(result.stage_warnings):  # what degraded, again at the end
         print(line)
     return 0
+
+
+def _scene(duration_scale: float):
+    """The tasks' scene, its simulated durations times ``duration_scale`` (as `evaluate --duration-scale`)."""
+    from dataclasses import replace
+
+    from real2sim.evaluate.scene_config import SceneConfig
+
+    scene = SceneConfig()
+    if duration_scale == 1.0:
+        return scene
+    return replace(scene, push_duration_s=scene.push_duration_s * duration_scale,
+                   total_duration_s=scene.total_duration_s * duration_scale)
 
 
 def _cpu_seconds() -> float:
