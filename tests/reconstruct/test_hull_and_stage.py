@@ -89,7 +89,7 @@ def test_hull_backend_end_to_end(hull_result, truth, tiny_config):
     """The stage's own truth comparison (ground_truth/ in the dataset) lands in the report."""
     report = hull_result.report
     assert report["backend"] == "hull" and report["device"] == "cpu"
-    _check_report(report, {"load", "visual_hull", "hull_surface", "texture", "held_out_mesh_psnr",
+    _check_report(report, {"load", "mask_edges", "visual_hull", "hull_surface", "texture", "held_out_mesh_psnr",
                            "compare_to_truth"})
     assert "loss_curve" not in report and "psnr_field_held_out_db" not in report
     t = report["truth"]
@@ -107,7 +107,7 @@ def test_hull_backend_end_to_end(hull_result, truth, tiny_config):
     assert 16.0 < report["psnr_mesh_held_out_db"] < 60.0
 
 
-FIELD_STAGES = {"load", "visual_hull", "train_field", "extract_mesh", "texture", "held_out_field_psnr",
+FIELD_STAGES = {"load", "mask_edges", "visual_hull", "train_field", "extract_mesh", "texture", "held_out_field_psnr",
                 "held_out_mesh_psnr"}
 
 

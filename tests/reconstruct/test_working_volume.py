@@ -194,3 +194,56 @@ def test_temple_hull_reconstruction_matches_the_true_box(temple_views, tmp_path)
     lo, hi = np.asarray(result.mesh.bounds)
     assert np.all(np.abs(lo - truth["bbox_min_m"]) < 0.005) and np.all(np.abs(hi - truth["bbox_max_m"]) < 0.005), (lo, hi)
     assert result.report["region_m"]
+
+
+def test_a_view_whose_mask_lost_part_of_the_object_is_not_trusted_alone():
+    """Views whose masks agree with the robust hull carve alone; the one whose mask lost the sphere's
+    upper half does not (it would remove a volume, not a sliver of skin)."""
+    from real2sim.reconstruct.hull import VoxelGrid, consistent_views, silhouette_scores
+
+    views = ring_views(azimuths_deg=np.linspace(0, 360, 20, endpoint=False), elevation_deg=25, distance_m=0.8,
+                       fx_px=400)
+    masks = views.mask.copy()
+    masks[0, : views.intrinsics.height // 2] = 0.0
+    broken = replace(views, mask=masks)
+    grid = VoxelGrid.covering(CENTRE_M - 1.3 * RADIUS_M, CENTRE_M + 1.3 * RADIUS_M, 40, None)
+    inside = silhouette_scores(broken, grid.centres(), 0.03).reshape(grid.shape) >= 0.5
+    trusted = consistent_views(broken, grid, inside)
+    assert not trusted[0] and trusted[1:].all(), trusted
+
+
+def test_trusted_views_trim_the_skin_that_robust_carving_leaves():
+    """Six views along a 135-degree arc, as the temple's: without opposite views, a side of the
+    sphere is bounded by one view's silhouette only, so the rule that two views must agree leaves a
+    skin there; views whose masks all agree with each other carve alone and the hull's box error
+    falls by two thirds (9 -> 3 mm here; what is left is six views' polygon around a sphere)."""
+    from real2sim.reconstruct.hull import VoxelGrid, carve
+
+    views = ring_views(azimuths_deg=np.linspace(135, 270, 6), elevation_deg=20, distance_m=0.6, fx_px=800)
+    grid = VoxelGrid.covering(CENTRE_M - 1.5 * RADIUS_M, CENTRE_M + 1.5 * RADIUS_M, 60, None)
+    centres = grid.centres()
+
+    def box_error_m(scores):
+        inside = centres[scores.reshape(-1) >= 0.5]
+        return max(np.abs(inside.min(axis=0) - (CENTRE_M - RADIUS_M)).max(),
+                   np.abs(inside.max(axis=0) - (CENTRE_M + RADIUS_M)).max())
+
+    robust = box_error_m(carve(views, grid, trust_consistent=False))
+    trusted = box_error_m(carve(views, grid))
+    assert trusted <= 1.5 * grid.voxel_m and trusted <= 0.5 * robust, (trusted, robust, grid.voxel_m)
+
+
+def test_temple_at_320_px_every_side_within_2_mm(temple_views):
+    """The issue's temple target on the real photographs reduced to 320x240, hull backend with the
+    default mask edges (moved to the photos' colour edges): every side of the mesh's box within
+    2 mm of the authors' tight box. With the masks as given (a threshold at 0.3 and a 2 px
+    dilation: a halo) the sides were up to 1.9 mm out at this size and 3.7 mm at 640x480."""
+    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
+
+    truth = json.loads((TEMPLE / "truth_bbox.json").read_text())
+    cfg = ReconstructConfig(backend="hull", hull_voxels=128, texture_px=64, max_faces=4000, max_image_side_px=320)
+    result = reconstruct(TEMPLE, cfg)
+    lo, hi = np.asarray(result.mesh.bounds)
+    errors_m = np.concatenate([np.asarray(truth["bbox_min_m"]) - lo, hi - np.asarray(truth["bbox_max_m"])])
+    assert np.abs(errors_m).max() <= 0.002, errors_m
+    assert result.report["mask_edges"]["method"] == "colour" and result.report["mask_edges"]["band_px"] == 2

@@ -21,9 +21,12 @@ real capture's region run off a metre past a 9 cm object. Points not constrained
 score 0, whatever their masks say; the same rule bounds the region the views see
 together (:func:`seen_together`), which no result may leave.
 
-No view is trusted alone: a point is carved by one mask only when too few views see
-it for a second to agree (``MIN_AGREEING``); otherwise the lowest mask value is
-skipped, so one wrong mask (a real threshold that ate part of the object) cannot cut it.
+No view is trusted alone until its mask has shown it agrees with the others: a point is
+carved by one mask only when too few views see it for a second to agree (``MIN_AGREEING``);
+otherwise the lowest mask value is skipped, so one wrong mask (a real threshold that ate part
+of the object) cannot cut it. That leaves a skin where one view alone bounds the object (a
+ring over part of a circle has no opposite views), so :func:`carve` then lets the views whose
+masks remove only a sliver of that robust hull (:func:`consistent_views`) carve alone.
 
 World frame, metres; the table top is z = 0 and nothing is kept below it.
 """
@@ -46,6 +49,8 @@ MIN_SPREAD_DEG = 25.0
 #: a point is carved only when this many of the views that see it put it outside their masks
 #: (when at least 2 * MIN_VOTES views see it; fewer views are all needed)
 MIN_AGREEING = 2
+#: a view whose mask alone would remove at most this share of the robust hull's skin carves alone
+TRUSTED_SKIN_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -161,12 +166,14 @@ def _constrained(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tensor, m
 
 def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction: float,
                       chunk: int = 100_000, min_votes: int = MIN_VOTES,
-                      min_spread_deg: float = MIN_SPREAD_DEG) -> np.ndarray:
+                      min_spread_deg: float = MIN_SPREAD_DEG, trusted: np.ndarray | None = None) -> np.ndarray:
     """(P,) float32 silhouette score of world points: see the module docstring.
 
     A point fewer than ``min_votes`` cameras see, or seen only from directions less than
     ``min_spread_deg`` apart, scores 0: nothing constrains it, and counting it as inside
-    would let the hull run off where the views are sparse.
+    would let the hull run off where the views are sparse. ``trusted``: (V,) bool, views
+    whose masks may carve alone (:func:`consistent_views`); the score is then at most
+    their lowest vote.
     """
     masks = torch.from_numpy(views.mask[:, None])  # (V, 1, H, W)
     touched = torch.from_numpy(border_touched(views.mask))
@@ -184,6 +191,9 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
             rank = torch.maximum(torch.floor(outlier_fraction * count).long(), floor)
             rank = torch.clamp(rank, max=torch.clamp(count - 1, min=0))
             score = ordered.gather(0, rank[None])[0]
+            if trusted is not None:
+                alone = seen & torch.from_numpy(np.asarray(trusted, bool))[:, None]
+                score = torch.minimum(score, vals.masked_fill(~alone, 2.0).min(dim=0).values)
             # Below 0.5 a point is outside whatever the spread; its score still places the surface
             # between voxels, so it keeps the score (the rule of min_votes alone). The spread is
             # computed only where the masks would keep a point.
@@ -193,6 +203,39 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
                 keep = keep & (~candidate | _constrained(centres, pts, seen & candidate[None], min_votes, min_spread_deg))
             out[start:start + chunk] = torch.where(keep, score, torch.zeros_like(score)).numpy()
     return out
+
+
+def lone_carving(views: PosedViews, points_m: np.ndarray, chunk: int = 100_000) -> np.ndarray:
+    """(V,) how many of ``points_m`` (world, metres) each view alone puts outside its mask (a vote below 0.5)."""
+    masks = torch.from_numpy(views.mask[:, None])
+    touched = torch.from_numpy(border_touched(views.mask))
+    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
+    counts = torch.zeros(views.count, dtype=torch.long)
+    with torch.no_grad():
+        for start in range(0, len(points_m), chunk):
+            pts = torch.from_numpy(np.asarray(points_m[start:start + chunk], dtype=np.float32))
+            grid, _, seen = _votes(views, w2c, pts, touched)
+            vals = torch.nn.functional.grid_sample(masks, grid[:, None], mode="bilinear", align_corners=False)[:, 0, 0]
+            counts += (seen & (vals < 0.5)).sum(dim=1)
+    return counts.numpy()
+
+
+def consistent_views(views: PosedViews, grid: VoxelGrid, inside: np.ndarray) -> np.ndarray:
+    """(V,) bool: views whose masks agree with the hull ``inside`` (bool, ``grid.shape``) found without
+    trusting any one view, so that they may carve alone.
+
+    A right mask on a right pose removes, alone, only a sliver of that hull: the skin where its
+    neighbours' silhouettes, a few degrees away, are a little wider, and the gaps only it sees
+    through. A mask that lost part of the object, or a pose that is off, removes a volume. A view is
+    trusted when what it would remove alone is at most ``TRUSTED_SKIN_FRACTION`` of the hull's
+    outer layer of voxels (a measure of the hull's size in voxels that does not depend on the grid).
+    """
+    from scipy.ndimage import binary_erosion
+
+    skin = int((inside & ~binary_erosion(inside, border_value=0)).sum())
+    if skin == 0:
+        return np.zeros(views.count, bool)
+    return lone_carving(views, grid.centres()[inside.reshape(-1)]) <= TRUSTED_SKIN_FRACTION * skin
 
 
 def seen_together(views: PosedViews, points_m: np.ndarray, *, min_votes: int = MIN_VOTES,
@@ -260,7 +303,8 @@ def _padded_box(grid: VoxelGrid, inside: np.ndarray) -> tuple[np.ndarray, np.nda
             grid.origin_m + (idx.max(axis=0) + 1.5) * grid.voxel_m)
 
 
-def carve(views: PosedViews, grid: VoxelGrid, outlier_fraction: float = 0.03, block: int = 3) -> np.ndarray:
+def carve(views: PosedViews, grid: VoxelGrid, outlier_fraction: float = 0.03, block: int = 3,
+          trust_consistent: bool = True) -> np.ndarray:
     """Silhouette scores on ``grid`` (shape ``grid.shape``), float32 in [0, 1].
 
     Scores are computed exactly only near the hull's surface: first at the centres
@@ -271,6 +315,12 @@ def carve(views: PosedViews, grid: VoxelGrid, outlier_fraction: float = 0.03, bl
     coarse_shape = tuple(int(n) for n in np.ceil(shape / block))
     coarse = VoxelGrid(grid.origin_m + 0.5 * (block - 1) * grid.voxel_m, grid.voxel_m * block, coarse_shape)
     coarse_in = silhouette_scores(views, coarse.centres(), outlier_fraction).reshape(coarse_shape) >= 0.5
+    trusted = consistent_views(views, coarse, coarse_in) if trust_consistent and coarse_in.any() else None
+    if trusted is not None and not trusted.any():
+        trusted = None
+    if trusted is not None:
+        coarse_in = silhouette_scores(views, coarse.centres(), outlier_fraction,
+                                      trusted=trusted).reshape(coarse_shape) >= 0.5
     from scipy.ndimage import binary_dilation, binary_erosion
 
     cube = np.ones((3, 3, 3), bool)
@@ -279,7 +329,8 @@ def carve(views: PosedViews, grid: VoxelGrid, outlier_fraction: float = 0.03, bl
     expand = lambda a: np.repeat(np.repeat(np.repeat(a, block, 0), block, 1), block, 2)[: shape[0], : shape[1], : shape[2]]
     scores = np.where(expand(certain_in), 1.0, 0.0).astype(np.float32)
     band = ~(expand(certain_in) | expand(certain_out))
-    scores[band] = silhouette_scores(views, grid.centres().reshape(*grid.shape, 3)[band], outlier_fraction)
+    scores[band] = silhouette_scores(views, grid.centres().reshape(*grid.shape, 3)[band], outlier_fraction,
+                                     trusted=trusted)
     return scores
 
 

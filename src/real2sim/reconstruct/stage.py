@@ -31,12 +31,13 @@ from real2sim.formats.dataset import has_table_plane, read_dataset
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.train import FieldConfig
-from real2sim.reconstruct.views import PosedViews, held_out_split, load_views
+from real2sim.reconstruct.views import PosedViews, held_out_split, load_views, refined_mask_edges
 
 BACKENDS = ("field", "hull")
 EXTRACTIONS = ("density", "tsdf")
 # where the density extraction cuts: the level the masks' edges choose, or ln 2 per voxel
 SURFACE_LEVELS = ("silhouettes", "half-light")
+MASK_EDGES = ("colour", "as-given")
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,8 @@ class ReconstructConfig:
     backend: str = "field"
     extraction: str = "density"
     surface_level: str = "silhouettes"
+    # "colour": masks' edges moved to the images' colour edges within a few pixels (see refined_mask_edges)
+    mask_edges: str = "colour"
     field: FieldConfig = field(default_factory=FieldConfig)
     hull_voxels: int = 192
     hull_outlier_fraction: float = 0.03
@@ -62,6 +65,8 @@ class ReconstructConfig:
             raise UserInputError(f"unknown backend {self.backend!r} (choose from {', '.join(BACKENDS)})")
         if self.extraction not in EXTRACTIONS:
             raise UserInputError(f"unknown extraction {self.extraction!r} (choose from {', '.join(EXTRACTIONS)})")
+        if self.mask_edges not in MASK_EDGES:
+            raise UserInputError(f"unknown mask edges {self.mask_edges!r} (choose from {', '.join(MASK_EDGES)})")
         if self.surface_level not in SURFACE_LEVELS:
             raise UserInputError(f"unknown surface level {self.surface_level!r} (choose from {', '.join(SURFACE_LEVELS)})")
         if not 16 <= self.hull_voxels <= 1024 or not 64 <= self.texture_px <= 8192:
@@ -121,9 +126,14 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         ds = read_dataset(dataset)
         views = load_views(ds, max_side_px=config.max_image_side_px)
         table_z_m = config.table_z_m if has_table_plane(ds) else None  # None: the images show no table
-        train_idx, held_idx = held_out_split(views.count, config.held_out_every)
-        train, held = views.subset(train_idx), views.subset(held_idx)
         truth = load_truth(dataset)
+    if config.mask_edges == "colour":
+        with clock.stage("mask_edges"):
+            views, report["mask_edges"] = refined_mask_edges(views)
+    else:
+        report["mask_edges"] = {"method": "as-given"}
+    train_idx, held_idx = held_out_split(views.count, config.held_out_every)
+    train, held = views.subset(train_idx), views.subset(held_idx)
     if views.unrefined:  # refine-poses could not refine them: the robot's poses, millimetres off
         with clock.stage("unrefined_poses"):
             from real2sim.reconstruct.silhouette_poses import align_unrefined
