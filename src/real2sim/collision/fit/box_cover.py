@@ -10,9 +10,9 @@ undo that: a box that would have to grow through its neighbours gains nothing un
 Here the solid is voxelised (a voxel is solid when the sample nearest its centre is inside;
 the interior fill points count as inside), and each box in turn is the
 maximal box of solid voxels, grown from one of several seeds, that covers the most voxels no
-earlier box covers. Growth adds one voxel layer at a time on the side that covers the most
-uncovered voxels (ties: the most solid ones), until no side can grow without leaving the
-solid; box sums are O(1) from 3-D prefix sums, and all seeds grow at once. On a cylinder
+earlier box covers. Growth adds one voxel layer at a time on the side whose layer holds the most
+uncovered voxels weighted by their depth in the solid (ties: the most solid ones), until no side
+can grow without leaving the solid; box sums are O(1) from 3-D prefix sums, and all seeds grow at once. On a cylinder
 this gives nested full-length slabs whose corners lie on the circle, on a carton one box,
 on a mug on its side the body's slabs and then the handle's. The fit then refines them.
 
@@ -32,10 +32,12 @@ _FACES = tuple((a, s) for a in range(3) for s in range(2))
 
 def solid_voxels(points: np.ndarray, sdf: np.ndarray, resolution: int) -> tuple[np.ndarray, np.ndarray, float]:
     """(solid (X, Y, Z) bool, origin (3,), voxel edge): voxels over the interior samples' bounds
-    (one spare layer each side) whose centre's nearest sample is inside (sdf < 0).
+    (one spare layer each side) whose centre's nearest sample is inside (sdf < 0) and that hold
+    no outside sample.
 
     The nearest sample, not the samples within the voxel: near-surface samples leave most voxels
     of the deep interior (and, when sparse, some of the shell) without a sample of their own."""
+    from scipy import ndimage
     from scipy.spatial import cKDTree
 
     inside = points[sdf < 0]
@@ -45,7 +47,18 @@ def solid_voxels(points: np.ndarray, sdf: np.ndarray, resolution: int) -> tuple[
     shape = np.ceil((hi + voxel - origin) / voxel).astype(int) + 1
     centres = origin + (np.stack(np.meshgrid(*(np.arange(n) for n in shape), indexing="ij"), -1).reshape(-1, 3) + 0.5) * voxel
     _, nearest = cKDTree(points).query(centres, k=1)
-    return (sdf[nearest] < 0).reshape(shape), origin, voxel
+    solid = (sdf[nearest] < 0).reshape(shape)
+    # Deep in a sparsely sampled interior the nearest sample can be an outside one across the
+    # surface: such voxels, enclosed by solid ones, are solid too.
+    ijk = np.floor((points[sdf >= 0] - origin) / voxel).astype(int)
+    ok = np.all((ijk >= 0) & (ijk < shape), axis=1)
+    has_outside = np.zeros(shape, dtype=bool)
+    has_outside[tuple(ijk[ok].T)] = True
+    # A voxel holding an outside sample straddles the surface (near-surface samples lie within a
+    # fraction of a voxel of it): its centre's sign is a coin toss, and one wrong voxel in a layer
+    # stops a box growing across it, so the cover keeps to voxels wholly inside; the fit then
+    # moves the faces out to the surface.
+    return (solid | ndimage.binary_fill_holes(solid)) & ~has_outside, origin, voxel
 
 
 def _prefix(grid: np.ndarray) -> np.ndarray:
@@ -64,8 +77,10 @@ def _box_sum(s: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
             + s[x0, y0, z1] + s[x0, y1, z0] + s[x1, y0, z0] - s[x0, y0, z0])
 
 
-def _grow(solid_s: np.ndarray, free_s: np.ndarray, shape: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Grow unit boxes at ``seeds`` (K, 3) to maximal solid boxes; returns (lo, hi) (K, 3) each."""
+def _grow(solid_s: np.ndarray, weight_s: np.ndarray, shape: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Grow unit boxes at ``seeds`` (K, 3) to maximal solid boxes, each step on the side whose layer
+    has the largest weight (``weight_s``: table of uncovered voxels times their depth); returns
+    (lo, hi) (K, 3) each."""
     k = len(seeds)
     lo, hi = seeds.copy(), seeds + 1
     active = np.ones(k, dtype=bool)
@@ -85,8 +100,10 @@ def _grow(solid_s: np.ndarray, free_s: np.ndarray, shape: np.ndarray, seeds: np.
         volume = np.prod(shi - slo, axis=1).reshape(k, 6)
         filled = _box_sum(solid_s, slo, shi).reshape(k, 6)
         ok = inside & (filled == volume) & active[:, None]
-        # Uncovered voxels first; among equal gains the larger layer, so the box ends maximal.
-        score = np.where(ok, _box_sum(free_s, slo, shi).reshape(k, 6) * 1e6 + volume, -1.0)
+        # Deep uncovered voxels first: the outermost layer of solid voxels is ragged (it follows the
+        # surface within a voxel), and a box that took part of it early could then grow no further
+        # across it. Among equal weights the larger layer, so the box ends maximal.
+        score = np.where(ok, _box_sum(weight_s, slo, shi).reshape(k, 6) * 1e6 + volume, -1.0)
         best = score.argmax(1)
         active &= score[rows, best] >= 0
         grow_lo = active & low_side[best]
@@ -101,7 +118,9 @@ def greedy_box_cover(points: np.ndarray, sdf: np.ndarray, count: int, resolution
     """Up to ``count`` axis-aligned boxes inside the solid the samples describe, each the
     maximal box (of the seeds tried) that covers the most voxels earlier boxes left uncovered.
 
-    ``points`` (N, 3) and ``sdf`` (N,) in unit-sphere coordinates, negative inside. Returns
+    ``points`` (N, 3) and ``sdf`` (N,) in unit-sphere coordinates, negative inside, with the
+    fitter's interior fill points among them (without them, a deep voxel's nearest sample may be
+    an outside one across the surface). Returns
     (centres (M, 3), half-extents (M, 3)), M <= ``count``: the cover stops early when every solid
     voxel is covered (a carton is one box). Deterministic for a given ``seed``.
     """
@@ -113,6 +132,7 @@ def greedy_box_cover(points: np.ndarray, sdf: np.ndarray, count: int, resolution
     from scipy import ndimage
 
     depth = ndimage.distance_transform_edt(solid)
+    depth_voxels = np.ceil(depth).astype(np.int64)
     shape = np.array(solid.shape)
     solid_s = _prefix(solid)
     free = solid.copy()
@@ -126,7 +146,7 @@ def greedy_box_cover(points: np.ndarray, sdf: np.ndarray, count: int, resolution
         rand = rng.choice(free_idx, size=min(len(free_idx), SEEDS_PER_BOX - len(deep)), replace=False)
         seeds = np.stack(np.unravel_index(np.concatenate((deep, rand)), solid.shape), 1)
         free_s = _prefix(free)
-        lo, hi = _grow(solid_s, free_s, shape, seeds)
+        lo, hi = _grow(solid_s, _prefix(np.where(free, depth_voxels, 0)), shape, seeds)
         gain = _box_sum(free_s, lo, hi)
         k = int(np.argmax(gain))
         if gain[k] <= 0:
