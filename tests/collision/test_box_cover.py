@@ -140,3 +140,4 @@ def test_cover_only_starts_boxes_alone(can):
 def test_box_init_is_checked():
     with pytest.raises(ValueError, match="box_init"):
         FitConfig(box_init="voxels")
+

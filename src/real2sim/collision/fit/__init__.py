@@ -23,6 +23,9 @@ Beyond the paper (each is a switch in :class:`FitConfig`, measured in
 * ``init="kmeans"``: primitives start at k-means clusters of the interior samples
   (target sdf < 0, including the fill points), sized from each cluster's spread, instead of wherever a
   randomly initialised network puts them;
+* ``box_init="cover"``: axis-aligned boxes alone (``boxes:N``) start instead from a greedy
+  cover of the solid by maximal inscribed boxes (:mod:`.box_cover`): k-means patches of the
+  shell left a lying can a lumpy staircase to roll on (docs/benchmarks/table1_boxes.md);
 * only each sample's closest primitive (the argmin of eq. 7) is evaluated with
   autograd: the gradient of a minimum flows only to its argmin anyway, so this
   gives exactly the same gradient for a fraction of the cost of the dense
@@ -40,7 +43,7 @@ into the unit sphere); :func:`.convert.to_collision_geometry` converts to metres
 asset frame with ``asset = centre_m + scale_m * unit``.
 
 The modules, in the order the fit uses them: :mod:`.config` (settings, result),
-:mod:`.params` (parameter layout), :mod:`.initialization`, :mod:`.losses`, :mod:`.union`
+:mod:`.params` (parameter layout), :mod:`.initialization` (with :mod:`.box_cover`), :mod:`.losses`, :mod:`.union`
 (the union's distance), :mod:`.loop` (the optimisation), :mod:`.convert` (to metres),
 :mod:`.stage` (:func:`fit_collision`, what the asset stage calls).
 """

@@ -118,7 +118,9 @@ def _initial_packed(
     dev, dt = points.device, points.dtype
     floor = 2.0 * config.min_size
     if config.init == "kmeans" and config.box_init == "cover" and layout.kinds == ("box",):
-        return [_cover_packed(points, sdf, n, config, generator)]
+        cover = _cover_packed(points, sdf, n, config, generator)
+        if cover is not None:
+            return [cover]
     if config.init == "kmeans":
         inside = points[sdf < 0]
         if len(inside) < n:  # too few interior samples: fall back to all near-surface ones
@@ -156,15 +158,20 @@ def _initial_packed(
 
 
 def _cover_packed(points: torch.Tensor, sdf: torch.Tensor, n: int, config: FitConfig,
-                  generator: torch.Generator) -> torch.Tensor:
+                  generator: torch.Generator) -> torch.Tensor | None:
     """Packed rows of ``n`` axis-aligned boxes from the greedy cover (:mod:`.box_cover`). When the
     cover needs fewer boxes (a carton is one), the rest start as the smallest boxes at random
     interior samples: they are dead from the start, so revival moves them to the worst-covered
-    samples and the end of the fit drops those still dead."""
+    samples and the end of the fit drops those still dead. None when the cover finds no voxel
+    wholly inside (a solid thinner than a voxel): the k-means start is used then."""
     from real2sim.collision.fit.box_cover import greedy_box_cover
 
+    state = generator.get_state()
     seed = int(torch.randint(2**31 - 1, (1,), generator=generator))
     centres, half = greedy_box_cover(points.cpu().numpy(), sdf.cpu().numpy(), n, config.fill_resolution, seed)
+    if len(centres) == 0:
+        generator.set_state(state)  # the k-means start then draws exactly what it draws without the cover
+        return None
     centres = torch.as_tensor(centres, dtype=points.dtype, device=points.device)
     half = torch.as_tensor(half, dtype=points.dtype, device=points.device)
     if len(centres) < n:
