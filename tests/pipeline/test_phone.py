@@ -80,6 +80,55 @@ def test_board_gives_metres_and_the_table(handheld, sfm_dir, tmp_path):
     assert (target / "ground_truth" / "mesh.obj").is_file() and (target / BOARD_RECORD).is_file()
 
 
+def _board_file(tmp_path: Path, *flags) -> Path:
+    """The PNG `real2sim board` writes (its layout in the file's metadata)."""
+    from real2sim.cli import main
+
+    assert main(["board", "--out", str(tmp_path / "board.pdf"), *map(str, flags)]) == 0
+    return tmp_path / "board.png"
+
+
+def test_board_frame_uses_the_board_file_it_is_given(handheld, sfm_dir, tmp_path):
+    """`run --board FILE`: the layout read from the file that `real2sim board` wrote is the one the
+    board_frame stage looks for and measures with; the same layout with squares half the size would
+    halve the scene."""
+    from dataclasses import replace
+
+    from real2sim.capture.board import DEFAULT_BOARD, read_board_spec
+
+    spec = read_board_spec(_board_file(tmp_path))
+    assert spec == DEFAULT_BOARD
+    record = run_board_frame(sfm_dir, tmp_path / "phone", PhoneConfig(board=spec))
+    assert record["board"] == DEFAULT_BOARD.to_json() and abs(record["errors_vs_ground_truth"]["scale_rel_error"]) < 0.02
+    small = replace(DEFAULT_BOARD, square_m=DEFAULT_BOARD.square_m / 2, marker_m=DEFAULT_BOARD.marker_m / 2)
+    halved = run_board_frame(sfm_dir, tmp_path / "phone_small", PhoneConfig(board=small))
+    assert abs(halved["errors_vs_ground_truth"]["scale_rel_error"] + 0.5) < 0.02, halved["errors_vs_ground_truth"]
+
+
+def test_run_reads_a_custom_board_file_and_refuses_a_wrong_one(tmp_path, capsys):
+    import argparse
+
+    from PIL import Image
+
+    from real2sim.capture.board import BoardSpec
+    from real2sim.cli.run import phone_config
+
+    (tmp_path / "photos").mkdir()
+    for i in range(9):
+        Image.new("RGB", (64, 48), (128, 128, 128)).save(tmp_path / "photos" / f"IMG_{i:04d}.png")
+    png = _board_file(tmp_path, "--squares", "9x6", "--square-mm", "20")
+    args = argparse.Namespace(dataset=tmp_path / "photos", frames=None, board_square_mm=25.0, board=png, seed=0)
+    config = phone_config(args)
+    assert (config.board.squares_x, config.board.squares_y, config.board.square_m) == (9, 6, 0.02)
+    from real2sim.pipeline.phone import board_spec
+
+    assert isinstance(config.board, BoardSpec) and abs(board_spec(config).square_m - 0.025) < 1e-12
+    Image.new("RGB", (64, 48)).save(tmp_path / "plain.png")
+    code, out, err = run_cli(capsys, tmp_path / "photos", "--mass", 0.3, "--out", tmp_path / "asset",
+                             "--board", tmp_path / "plain.png")
+    _one_line_exit_2(code, out, err, "not a board written by `real2sim board`", tmp_path / "asset")
+
+
 def _without_board(handheld: Path, sfm_dir: Path, tmp_path: Path, keep: int) -> Path:
     """The sfm stage's dataset with the board painted out of all but ``keep`` images."""
     from PIL import Image
@@ -169,6 +218,9 @@ def test_phone_flags_refused_on_a_dataset(tmp_path, capsys):
     capture_cli("can", "--views", 4, "--width", 32, "--height", 24, "--out", tmp_path / "ds")
     code, out, err = run_cli(capsys, tmp_path / "ds", "--mass", 0.3, "--out", tmp_path / "asset", "--frames", 20)
     _one_line_exit_2(code, out, err, "--frames is for photos or a video", tmp_path / "asset")
+    code, out, err = run_cli(capsys, tmp_path / "ds", "--mass", 0.3, "--out", tmp_path / "asset", "--board",
+                             tmp_path / "board.png")
+    _one_line_exit_2(code, out, err, "--board is for photos or a video", tmp_path / "asset")
 
 
 # ----------------------------------------------------------------------------- end to end (slow)

@@ -16,7 +16,7 @@ WORKERS = integer(1, 1024)
 TIMEOUT_S = positive(3600.0)
 MASS_KG = positive(1000.0)
 #: run's flags that batch sets per object itself, or does not take
-_NOT_FORWARDED = {"dataset", "out", "overwrite", "mass", "help", "frames", "board_square_mm"}
+_NOT_FORWARDED = {"dataset", "out", "overwrite", "mass", "help", "frames", "board_square_mm", "board"}
 
 
 def _run_parser() -> argparse.ArgumentParser:
@@ -150,7 +150,7 @@ def plan(args: argparse.Namespace):
         mass, reason = _mass_of(name, dataset_folder(dataset), args, table)
         per = argparse.Namespace(**vars(args))  # config_from_args sets some flags on what it is given
         per.dataset, per.out, per.mass, per.overwrite = Path(dataset), out / name, mass or 1.0, False
-        per.frames = per.board_square_mm = None
+        per.frames = per.board_square_mm = per.board = None
         try:
             config = config_from_args(per)  # checks the dataset itself: not a dataset -> one line
         except UserInputError as exc:

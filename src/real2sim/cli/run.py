@@ -49,6 +49,9 @@ def register(sub) -> None:
                    help="a video: frames kept, the sharpest of each equal stretch of the clip (default 80)")
     p.add_argument("--board-square-mm", type=positive(1000.0), default=None, metavar="MM",
                    help="photos or a video: the printed board's square side as measured, mm, when the print was scaled")
+    p.add_argument("--board", type=Path, default=None, metavar="PDF|PNG",
+                   help="photos or a video: the board file `real2sim board` wrote, when it was not the default "
+                   "one (other squares or sizes; its layout is read from the file)")
     p.add_argument("--object-height-m", type=positive(10.0), default=None, metavar="H", help="a COLMAP dataset "
                    "(images/ + sparse/0, no transforms.json) or an ns-process-data folder (transforms.json with "
                    "applied_transform, sparse_pc.ply): the object's height above the table, metres; sets the "
@@ -174,7 +177,7 @@ def config_from_args(args: argparse.Namespace):
 
 def phone_config(args: argparse.Namespace):
     """PhoneConfig when DATASET is a folder of photos or a video (UserInputError for one with no images),
-    else None (and then --frames and --board-square-mm are refused)."""
+    else None (and then --frames, --board-square-mm and --board are refused)."""
     from real2sim.formats.errors import UserInputError
     from real2sim.pipeline.phone import PhoneConfig, phone_input
     from real2sim.capture.sfm import SfmConfig
@@ -182,13 +185,19 @@ def phone_config(args: argparse.Namespace):
 
     phone = phone_input(args.dataset)
     if phone is None:
-        for flag, value in (("--frames", args.frames), ("--board-square-mm", args.board_square_mm)):
+        for flag, value in (("--frames", args.frames), ("--board-square-mm", args.board_square_mm),
+                            ("--board", getattr(args, "board", None))):
             if value is not None:
                 raise UserInputError(f"{flag} is for photos or a video, and {args.dataset} is a dataset")
         return None
     if args.frames is not None and phone.kind != "video":
         raise UserInputError(f"--frames is for a video, and {args.dataset} is a folder of photos")
-    return PhoneConfig(frames=args.frames or DEFAULT_FRAMES, board_square_mm=args.board_square_mm,
+    board = None
+    if getattr(args, "board", None) is not None:
+        from real2sim.capture.board import read_board_spec
+
+        board = read_board_spec(args.board)
+    return PhoneConfig(frames=args.frames or DEFAULT_FRAMES, board_square_mm=args.board_square_mm, board=board,
                        sfm=SfmConfig(seed=args.seed))
 
 

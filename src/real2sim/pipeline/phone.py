@@ -59,11 +59,14 @@ class PhoneInput:
 
 @dataclass(frozen=True)
 class PhoneConfig:
-    """``frames``: video frames kept; ``board_square_mm``: the printed board's square when the print was
-    scaled (None: the board's own size); ``sfm``: structure-from-motion settings."""
+    """``frames``: video frames kept; ``board``: the printed board (a
+    :class:`real2sim.capture.board.BoardSpec`; None: ``real2sim board``'s default); ``board_square_mm``:
+    its square as measured when the print was scaled (None: the board's own size); ``sfm``:
+    structure-from-motion settings."""
 
     frames: int = DEFAULT_FRAMES
     board_square_mm: float | None = None
+    board: "BoardSpec | None" = None
     sfm: SfmConfig = field(default_factory=SfmConfig)
 
 
@@ -193,10 +196,11 @@ def board_spec(config: PhoneConfig):
 
     from real2sim.capture.board import DEFAULT_BOARD
 
+    board = config.board if config.board is not None else DEFAULT_BOARD
     if config.board_square_mm is None:
-        return DEFAULT_BOARD
-    ratio = config.board_square_mm / (1000.0 * DEFAULT_BOARD.square_m)
-    return replace(DEFAULT_BOARD, square_m=DEFAULT_BOARD.square_m * ratio, marker_m=DEFAULT_BOARD.marker_m * ratio)
+        return board
+    ratio = config.board_square_mm / (1000.0 * board.square_m)
+    return replace(board, square_m=board.square_m * ratio, marker_m=board.marker_m * ratio)
 
 
 def run_board_frame(source: Path, target: Path, config: PhoneConfig, progress: ProgressFn | None = None) -> dict:
@@ -284,5 +288,5 @@ def phone_stages(runner, phone: PhoneInput, run_dir: Path, config) -> Path:
         return {"result": {k: record[k] for k in keys} | {k: record[k] for k in ("errors_vs_ground_truth",) if k in record}}
 
     runner.stage("board_frame", {"sfm": mf.files_digest(sfm_dir, mf.tree_files(sfm_dir))},
-                 {"board_square_mm": cfg.board_square_mm}, upstream, [f"{mf.RUN_DIRNAME}/{PHONE_DIRNAME}"], board_work)
+                 {"board": board_spec(cfg).to_json()}, upstream, [f"{mf.RUN_DIRNAME}/{PHONE_DIRNAME}"], board_work)
     return phone_dir
