@@ -7,14 +7,14 @@ from one height to the next (support function 3.6 mm inside the true one on aver
 directions about the long axis, 5.3 mm at worst, on a 34 mm radius). Gradient steps do not
 undo that: a box that would have to grow through its neighbours gains nothing until it has.
 
-Here the solid is voxelised (a voxel is solid when the sample nearest its centre is inside;
-the interior fill points count as inside), and each box in turn is the
-maximal box of solid voxels, grown from one of several seeds, that covers the most voxels no
+Here the solid is voxelised (a voxel is solid when the sample nearest its centre is inside and
+it holds no outside sample; the interior fill points count as inside), and each box in turn is
+the maximal box of solid voxels, grown from one of several seeds, that covers the most voxels no
 earlier box covers. Growth adds one voxel layer at a time on the side whose layer holds the most
 uncovered voxels weighted by their depth in the solid (ties: the most solid ones), until no side
-can grow without leaving the solid; box sums are O(1) from 3-D prefix sums, and all seeds grow at once. On a cylinder
-this gives nested full-length slabs whose corners lie on the circle, on a carton one box,
-on a mug on its side the body's slabs and then the handle's. The fit then refines them.
+can grow without leaving the solid; box sums are O(1) from 3-D prefix sums, and all seeds grow
+at once. On a cylinder this gives nested full-length slabs whose corners lie on the circle, on a
+carton one box. The fit then moves the faces out to the surface.
 
 Lengths are in unit-sphere coordinates, like the samples.
 """
