@@ -26,7 +26,8 @@ carved by one mask only when too few views see it for a second to agree (``MIN_A
 otherwise the lowest mask value is skipped, so one wrong mask (a real threshold that ate part
 of the object) cannot cut it. That leaves a skin where one view alone bounds the object (a
 ring over part of a circle has no opposite views), so :func:`carve` then lets the views whose
-masks remove only a sliver of that robust hull (:func:`consistent_views`) carve alone.
+masks remove only a sliver of that robust hull (:func:`consistent_views`) carve alone where a
+point lies more than ``TRUSTED_MARGIN_PX`` outside their mask.
 
 World frame, metres; the table top is z = 0 and nothing is kept below it.
 """
@@ -51,6 +52,10 @@ MIN_SPREAD_DEG = 25.0
 MIN_AGREEING = 2
 #: a view whose mask alone would remove at most this share of the robust hull's skin carves alone
 TRUSTED_SKIN_FRACTION = 0.5
+#: ... but only where a point lies more than this far outside its mask (pixels): closer in, the
+#: silhouettes of many views with poses a fraction of a pixel off disagree, and the strictest of
+#: them would erode the object (a bottle's hull from 100 refined views: 0.36 -> 0.79 mm Chamfer)
+TRUSTED_MARGIN_PX = 1.5
 
 
 @dataclass(frozen=True)
@@ -179,6 +184,9 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
     touched = torch.from_numpy(border_touched(views.mask))
     w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
     centres = torch.from_numpy(views.c2w_cv[:, :3, 3]).float()
+    if trusted is not None:
+        trusted_t = torch.from_numpy(np.asarray(trusted, bool))
+        outside_px = torch.from_numpy(_outside_distance_px(views.mask, trusted))[:, None]
     out = np.empty(len(points_m), dtype=np.float32)
     with torch.no_grad():
         for start in range(0, len(points_m), chunk):
@@ -192,8 +200,11 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
             rank = torch.clamp(rank, max=torch.clamp(count - 1, min=0))
             score = ordered.gather(0, rank[None])[0]
             if trusted is not None:
-                alone = seen & torch.from_numpy(np.asarray(trusted, bool))[:, None]
-                score = torch.minimum(score, vals.masked_fill(~alone, 2.0).min(dim=0).values)
+                alone = seen & trusted_t[:, None]
+                beyond_px = torch.nn.functional.grid_sample(outside_px, grid[:, None], mode="bilinear",
+                                                            padding_mode="border", align_corners=False)[:, 0, 0]
+                lone = (0.5 + TRUSTED_MARGIN_PX - beyond_px).clamp(0.0, 1.0).masked_fill(~alone, 2.0)
+                score = torch.minimum(score, lone.min(dim=0).values)
             # Below 0.5 a point is outside whatever the spread; its score still places the surface
             # between voxels, so it keeps the score (the rule of min_votes alone). The spread is
             # computed only where the masks would keep a point.
@@ -202,6 +213,17 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
             if bool(candidate.any()):
                 keep = keep & (~candidate | _constrained(centres, pts, seen & candidate[None], min_votes, min_spread_deg))
             out[start:start + chunk] = torch.where(keep, score, torch.zeros_like(score)).numpy()
+    return out
+
+
+def _outside_distance_px(mask: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """(V, H, W) float32: each pixel's distance to the nearest object pixel of its view's mask (0 on
+    the object), for the views in ``which`` (others all 0)."""
+    from scipy.ndimage import distance_transform_edt
+
+    out = np.zeros(mask.shape, np.float32)
+    for i in np.nonzero(which)[0]:
+        out[i] = distance_transform_edt(mask[i] < 0.5)
     return out
 
 
