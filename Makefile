@@ -25,7 +25,7 @@ $(STAMP): $(PY) pyproject.toml
 install: $(STAMP)
 
 # demo: simulated capture of the bundled bottle -> refine poses -> reconstruct -> assets -> truth.json
-# -> Drake evaluation -> report (demo_out/); demo-quick: the small version CI runs as a test.
+# -> Drake evaluation -> report (demo_out/); demo-quick: the small version (CI tests a smaller one still).
 demo: $(STAMP)
 	$(VENV)/bin/real2sim demo --out demo_out --overwrite
 
