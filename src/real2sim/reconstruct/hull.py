@@ -404,10 +404,11 @@ def simplified(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
 
 
 def visual_hull_mesh(views: PosedViews, *, longest_side_voxels: int = 192, outlier_fraction: float = 0.03,
-                     table_z_m: float = 0.0) -> tuple[trimesh.Trimesh, VoxelGrid, np.ndarray]:
-    """The visual hull's surface (metres, world frame), its grid and the scores on it."""
+                     table_z_m: float = 0.0, trust_consistent: bool = True) -> tuple[trimesh.Trimesh, VoxelGrid, np.ndarray]:
+    """The visual hull's surface (metres, world frame), its grid and the scores on it
+    (``trust_consistent``: see :func:`carve`; off for candidate masks that only bound the object)."""
     lo, hi = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
     grid = VoxelGrid.covering(lo, hi, longest_side_voxels, table_z_m)
-    scores = carve(views, grid, outlier_fraction)
+    scores = carve(views, grid, outlier_fraction, trust_consistent=trust_consistent)
     mesh = largest_parts(surface_from_grid(scores, grid, 0.5, table_z_m))
     return mesh, grid, scores

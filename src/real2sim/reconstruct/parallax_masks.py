@@ -278,8 +278,10 @@ def _standing_hull(views: PosedViews, table: np.ndarray, config: ParallaxConfig)
     """The visual hull of what is not table, its columns near the table filled down to it (steps 3-4)."""
     candidates = PosedViews(views.rgb, (~table).astype(np.float32), views.c2w_cv, views.intrinsics, views.names)
     try:
+        # "not table" is a region the object lies within, not its silhouette: no view may carve alone
         _, grid, scores = visual_hull_mesh(candidates, longest_side_voxels=config.hull_voxels,
-                                           outlier_fraction=config.outlier_fraction, table_z_m=config.table_z_m)
+                                           outlier_fraction=config.outlier_fraction, table_z_m=config.table_z_m,
+                                           trust_consistent=False)
     except UserInputError as exc:
         raise UserInputError(f"parallax masks found no object standing on the table ({exc}); the method needs a "
                              "textured table around the object and poses accurate to a pixel") from None
