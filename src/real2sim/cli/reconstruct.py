@@ -62,11 +62,12 @@ def add_field_arguments(p) -> None:
     # choices written out: importing the stage's tuples here would load torch for every command
     p.add_argument("--extraction", choices=["density", "tsdf"], default="density",
                    help="field backend: surface by marching cubes on the density (default) or TSDF fusion")
-    p.add_argument("--mask-edges", choices=["colour", "as-given"], default="colour",
-                   help="both backends: move each mask's edge, by at most a few pixels (4 at 640x480), to where "
-                        "the image's colours change from object to background (default colour: thresholded "
-                        "masks keep a halo of blur and shadow, network masks miss rims), or use the masks "
-                        "as-given (exact masks, e.g. rendered ones)")
+    p.add_argument("--mask-edges", choices=["auto", "colour", "as-given"], default="auto",
+                   help="both backends: colour moves each mask's edge, by at most a few pixels (4 at 640x480), to "
+                        "where the image's colours change from object to background, when a dozen views show the "
+                        "masks miss them (thresholded masks keep a halo of blur and shadow, network masks miss "
+                        "rims); as-given uses the masks as they are; auto (default) is colour, except for masks "
+                        "`run --mask parallax` makes, which come from the images already")
     p.add_argument("--surface-level", choices=["silhouettes", "half-light"], default="silhouettes",
                    help="density extraction: cut the density where the masks' edges say (default) or at ln 2 "
                         "per voxel")
@@ -98,7 +99,7 @@ def reconstruct_config(args: argparse.Namespace, field_voxels: int | None):
                     colour_correction=getattr(args, "field_colours", True))
     return ReconstructConfig(backend=args.backend, extraction=args.extraction, surface_level=args.surface_level,
                              field=field, texture_px=args.texture_px, max_image_side_px=args.max_image_px,
-                             table_z_m=args.table_z, mask_edges=getattr(args, "mask_edges", "colour"))
+                             table_z_m=args.table_z, mask_edges=getattr(args, "mask_edges", "auto"))
 
 
 def run_reconstruct(args: argparse.Namespace) -> int:

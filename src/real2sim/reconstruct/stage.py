@@ -37,7 +37,7 @@ BACKENDS = ("field", "hull")
 EXTRACTIONS = ("density", "tsdf")
 # where the density extraction cuts: the level the masks' edges choose, or ln 2 per voxel
 SURFACE_LEVELS = ("silhouettes", "half-light")
-MASK_EDGES = ("colour", "as-given")
+MASK_EDGES = ("auto", "colour", "as-given")
 
 
 @dataclass(frozen=True)
@@ -47,8 +47,9 @@ class ReconstructConfig:
     backend: str = "field"
     extraction: str = "density"
     surface_level: str = "silhouettes"
-    # "colour": masks' edges moved to the images' colour edges within a few pixels (see refined_mask_edges)
-    mask_edges: str = "colour"
+    # "colour": masks' edges moved to the images' colour edges within a few pixels (see refined_mask_edges);
+    # "auto" (default): as "colour", except that `run` keeps parallax masks as given
+    mask_edges: str = "auto"
     field: FieldConfig = field(default_factory=FieldConfig)
     hull_voxels: int = 192
     hull_outlier_fraction: float = 0.03
@@ -127,7 +128,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         views = load_views(ds, max_side_px=config.max_image_side_px)
         table_z_m = config.table_z_m if has_table_plane(ds) else None  # None: the images show no table
         truth = load_truth(dataset)
-    if config.mask_edges == "colour":
+    if config.mask_edges in ("auto", "colour"):
         with clock.stage("mask_edges"):
             views, report["mask_edges"] = refined_mask_edges(views)
     else:
