@@ -327,8 +327,10 @@ def test_signal_during_colmap_is_one_line_and_leaves_nothing(small_capture, tmp_
     temp = tmp_path / "tmp"
     temp.mkdir()
     names = sorted(p.name for p in root.iterdir())
+    # a suite run in the background ignores SIGINT, and a child would inherit that: start it at its default
     proc = subprocess.Popen([sys.executable, "-m", "real2sim", "refine-poses", str(root)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env={**os.environ, "TMPDIR": str(temp)})
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "TMPDIR": str(temp)},
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines = []
     try:
         for line in proc.stderr:  # the progress lines; COLMAP's feature extraction starts after this one
