@@ -133,17 +133,25 @@ def test_views_cut_by_the_image_border_do_not_cut_the_object():
     assert scores[inside_true].min() >= 0.5
 
 
-def test_one_wrong_mask_does_not_cut_the_object():
-    """One view's mask loses the sphere's upper half (a threshold that ate it): enough other views
-    see that half, so it stays."""
-    from real2sim.reconstruct.hull import VoxelGrid, carve
+def _ring_with_one_wrong_mask():
+    """A 20-view ring of the sphere whose first mask lost the sphere's upper half, and a 40-voxel grid
+    around the sphere."""
+    from real2sim.reconstruct.hull import VoxelGrid
 
     views = ring_views(azimuths_deg=np.linspace(0, 360, 20, endpoint=False), elevation_deg=25, distance_m=0.8,
                        fx_px=400)
     masks = views.mask.copy()
     masks[0, : views.intrinsics.height // 2] = 0.0
-    broken = replace(views, mask=masks)
     grid = VoxelGrid.covering(CENTRE_M - 1.3 * RADIUS_M, CENTRE_M + 1.3 * RADIUS_M, 40, None)
+    return replace(views, mask=masks), grid
+
+
+def test_one_wrong_mask_does_not_cut_the_object():
+    """One view's mask loses the sphere's upper half (a threshold that ate it): enough other views
+    see that half, so it stays."""
+    from real2sim.reconstruct.hull import carve
+
+    broken, grid = _ring_with_one_wrong_mask()
     centres = grid.centres()
     inside_true = np.linalg.norm(centres - CENTRE_M, axis=1) < RADIUS_M - 1.5 * grid.voxel_m
     assert carve(broken, grid).reshape(-1)[inside_true].min() >= 0.5
@@ -199,14 +207,9 @@ def test_temple_hull_reconstruction_matches_the_true_box(temple_views, tmp_path)
 def test_a_view_whose_mask_lost_part_of_the_object_is_not_trusted_alone():
     """Views whose masks agree with the robust hull carve alone; the one whose mask lost the sphere's
     upper half does not (it would remove a volume, not a sliver of skin)."""
-    from real2sim.reconstruct.hull import VoxelGrid, consistent_views, silhouette_scores
+    from real2sim.reconstruct.hull import consistent_views, silhouette_scores
 
-    views = ring_views(azimuths_deg=np.linspace(0, 360, 20, endpoint=False), elevation_deg=25, distance_m=0.8,
-                       fx_px=400)
-    masks = views.mask.copy()
-    masks[0, : views.intrinsics.height // 2] = 0.0
-    broken = replace(views, mask=masks)
-    grid = VoxelGrid.covering(CENTRE_M - 1.3 * RADIUS_M, CENTRE_M + 1.3 * RADIUS_M, 40, None)
+    broken, grid = _ring_with_one_wrong_mask()
     inside = silhouette_scores(broken, grid.centres(), 0.03).reshape(grid.shape) >= 0.5
     trusted = consistent_views(broken, grid, inside)
     assert not trusted[0] and trusted[1:].all(), trusted

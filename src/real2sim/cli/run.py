@@ -186,14 +186,14 @@ def phone_config(args: argparse.Namespace):
     phone = phone_input(args.dataset)
     if phone is None:
         for flag, value in (("--frames", args.frames), ("--board-square-mm", args.board_square_mm),
-                            ("--board", getattr(args, "board", None))):
+                            ("--board", args.board)):
             if value is not None:
                 raise UserInputError(f"{flag} is for photos or a video, and {args.dataset} is a dataset")
         return None
     if args.frames is not None and phone.kind != "video":
         raise UserInputError(f"--frames is for a video, and {args.dataset} is a folder of photos")
     board = None
-    if getattr(args, "board", None) is not None:
+    if args.board is not None:
         from real2sim.capture.board import read_board_spec
 
         board = read_board_spec(args.board)

@@ -169,6 +169,20 @@ def _constrained(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tensor, m
     return ok
 
 
+def _mask_votes(views: PosedViews, points_m: np.ndarray, chunk: int):
+    """Per chunk of ``chunk`` world points (metres): its first index, the points (tensor), their
+    grid_sample coordinates in every view, which views vote on them (:func:`_votes`), and each view's
+    bilinear mask value there, (V, chunk). Callers hold ``torch.no_grad()``."""
+    masks = torch.from_numpy(views.mask[:, None])  # (V, 1, H, W)
+    touched = torch.from_numpy(border_touched(views.mask))
+    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
+    for start in range(0, len(points_m), chunk):
+        pts = torch.from_numpy(np.asarray(points_m[start:start + chunk], dtype=np.float32))
+        grid, _, seen = _votes(views, w2c, pts, touched)
+        vals = torch.nn.functional.grid_sample(masks, grid[:, None], mode="bilinear", align_corners=False)[:, 0, 0]
+        yield start, pts, grid, seen, vals
+
+
 def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction: float,
                       chunk: int = 100_000, min_votes: int = MIN_VOTES,
                       min_spread_deg: float = MIN_SPREAD_DEG, trusted: np.ndarray | None = None) -> np.ndarray:
@@ -180,19 +194,13 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
     whose masks may carve alone (:func:`consistent_views`); the score is then at most
     their lowest vote.
     """
-    masks = torch.from_numpy(views.mask[:, None])  # (V, 1, H, W)
-    touched = torch.from_numpy(border_touched(views.mask))
-    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
     centres = torch.from_numpy(views.c2w_cv[:, :3, 3]).float()
     if trusted is not None:
         trusted_t = torch.from_numpy(np.asarray(trusted, bool))
         outside_px = torch.from_numpy(_outside_distance_px(views.mask, trusted))[:, None]
     out = np.empty(len(points_m), dtype=np.float32)
     with torch.no_grad():
-        for start in range(0, len(points_m), chunk):
-            pts = torch.from_numpy(np.asarray(points_m[start:start + chunk], dtype=np.float32))
-            grid, _, seen = _votes(views, w2c, pts, touched)
-            vals = torch.nn.functional.grid_sample(masks, grid[:, None], mode="bilinear", align_corners=False)[:, 0, 0]
+        for start, pts, grid, seen, vals in _mask_votes(views, points_m, chunk):
             count = seen.sum(dim=0)
             ordered = vals.masked_fill(~seen, 2.0).sort(dim=0).values  # the votes first, in order
             floor = torch.where(count >= 2 * min_votes, MIN_AGREEING - 1, 0)
@@ -229,15 +237,9 @@ def _outside_distance_px(mask: np.ndarray, which: np.ndarray) -> np.ndarray:
 
 def lone_carving(views: PosedViews, points_m: np.ndarray, chunk: int = 100_000) -> np.ndarray:
     """(V,) how many of ``points_m`` (world, metres) each view alone puts outside its mask (a vote below 0.5)."""
-    masks = torch.from_numpy(views.mask[:, None])
-    touched = torch.from_numpy(border_touched(views.mask))
-    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
     counts = torch.zeros(views.count, dtype=torch.long)
     with torch.no_grad():
-        for start in range(0, len(points_m), chunk):
-            pts = torch.from_numpy(np.asarray(points_m[start:start + chunk], dtype=np.float32))
-            grid, _, seen = _votes(views, w2c, pts, touched)
-            vals = torch.nn.functional.grid_sample(masks, grid[:, None], mode="bilinear", align_corners=False)[:, 0, 0]
+        for _, _, _, seen, vals in _mask_votes(views, points_m, chunk):
             counts += (seen & (vals < 0.5)).sum(dim=1)
     return counts.numpy()
 
