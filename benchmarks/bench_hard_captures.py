@@ -11,6 +11,12 @@ and the wall seconds of `run`. A run that fails is a row too, with its last erro
     python benchmarks/bench_hard_captures.py                   # bottle and can, every condition (hours on 2 cores)
     python benchmarks/bench_hard_captures.py --objects can --conditions no_table,all
     python benchmarks/bench_hard_captures.py --quick           # the can, all conditions together, tiny: minutes
+    python benchmarks/bench_hard_captures.py --objects can --conditions low_res_256x192 --views 60 --all-unrefined
+
+--all-unrefined puts every view in the state refine-poses leaves when COLMAP registers too few frames
+(each frame marked not refined, the given noisy poses kept) and runs `run --no-refine-poses`: what the
+reconstruction does when COLMAP cannot refine (issue #28's 60-view 256x192 target), whatever COLMAP
+would have managed on this capture. Its rows go to docs/benchmarks/hard_captures_unrefined.md.
 
 --quick is a smoke test of the script, not of the targets: 16 views at 128x96 and `run --steps 300
 --voxels 64`. Writes docs/benchmarks/hard_captures.md (machine, date, command) after each row.
@@ -70,8 +76,19 @@ def _last_error(text: str) -> str:
     return (lines[-1] if lines else "no output")[:160].replace("|", "/")
 
 
+def mark_all_unrefined(dataset: Path) -> None:
+    """Every frame of ``dataset/transforms.json`` marked as refine-poses marks them when COLMAP refines none."""
+    from real2sim.formats.dataset import POSE_REFINED_KEY
+
+    path = dataset / "transforms.json"
+    data = json.loads(path.read_text())
+    for frame in data["frames"]:
+        frame[POSE_REFINED_KEY] = False
+    path.write_text(json.dumps(data, indent=2))
+
+
 def run_condition(name: str, condition: str, work: Path, views: int, width: int, height: int,
-                  run_args: list[str], noise: tuple[float, float] = (5.0, 1.0)) -> list:
+                  run_args: list[str], noise: tuple[float, float] = (5.0, 1.0), all_unrefined: bool = False) -> list:
     """One table row: object, condition, Chamfer mm, IoU, target met, WARNING lines, run seconds."""
     from real2sim.geometry.objects import OBJECTS
 
@@ -81,6 +98,9 @@ def run_condition(name: str, condition: str, work: Path, views: int, width: int,
                          capture_output=True, text=True)
     if cap.returncode != 0:
         return [name, condition, "-", "-", f"capture failed: {_last_error(cap.stderr)}", "-", "-"]
+    if all_unrefined:
+        mark_all_unrefined(dataset)
+        run_args = [*run_args, "--no-refine-poses"]
     start = time.perf_counter()
     run = subprocess.run(_cli("run", str(dataset), "--mass", f"{OBJECTS[name].mass_kg:g}", "--out", str(asset),
                               *run_args), capture_output=True, text=True)
@@ -106,6 +126,8 @@ def main() -> int:
     parser.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
     parser.add_argument("--keep", type=Path, default=None, help="keep the captures and assets here")
+    parser.add_argument("--all-unrefined", action="store_true",
+                        help="every frame as refine-poses leaves it when COLMAP refines none (see above)")
     args = parser.parse_args()
     objects, conditions = args.objects.split(","), args.conditions.split(",")
     unknown = [c for c in conditions if c not in CONDITIONS]
@@ -124,19 +146,25 @@ def main() -> int:
                "58 px at fx = 3300 px)")
     if args.quick:
         setting += ". QUICK smoke-test setting: not the issue's targets' setting"
+    if args.all_unrefined:
+        setting += (". Every frame marked not refined, as refine-poses leaves them when COLMAP refines none, and "
+                    "`run --no-refine-poses`: the reconstruction aligns all views by their silhouettes")
     rows = []
     for name in objects:
         for condition in conditions:
             rows.append(run_condition(name, condition, work, views, width, height, run_args,
-                                      (args.pose_noise_mm, args.pose_noise_deg)))
+                                      (args.pose_noise_mm, args.pose_noise_deg), args.all_unrefined))
             print(rows[-1], flush=True)
             flags = "\n".join(f"- `{c}`: `capture {' '.join(_flags(c, width, height))}`" for c in conditions)
             body = ((args.note + "\n\n" if args.note else "") + setting + f". Target: Chamfer <= {TARGET_CHAMFER_MM} "
                     f"mm and IoU >= {TARGET_IOU} against the true object (truth.json).\n\n"
                     + markdown_table(["object", "condition", "Chamfer mm", "IoU", "target met", "run WARNING lines",
                                       "run wall s"], rows) + "\n\nConditions:\n\n" + flags)
-            print(write_section("hard_captures", "Hard captures: `run` on turntable, long-lens, cut-off, no-table, "
-                                "jittered and JPEG captures", body,
+            section, title = "hard_captures", ("Hard captures: `run` on turntable, long-lens, cut-off, no-table, "
+                                               "jittered and JPEG captures")
+            if args.all_unrefined:
+                section, title = "hard_captures_unrefined", "Hard captures whose poses COLMAP cannot refine"
+            print(write_section(section, title, body,
                                 "python benchmarks/bench_hard_captures.py " + " ".join(sys.argv[1:])))
     return 0
 

@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from tests.progress_check import Recorder
 from real2sim.capture.wrist_camera import CaptureConfig, camera_poses, capture, object_frame
 from real2sim.formats.dataset import (
+    POSE_REFINED_KEY,
     Dataset,
     Frame,
     read_dataset,
@@ -106,7 +107,6 @@ def test_refine_small_capture_improves_or_falls_back(small_capture, tmp_path):
     assert result.sim3_scale == pytest.approx(1.0, abs=0.1)
     assert not [p for p in root.iterdir() if p.name.startswith(".") and p.name != ".real2sim"]
     # every frame says whether it was refined; the ones that were not kept the robot's pose exactly
-    from real2sim.formats.dataset import POSE_REFINED_KEY
 
     given = read_transforms(small_capture / "transforms.json").poses_c2w_gl()
     flags = np.array([f.extra[POSE_REFINED_KEY] for f in ds.frames])
@@ -132,7 +132,15 @@ def test_fallback_on_featureless_images(tmp_path):
     with pytest.warns(RuntimeWarning, match="kept the given poses"):
         result = refine_poses(root)
     assert not result.refined and result.reason
-    assert (root / "transforms.json").read_bytes() == before
+    # the poses stay as given, and every frame says it was not refined, so the reconstruction aligns
+    # them all by their silhouettes (reconstruct.silhouette_poses.align_all)
+    kept = json.loads((root / "transforms.json").read_text())
+    given = json.loads(before)
+    np.testing.assert_array_equal([f["transform_matrix"] for f in kept["frames"]],
+                                  [f["transform_matrix"] for f in given["frames"]])
+    assert [f[POSE_REFINED_KEY] for f in kept["frames"]] == [False] * 6
+    assert kept["real2sim_refinement"]["refined"] is False
+    assert json.loads((root / "transforms_unrefined.json").read_text()) == given
     assert json.loads((root / "refine_report.json").read_text())["refined"] is False
 
 

@@ -230,7 +230,8 @@ def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progre
     n = len(given)
 
     def fallback(reason: str, **kw) -> tuple[np.ndarray, RefineResult]:
-        warnings.warn(f"pose refinement kept the given poses: {reason}", RuntimeWarning, stacklevel=3)
+        warnings.warn(f"pose refinement kept the given poses: {reason} (reconstruct aligns every view to the "
+                      "others by its silhouette instead)", RuntimeWarning, stacklevel=3)
         base = dict(refined=False, reason=reason, num_frames=n, num_refined_frames=0, num_pairs=0,
                     num_points3d=0, mean_reproj_error_px=None, sim3_scale=None)
         base.update(kw)
@@ -416,14 +417,15 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
     unrefined = root / "transforms_unrefined.json"
     if not unrefined.exists():
         write_json_atomic(unrefined, __import__("json").loads((root / "transforms.json").read_text()))
-    if result.refined:
-        extra = dict(ds.extra)
-        extra["real2sim_refinement"] = {k: v for k, v in result.to_json().items() if k != "timings_s"}
-        # a frame COLMAP could not refine keeps its given pose; say so, for the reconstruction
-        new = replace(ds, frames=tuple(replace(f, transform_matrix=poses[i],
-                                               extra={**f.extra, POSE_REFINED_KEY: result.frame_refined[i]})
-                                       for i, f in enumerate(ds.frames)), extra=extra)
-        write_transforms(root / "transforms.json", new)
+    extra = dict(ds.extra)
+    extra["real2sim_refinement"] = {k: v for k, v in result.to_json().items() if k != "timings_s"}
+    # a frame COLMAP could not refine keeps its given pose; say so, for the reconstruction (which
+    # aligns such frames by their silhouettes: to the refined ones, or, when none is, to each other)
+    marks = result.frame_refined if result.refined else (False,) * len(ds.frames)
+    new = replace(ds, frames=tuple(replace(f, transform_matrix=poses[i] if result.refined else f.transform_matrix,
+                                           extra={**f.extra, POSE_REFINED_KEY: bool(marks[i])})
+                                   for i, f in enumerate(ds.frames)), extra=extra)
+    write_transforms(root / "transforms.json", new)
     write_json_atomic(root / "refine_report.json", result.to_json())
     if progress:
         progress("written", refine_steps(cfg), refine_steps(cfg))

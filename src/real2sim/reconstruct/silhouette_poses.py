@@ -49,15 +49,18 @@ def hull_surface_points(views: PosedViews, *, outlier_fraction: float, table_z_m
     return grid.centres()[boundary.ravel()]
 
 
-def splatted_silhouette(views: PosedViews, c2w_cv: np.ndarray, points_m: np.ndarray) -> np.ndarray:
+def splatted_silhouette(views: PosedViews, c2w_cv: np.ndarray, points_m: np.ndarray,
+                        window: tuple[int, int, int, int] | None = None) -> np.ndarray:
     """(H, W) float silhouette in [0, 1]: each point's projection shared bilinearly among its
-    four nearest pixel centres, clipped at 1, so the image moves continuously with the camera."""
+    four nearest pixel centres, clipped at 1, so the image moves continuously with the camera.
+    ``window``: (u0, v0, u1, v1) px, only that part of the image (shape (v1 - v0, u1 - u0))."""
     k = views.intrinsics
-    h, w = k.height, k.width
+    u_off, v_off, u_end, v_end = window if window is not None else (0, 0, k.width, k.height)
+    h, w = v_end - v_off, u_end - u_off
     uv, depth = project(k, c2w_cv[None], points_m)
     front = depth[0] > 0
-    u = uv[0, front, 0].astype(np.float64) - 0.5  # pixel centres at integers
-    v = uv[0, front, 1].astype(np.float64) - 0.5
+    u = uv[0, front, 0].astype(np.float64) - 0.5 - u_off  # pixel centres at integers
+    v = uv[0, front, 1].astype(np.float64) - 0.5 - v_off
     u0, v0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
     fu, fv = u - u0, v - v0
     image = np.zeros(h * w)
@@ -86,20 +89,42 @@ def align_view(views: PosedViews, index: int, points_m: np.ndarray, *, max_evalu
     from scipy.ndimage import binary_closing, gaussian_filter
     from scipy.optimize import minimize
 
-    mask = views.mask[index].astype(np.float64)
-    target = gaussian_filter(mask, BLUR_PX)
     start = views.c2w_cv[index]
+    window = _fit_window(views, index, start, points_m)
+    u0, v0, u1, v1 = window
+    mask = views.mask[index, v0:v1, u0:u1].astype(np.float64)
+    target = gaussian_filter(mask, BLUR_PX)
+    scale = mask.size / float(views.mask[index].size)  # the loss stays a mean over the whole image
 
     def loss(step: np.ndarray) -> float:
-        diff = gaussian_filter(splatted_silhouette(views, moved_camera(start, step), points_m), BLUR_PX) - target
-        return float(np.mean(np.minimum(diff, 0.0) ** 2) + SPILL_WEIGHT * np.mean(np.maximum(diff, 0.0) ** 2))
+        diff = gaussian_filter(splatted_silhouette(views, moved_camera(start, step), points_m, window),
+                               BLUR_PX) - target
+        return scale * float(np.mean(np.minimum(diff, 0.0) ** 2) + SPILL_WEIGHT * np.mean(np.maximum(diff, 0.0) ** 2))
 
     result = minimize(loss, np.zeros(6), method="Powell",
                       options={"xtol": 1e-2, "ftol": 1e-7, "maxfev": max_evaluations})
     c2w = moved_camera(start, result.x)
     covered = binary_closing(splatted_silhouette(views, c2w, points_m) > 0, np.ones((3, 3), bool))
-    coverage = float((mask * covered).sum() / max(mask.sum(), 1e-9))
+    whole = views.mask[index]
+    coverage = float((whole * covered).sum() / max(whole.sum(), 1e-9))
     return c2w, coverage
+
+
+def _fit_window(views: PosedViews, index: int, c2w_cv: np.ndarray, points_m: np.ndarray) -> tuple[int, int, int, int]:
+    """(u0, v0, u1, v1) px: the part of view ``index`` that holds its mask and ``points_m`` as the camera
+    sees them now, with room for the fit to move them (half their size, at least 16 px): the loss is
+    the same there as over the whole image, and a small object's fit costs its own size, not the image's."""
+    k = views.intrinsics
+    ys, xs = np.nonzero(views.mask[index] >= 0.5)
+    uv, depth = project(k, c2w_cv[None], points_m)
+    uv = uv[0, depth[0] > 0]
+    us = np.concatenate([xs + 0.5, uv[:, 0]])
+    vs = np.concatenate([ys + 0.5, uv[:, 1]])
+    if not len(us):
+        return 0, 0, k.width, k.height
+    pad = max(16.0, 0.5 * max(us.max() - us.min(), vs.max() - vs.min()))
+    return (int(np.clip(np.floor(us.min() - pad), 0, k.width)), int(np.clip(np.floor(vs.min() - pad), 0, k.height)),
+            int(np.clip(np.ceil(us.max() + pad), 0, k.width)), int(np.clip(np.ceil(vs.max() + pad), 0, k.height)))
 
 
 def align_unrefined(views: PosedViews, *, outlier_fraction: float, table_z_m: float, min_coverage: float = 0.97,
@@ -126,3 +151,131 @@ def align_unrefined(views: PosedViews, *, outlier_fraction: float, table_z_m: fl
               for i, deg, mm in zip(unrefined, turned_deg, moved_mm)}
     moved = PosedViews(views.rgb, views.mask, c2w, views.intrinsics, views.names, views.unrefined)
     return moved.subset(np.nonzero(keep)[0]), report
+
+
+# --- every view off: silhouette coherence ------------------------------------------------------------
+#
+# When refine-poses could not refine the capture at all (COLMAP registered too few frames, or its model
+# was refused), every pose is the robot's, a few millimetres and a degree off, and there is no set of
+# good views to align the others to. The views are then aligned to each other: each view's camera is
+# moved (:func:`align_view`) onto the visual hull of all the *other* views, carved with a tolerance
+# (``ALL_OUTLIER_FRACTION`` of the views may disagree about a point), and the round is repeated. This is
+# the silhouette coherence of Hernandez, Schmitt and Cipolla (2007): at the true poses every mask is
+# exactly covered by the projection of the others' hull. The views can agree with each other in any
+# frame: a motion of the whole rig (turn, shift, growth about the object) leaves every silhouette the
+# same, and the one-sided fit onto a hull that noisy poses have eroded pulls every camera a little
+# closer (a growth of -5 % in the first round on a 60-view can). That common motion is taken out after
+# each round, so the world frame stays the robot's, with its table at z = 0.
+
+ALL_OUTLIER_FRACTION = 0.15
+ALL_ROUNDS = 3
+ALL_VOXELS = 96
+
+
+def leave_one_out_surfaces(views: PosedViews, *, outlier_fraction: float, table_z_m: float | None,
+                           voxels: int = ALL_VOXELS) -> list[np.ndarray]:
+    """Per view, (P_i, 3) centres (metres, world) of the boundary voxels of the visual hull carved by the
+    other views: a point is inside when at most ``outlier_fraction`` of the others that see it (at
+    least 3) put it outside their masks."""
+    import torch
+    from scipy.ndimage import binary_erosion
+
+    from real2sim.reconstruct.hull import VoxelGrid, _mask_votes, object_region
+
+    lo, hi = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+    pad = 0.1 * (hi - lo)  # the others' hull may reach past the region all views agree on
+    lo, hi = lo - pad, hi + pad
+    if table_z_m is not None:
+        lo[2] = max(lo[2], table_z_m)
+    grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
+    centres = grid.centres()
+    outside, seen = [], []
+    with torch.no_grad():
+        for _, _, _, sees, vals in _mask_votes(views, centres, 200_000):
+            outside.append((sees & (vals < 0.5)).numpy())
+            seen.append(sees.numpy())
+    outside_v, seen_v = np.concatenate(outside, axis=1), np.concatenate(seen, axis=1)
+    outside_n, seen_n = outside_v.sum(axis=0), seen_v.sum(axis=0)
+    surfaces = []
+    for i in range(views.count):
+        others_out, others_seen = outside_n - outside_v[i], seen_n - seen_v[i]
+        inside = ((others_seen >= 3) & (others_out <= np.floor(outlier_fraction * others_seen))).reshape(grid.shape)
+        surfaces.append(centres[(inside & ~binary_erosion(inside, border_value=0)).ravel()])
+    return surfaces
+
+
+def remove_rig_motion(given_c2w: np.ndarray, moved_c2w: np.ndarray, pivot_m: np.ndarray
+                      ) -> tuple[np.ndarray, dict]:
+    """``moved_c2w`` (N, 4, 4, OpenCV axes) less the motion of the whole rig that best explains how they
+    moved from ``given_c2w``: a turn w about ``pivot_m``, a shift t and a growth s about it, so that
+    view i turns by w and its centre moves by w x a_i + t + s a_i (a_i: its centre less the pivot), in
+    least squares with turns weighed by the cameras' median distance (both residuals in metres).
+    Returns the poses and the motion taken out (degrees, millimetres, growth as a fraction)."""
+    from scipy.spatial.transform import Rotation
+
+    arm = given_c2w[:, :3, 3] - pivot_m
+    distance_m = float(np.median(np.linalg.norm(arm, axis=1)))
+    turn = Rotation.from_matrix(moved_c2w[:, :3, :3] @ np.swapaxes(given_c2w[:, :3, :3], 1, 2)).as_rotvec()
+    move = moved_c2w[:, :3, 3] - given_c2w[:, :3, 3]
+    n = len(arm)
+    skew = np.zeros((n, 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -arm[:, 2], arm[:, 1], -arm[:, 0]
+    skew = skew - np.swapaxes(skew, 1, 2)
+    rows = np.zeros((n, 6, 7))
+    rows[:, :3, :3] = distance_m * np.eye(3)
+    rows[:, 3:, :3] = -skew  # w x a = -[a]x w
+    rows[:, 3:, 3:6] = np.eye(3)
+    rows[:, 3:, 6] = arm
+    rhs = np.concatenate([distance_m * turn, move], axis=1)
+    solution = np.linalg.lstsq(rows.reshape(-1, 7), rhs.reshape(-1), rcond=None)[0]
+    w, shift, growth = solution[:3], solution[3:6], float(solution[6])
+    rot = Rotation.from_rotvec(w).as_matrix()
+    out = moved_c2w.copy()
+    out[:, :3, :3] = rot.T @ moved_c2w[:, :3, :3]
+    out[:, :3, 3] = pivot_m + ((moved_c2w[:, :3, 3] - pivot_m - shift) @ rot) / (1.0 + growth)
+    return out, {"turn_deg": round(float(np.degrees(np.linalg.norm(w))), 4),
+                 "shift_mm": round(float(1000.0 * np.linalg.norm(shift)), 3), "growth": round(growth, 5)}
+
+
+def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_ROUNDS,
+              outlier_fraction: float = ALL_OUTLIER_FRACTION, max_evaluations: int = 300,
+              progress=None) -> tuple[PosedViews, dict]:
+    """``views`` with every camera moved so the views' silhouettes agree (see the comment above), and a
+    report: per round the rig motion taken out and the median move; per view its coverage and move.
+    Views whose masks the others' hull still leaves more than 5 % uncovered keep their move but are
+    listed (``poorly_covered``): a mask that is wrong, or a pose a small motion does not explain."""
+    from real2sim.reconstruct.hull import object_region
+
+    if views.count < MIN_VIEWS:
+        return views, {}
+    c2w = views.c2w_cv.copy()
+    coverage = np.ones(views.count)
+    rounds_report = []
+    for r in range(rounds):
+        current = replace_poses(views, c2w)
+        surfaces = leave_one_out_surfaces(current, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+        moved = c2w.copy()
+        for i in range(views.count):
+            if progress:
+                progress(f"poses of all views, round {r + 1}/{rounds}", i, views.count)
+            if len(surfaces[i]):
+                moved[i], coverage[i] = align_view(current, i, surfaces[i], max_evaluations=max_evaluations)
+        lo, hi = object_region(current, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+        moved, rig = remove_rig_motion(views.c2w_cv, moved, 0.5 * (lo + hi))
+        turned, shifted = pose_errors(moved, c2w)
+        rounds_report.append({"rig_motion_removed": rig, "median_turn_deg": round(float(np.median(turned)), 4),
+                              "median_move_mm": round(float(np.median(shifted)), 3)})
+        c2w = moved
+    turned_deg, moved_mm = pose_errors(c2w, views.c2w_cv)
+    report = {"method": "silhouette coherence of all views", "rounds": rounds_report,
+              "poorly_covered": [views.names[i] for i in np.nonzero(coverage < 0.95)[0]],
+              "views": {name: {"mask_coverage": round(float(cov), 4), "moved_mm": round(float(mm), 3),
+                               "turned_deg": round(float(deg), 4)}
+                        for name, cov, deg, mm in zip(views.names, coverage, turned_deg, moved_mm)}}
+    return replace_poses(views, c2w, unrefined=()), report
+
+
+def replace_poses(views: PosedViews, c2w_cv: np.ndarray, unrefined: tuple[str, ...] | None = None) -> PosedViews:
+    """``views`` with cameras ``c2w_cv`` (and, when given, ``unrefined`` names)."""
+    return PosedViews(views.rgb, views.mask, c2w_cv, views.intrinsics, views.names,
+                      views.unrefined if unrefined is None else unrefined)

@@ -31,7 +31,7 @@ from real2sim.formats.dataset import has_table_plane, read_dataset
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.train import FieldConfig
-from real2sim.reconstruct.views import PosedViews, held_out_split, load_views, refined_mask_edges
+from real2sim.reconstruct.views import MIN_VIEWS, PosedViews, held_out_split, load_views, refined_mask_edges
 
 BACKENDS = ("field", "hull")
 EXTRACTIONS = ("density", "tsdf")
@@ -133,6 +133,14 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
             views, report["mask_edges"] = refined_mask_edges(views)
     else:
         report["mask_edges"] = {"method": "as-given"}
+    if views.unrefined and views.count - len(views.unrefined) < MIN_VIEWS:
+        # refine-poses refined (almost) none: no good views to align the others to, so all are aligned
+        # to each other, held-out ones too (their colours never train the field; their masks help place it)
+        with clock.stage("all_poses"):
+            from real2sim.reconstruct.silhouette_poses import align_all
+
+            views, report["silhouette_poses"] = align_all(views, table_z_m=table_z_m, progress=progress)
+            report["silhouette_poses"].update(_errors_vs_truth(dataset, ds, views))
     train_idx, held_idx = held_out_split(views.count, config.held_out_every)
     train, held = views.subset(train_idx), views.subset(held_idx)
     if views.unrefined:  # refine-poses could not refine them: the robot's poses, millimetres off
@@ -229,6 +237,19 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     report["total_seconds"] = round(sum(s["seconds"] for s in clock.stages.values()), 3)
     report["config"] = asdict(config)
     return Reconstruction(mesh=textured, report=report, field=None if config.backend == "hull" else trained.field)
+
+
+def _errors_vs_truth(dataset: Path | str, ds, views: PosedViews) -> dict:
+    """``{"pose_error_vs_truth": ...}``: the given and the aligned poses of ``views`` against the dataset's
+    true ones (ground_truth/), with how far the working volume's corners move in the image; {} without them."""
+    from real2sim.reconstruct.hull import object_region
+    from real2sim.reconstruct.view_corrections import pose_errors_vs_truth
+
+    given = dict(zip((f.file_path for f in ds.frames), ds.poses_c2w_cv()))
+    region = object_region(views, table_z_m=None)
+    errors = pose_errors_vs_truth(np.stack([given[n] for n in views.names]), views.c2w_cv, views.names, dataset,
+                                  region_m=region, intrinsics=views.intrinsics)
+    return {} if errors is None else {"pose_error_vs_truth": errors}
 
 
 class UnboundedReconstruction(UserInputError):
