@@ -18,6 +18,7 @@ from __future__ import annotations
 import resource
 import sys
 import time
+import warnings
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -140,7 +141,11 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
             from real2sim.reconstruct.silhouette_poses import align_all
 
             views, report["silhouette_poses"] = align_all(views, table_z_m=table_z_m, progress=progress)
-            report["silhouette_poses"].update(_errors_vs_truth(dataset, ds, views))
+            if report["silhouette_poses"]["method"] == "none":
+                warnings.warn(f"poses not aligned: {report['silhouette_poses']['reason']}", RuntimeWarning,
+                              stacklevel=2)
+            else:
+                report["silhouette_poses"].update(_errors_vs_truth(dataset, ds, views))
     train_idx, held_idx = held_out_split(views.count, config.held_out_every)
     train, held = views.subset(train_idx), views.subset(held_idx)
     if views.unrefined:  # refine-poses could not refine them: the robot's poses, millimetres off
