@@ -105,6 +105,27 @@ def _runs():
     return rows
 
 
+def test_a_report_rewritten_on_the_same_runs_keeps_its_plots_and_redraws_them_when_runs_change(tmp_path):
+    """run rewrites an evaluation's report once truth.json and the warnings are known: the runs are the
+    same, so the plots are taken as they are; runs that changed get new plots."""
+    rows = _runs()
+    write_csv_atomic(tmp_path / "runs.csv", rows, RUN_COLUMNS)
+    write_report(tmp_path)
+    first = PARETO_PLOTS[0][2]
+    marker = Image.new("RGB", (400, 400), (255, 0, 0))
+    marker.save(tmp_path / first)  # stands for the plot drawn the first time
+    marked = (tmp_path / first).read_bytes()
+    text = write_report(tmp_path).read_text()
+    assert (tmp_path / first).read_bytes() == marked
+    assert text.count("data:image/png;base64,") == len(PARETO_PLOTS)
+    write_csv_atomic(tmp_path / "runs.csv", [dict(r, ocae_m=2 * r["ocae_m"]) for r in rows], RUN_COLUMNS)
+    write_report(tmp_path)
+    assert (tmp_path / first).read_bytes() != marked  # drawn again from the new runs
+    with Image.open(tmp_path / first) as im:
+        assert im.size[0] > 300 and im.getpixel((im.size[0] // 2, 5)) != (255, 0, 0)
+    assert not list(tmp_path.glob(".*tmp*"))
+
+
 def test_summarize_means_and_failures():
     rows = _runs()
     summary = {r["representation"]: r for r in summarize(rows)}

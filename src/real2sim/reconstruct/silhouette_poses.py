@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from real2sim.formats.dataset import pose_errors
+from real2sim.formats.errors import UserInputError
 from real2sim.reconstruct.views import MIN_VIEWS, PosedViews, project
 
 SPILL_WEIGHT = 0.03
@@ -257,7 +258,13 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
     rounds_report = []
     for r in range(rounds):
         current = replace_poses(views, c2w)
-        surfaces = leave_one_out_surfaces(current, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+        try:
+            surfaces = leave_one_out_surfaces(current, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+        except UserInputError as e:  # the views agree on no closed region even with the tolerance
+            if r == 0:
+                return views, {"method": "none", "reason": f"the views' silhouettes do not bound a region ({e}); "
+                                                           "the given poses are used"}
+            break  # the rounds done so far stand
         moved = c2w.copy()
         for i in range(views.count):
             if progress:

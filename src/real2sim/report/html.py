@@ -64,11 +64,33 @@ def build_outputs(results_dir: Path, rows: Sequence[dict], *, config: dict | Non
     rows = [dict(r, error=relative_paths_in_text(r["error"], results_dir)) if r["error"] else r for r in rows]
     summary = summarize(rows)
     write_csv_atomic(out / "summary.csv", summary, SUMMARY_COLUMNS)
-    plots = write_pareto_plots(summary, out)
+    plots = _unchanged_plots(results_dir, out)
+    if plots is None:
+        plots = write_pareto_plots(summary, out)
     page = render_html(summary, rows, config, plots, results_dir=results_dir)
     report = out / "report.html"
     write_text_atomic(report, page)
     return summary, plots, report
+
+
+def _unchanged_plots(results_dir: Path, out: Path) -> list[Path] | None:
+    """The plots of ``results_dir`` copied into ``out`` when they were drawn from the very summary just
+    written there (the same summary.csv, byte for byte): a report rewritten for its warnings or truth
+    does not draw them again (matplotlib is a sixth of a small run's evaluation). None otherwise."""
+    import shutil
+
+    from real2sim.report.pareto import PARETO_PLOTS
+
+    if out == results_dir or not (results_dir / "summary.csv").is_file():
+        return None
+    if (results_dir / "summary.csv").read_bytes() != (out / "summary.csv").read_bytes():
+        return None
+    names = [name for _x, _y, name, _fig in PARETO_PLOTS]
+    if not all((results_dir / name).is_file() and not (results_dir / name).is_symlink() for name in names):
+        return None
+    for name in names:
+        shutil.copyfile(results_dir / name, out / name)
+    return [out / name for name in names]
 
 
 def _output_names() -> list[str]:
