@@ -220,3 +220,23 @@ def test_reconstruct_aligns_every_view_when_refine_poses_refined_none(can_captur
     chamfer_mm, given_mm = result.report["truth"]["chamfer_mm"], as_given.report["truth"]["chamfer_mm"]
     assert chamfer_mm < 1.5 and chamfer_mm < 0.5 * given_mm, (chamfer_mm, given_mm)
     assert "unrefined_views" not in result.report or not result.report["unrefined_views"]
+
+
+def test_no_silhouette_poses_takes_unrefined_poses_as_they_are(can_capture, tmp_path, tiny_config):
+    """--no-silhouette-poses: frames marked not refined keep their poses, and the report says so."""
+    from dataclasses import replace
+
+    from real2sim.formats.dataset import POSE_REFINED_KEY
+    from real2sim.reconstruct.stage import reconstruct
+    from tests.reconstruct.conftest import copy_dataset, edit_transforms
+
+    def unrefined(data):
+        for frame in data["frames"]:
+            frame[POSE_REFINED_KEY] = False
+        return data
+
+    marked = edit_transforms(copy_dataset(can_capture, tmp_path / "marked"), unrefined)
+    report = reconstruct(marked, replace(tiny_config, backend="hull", silhouette_poses=False)).report
+    assert report["unrefined_poses"].startswith("taken as given")
+    assert "silhouette_poses" not in report and "unrefined_views" not in report
+    assert report["config"]["silhouette_poses"] is False

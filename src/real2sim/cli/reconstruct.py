@@ -68,6 +68,11 @@ def add_field_arguments(p) -> None:
                         "masks miss them (thresholded masks keep a halo of blur and shadow, network masks miss "
                         "rims); as-given uses the masks as they are; auto (default) is colour, except for masks "
                         "`run --mask parallax` makes, which come from the images already")
+    p.add_argument("--no-silhouette-poses", dest="silhouette_poses", action="store_false",
+                   help="both backends: take the poses of frames refine-poses could not refine as they are; by "
+                        "default they are moved onto the refined views' visual hull by their masks, and when "
+                        "none was refined every view is aligned to the others (minutes: 1-2 s per view and "
+                        "round, 3 rounds; see docs/reconstruct.md)")
     p.add_argument("--surface-level", choices=["silhouettes", "half-light"], default="silhouettes",
                    help="density extraction: cut the density where the masks' edges say (default) or at ln 2 "
                         "per voxel")
@@ -99,7 +104,8 @@ def reconstruct_config(args: argparse.Namespace, field_voxels: int | None):
                     colour_correction=getattr(args, "field_colours", True))
     return ReconstructConfig(backend=args.backend, extraction=args.extraction, surface_level=args.surface_level,
                              field=field, texture_px=args.texture_px, max_image_side_px=args.max_image_px,
-                             table_z_m=args.table_z, mask_edges=getattr(args, "mask_edges", "auto"))
+                             table_z_m=args.table_z, mask_edges=getattr(args, "mask_edges", "auto"),
+                             silhouette_poses=getattr(args, "silhouette_poses", True))
 
 
 def run_reconstruct(args: argparse.Namespace) -> int:

@@ -51,6 +51,9 @@ class ReconstructConfig:
     # "colour": masks' edges moved to the images' colour edges within a few pixels (see refined_mask_edges);
     # "auto" (default): as "colour", except that `run` keeps parallax masks as given
     mask_edges: str = "auto"
+    # frames refine-poses could not refine are aligned by their silhouettes (silhouette_poses.py); False:
+    # taken as they are
+    silhouette_poses: bool = True
     field: FieldConfig = field(default_factory=FieldConfig)
     hull_voxels: int = 192
     hull_outlier_fraction: float = 0.03
@@ -134,6 +137,9 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
             views, report["mask_edges"] = refined_mask_edges(views)
     else:
         report["mask_edges"] = {"method": "as-given"}
+    if not config.silhouette_poses and views.unrefined:
+        report["unrefined_poses"] = "taken as given (--no-silhouette-poses)"
+        views = replace(views, unrefined=())
     if views.unrefined and views.count - len(views.unrefined) < MIN_VIEWS:
         # refine-poses refined (almost) none: no good views to align the others to, so all are aligned
         # to each other, held-out ones too (their colours never train the field; their masks help place it)
@@ -247,9 +253,12 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
 def _errors_vs_truth(dataset: Path | str, ds, views: PosedViews) -> dict:
     """``{"pose_error_vs_truth": ...}``: the given and the aligned poses of ``views`` against the dataset's
     true ones (ground_truth/), with how far the working volume's corners move in the image; {} without them."""
+    from real2sim.formats.dataset import read_ground_truth
     from real2sim.reconstruct.hull import object_region
     from real2sim.reconstruct.view_corrections import pose_errors_vs_truth
 
+    if read_ground_truth(dataset) is None:
+        return {}
     given = dict(zip((f.file_path for f in ds.frames), ds.poses_c2w_cv()))
     region = object_region(views, table_z_m=None)
     errors = pose_errors_vs_truth(np.stack([given[n] for n in views.names]), views.c2w_cv, views.names, dataset,
