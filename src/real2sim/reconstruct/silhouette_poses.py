@@ -177,18 +177,19 @@ ALL_MIN_VIEWS = 24
 
 
 def leave_one_out_surfaces(views: PosedViews, *, outlier_fraction: float, table_z_m: float | None,
-                           voxels: int = ALL_VOXELS) -> list[np.ndarray]:
+                           voxels: int = ALL_VOXELS) -> tuple[list[np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """Per view, (P_i, 3) centres (metres, world) of the boundary voxels of the visual hull carved by the
     other views: a point is inside when at most ``outlier_fraction`` of the others that see it (at
-    least 3) put it outside their masks."""
+    least 3) put it outside their masks; and the region all views agree on (:func:`hull.object_region`
+    with that tolerance), which the grid covers with a margin."""
     import torch
     from scipy.ndimage import binary_erosion
 
     from real2sim.reconstruct.hull import VoxelGrid, _mask_votes, object_region
 
-    lo, hi = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
-    pad = 0.1 * (hi - lo)  # the others' hull may reach past the region all views agree on
-    lo, hi = lo - pad, hi + pad
+    region = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+    pad = 0.1 * (region[1] - region[0])  # the others' hull may reach past the region all views agree on
+    lo, hi = region[0] - pad, region[1] + pad
     if table_z_m is not None:
         lo[2] = max(lo[2], table_z_m)
     grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
@@ -205,34 +206,27 @@ def leave_one_out_surfaces(views: PosedViews, *, outlier_fraction: float, table_
         others_out, others_seen = outside_n - outside_v[i], seen_n - seen_v[i]
         inside = ((others_seen >= 3) & (others_out <= np.floor(outlier_fraction * others_seen))).reshape(grid.shape)
         surfaces.append(centres[(inside & ~binary_erosion(inside, border_value=0)).ravel()])
-    return surfaces
+    return surfaces, region
 
 
 def remove_rig_motion(given_c2w: np.ndarray, moved_c2w: np.ndarray, pivot_m: np.ndarray
                       ) -> tuple[np.ndarray, dict]:
     """``moved_c2w`` (N, 4, 4, OpenCV axes) less the motion of the whole rig that best explains how they
-    moved from ``given_c2w``: a turn w about ``pivot_m``, a shift t and a growth s about it, so that
-    view i turns by w and its centre moves by w x a_i + t + s a_i (a_i: its centre less the pivot), in
-    least squares with turns weighed by the cameras' median distance (both residuals in metres).
-    Returns the poses and the motion taken out (degrees, millimetres, growth as a fraction)."""
+    moved from ``given_c2w`` (:func:`view_corrections.rig_motion`: a turn w about ``pivot_m``, a shift t
+    and a growth s about it), taken out exactly. Returns the poses and the motion taken out (degrees,
+    millimetres, growth as a fraction)."""
+    import torch
     from scipy.spatial.transform import Rotation
+
+    from real2sim.reconstruct.view_corrections import rig_motion
 
     arm = given_c2w[:, :3, 3] - pivot_m
     distance_m = float(np.median(np.linalg.norm(arm, axis=1)))
     turn = Rotation.from_matrix(moved_c2w[:, :3, :3] @ np.swapaxes(given_c2w[:, :3, :3], 1, 2)).as_rotvec()
     move = moved_c2w[:, :3, 3] - given_c2w[:, :3, 3]
-    n = len(arm)
-    skew = np.zeros((n, 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -arm[:, 2], arm[:, 1], -arm[:, 0]
-    skew = skew - np.swapaxes(skew, 1, 2)
-    rows = np.zeros((n, 6, 7))
-    rows[:, :3, :3] = distance_m * np.eye(3)
-    rows[:, 3:, :3] = -skew  # w x a = -[a]x w
-    rows[:, 3:, 3:6] = np.eye(3)
-    rows[:, 3:, 6] = arm
-    rhs = np.concatenate([distance_m * turn, move], axis=1)
-    solution = np.linalg.lstsq(rows.reshape(-1, 7), rhs.reshape(-1), rcond=None)[0]
-    w, shift, growth = solution[:3], solution[3:6], float(solution[6])
+    w, shift, growth, _ = (t.numpy() for t in rig_motion(torch.from_numpy(turn), torch.from_numpy(move),
+                                                          torch.from_numpy(arm), distance_m))
+    growth = float(growth)
     rot = Rotation.from_rotvec(w).as_matrix()
     out = moved_c2w.copy()
     out[:, :3, :3] = rot.T @ moved_c2w[:, :3, :3]
@@ -248,7 +242,7 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
     report: per round the rig motion taken out and the median move; per view its coverage and move.
     Views whose masks the others' hull still leaves more than 5 % uncovered keep their move but are
     listed (``poorly_covered``): a mask that is wrong, or a pose a small motion does not explain."""
-    from real2sim.reconstruct.hull import object_region
+    from dataclasses import replace
 
     if views.count < ALL_MIN_VIEWS:
         return views, {"method": "none", "reason": f"{views.count} views: too few to align to each other "
@@ -257,9 +251,10 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
     coverage = np.ones(views.count)
     rounds_report = []
     for r in range(rounds):
-        current = replace_poses(views, c2w)
+        current = replace(views, c2w_cv=c2w)
         try:
-            surfaces = leave_one_out_surfaces(current, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+            surfaces, (lo, hi) = leave_one_out_surfaces(current, outlier_fraction=outlier_fraction,
+                                                        table_z_m=table_z_m)
         except UserInputError as e:  # the views agree on no closed region even with the tolerance
             if r == 0:
                 return views, {"method": "none", "reason": f"the views' silhouettes do not bound a region ({e}); "
@@ -271,7 +266,6 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
                 progress(f"poses of all views, round {r + 1}/{rounds}", i, views.count)
             if len(surfaces[i]):
                 moved[i], coverage[i] = align_view(current, i, surfaces[i], max_evaluations=max_evaluations)
-        lo, hi = object_region(current, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
         moved, rig = remove_rig_motion(views.c2w_cv, moved, 0.5 * (lo + hi))
         turned, shifted = pose_errors(moved, c2w)
         rounds_report.append({"rig_motion_removed": rig, "median_turn_deg": round(float(np.median(turned)), 4),
@@ -283,10 +277,4 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
               "views": {name: {"mask_coverage": round(float(cov), 4), "moved_mm": round(float(mm), 3),
                                "turned_deg": round(float(deg), 4)}
                         for name, cov, deg, mm in zip(views.names, coverage, turned_deg, moved_mm)}}
-    return replace_poses(views, c2w, unrefined=()), report
-
-
-def replace_poses(views: PosedViews, c2w_cv: np.ndarray, unrefined: tuple[str, ...] | None = None) -> PosedViews:
-    """``views`` with cameras ``c2w_cv`` (and, when given, ``unrefined`` names)."""
-    return PosedViews(views.rgb, views.mask, c2w_cv, views.intrinsics, views.names,
-                      views.unrefined if unrefined is None else unrefined)
+    return replace(views, c2w_cv=c2w, unrefined=()), report

@@ -165,7 +165,7 @@ class ViewCorrections(torch.nn.Module):
         """Take out of the corrections the rigid motion of the whole rig (pose) and the common
         gain and bias (colour) that best explain them; see the module docstring."""
         if self.poses:
-            w, moves = _rig_motion(self.rotation_rad, self.translation_m, self._arm_m, self.distance_m)
+            w, _, _, moves = rig_motion(self.rotation_rad, self.translation_m, self._arm_m, self.distance_m)
             self.rotation_rad -= w
             self.translation_m -= moves
         if self.colours:
@@ -195,13 +195,14 @@ class ViewCorrections(torch.nn.Module):
         return self.rotation_rad.detach().clone(), self.translation_m.detach().clone()
 
 
-def _rig_motion(rotation: torch.Tensor, translation: torch.Tensor, arm_m: torch.Tensor,
-                distance_m: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """The small motion of the whole rig closest, in least squares, to the per-view corrections: a
-    rotation vector w about the pivot, a shift t and a growth s of the rig about the pivot (the field
-    scaled with it renders the same images), so view i turns by w and moves by w x arm_i + t + s arm_i.
-    Rotations are weighed by ``distance_m`` so that both residuals are in metres. Returns (w, the
-    per-view moves (V, 3))."""
+def rig_motion(rotation: torch.Tensor, translation: torch.Tensor, arm_m: torch.Tensor,
+               distance_m: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The small motion of the whole rig closest, in least squares, to the per-view corrections (rotation
+    vectors and camera-centre moves, (V, 3) each): a rotation vector w about the pivot, a shift t and a
+    growth s of the rig about the pivot (the field scaled with it renders the same images), so view i
+    turns by w and moves by w x arm_i + t + s arm_i (``arm_m``: camera centres less the pivot).
+    Rotations are weighed by ``distance_m`` so that both residuals are in metres. Returns (w, t, s,
+    the per-view moves (V, 3)), in ``rotation``'s dtype."""
     views = len(arm_m)
     dtype = torch.float64
     arm = arm_m.to(dtype)
@@ -217,7 +218,8 @@ def _rig_motion(rotation: torch.Tensor, translation: torch.Tensor, arm_m: torch.
     b = torch.cat([distance_m * rotation.to(dtype), translation.to(dtype)], dim=1).reshape(-1)
     solution = torch.linalg.lstsq(a.cpu(), b.cpu()[:, None]).solution[:, 0].to(arm.device)
     moves = (rows_move @ solution)  # (V, 3)
-    return solution[:3].to(rotation.dtype), moves.to(rotation.dtype)
+    solution = solution.to(rotation.dtype)
+    return solution[:3], solution[3:6], solution[6], moves.to(rotation.dtype)
 
 
 def correction_report(corrections: ViewCorrections, views, *, dataset_root=None,
