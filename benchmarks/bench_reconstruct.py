@@ -107,7 +107,15 @@ def _dataset_size(ds: Path) -> tuple[int, int, int]:
     return len(meta["frames"]), int(meta["w"]), int(meta["h"])
 
 
-def _write(args, argv, rows: list, pose_rows: list) -> None:
+def _stage_row(name: str, label: str, report: dict) -> list:
+    """Seconds per stage of one reconstruction (report.json's stages), the visual hull and carving apart."""
+    stages = {k: v["seconds"] for k, v in report["stages"].items()}
+    cells = ", ".join(f"{k} {v:.3g}" for k, v in stages.items())
+    carving = report.get("hull_and_carving_seconds")
+    return [name, label, cells, "-" if carving is None else f"{carving:.3g}", f"{sum(stages.values()):.4g}"]
+
+
+def _write(args, argv, rows: list, pose_rows: list, stage_rows: list | None = None) -> None:
     """Write (or rewrite) the section with the rows so far: a stopped run keeps what it measured."""
     load = os.getloadavg()[0]
     body = (
@@ -127,6 +135,9 @@ def _write(args, argv, rows: list, pose_rows: list) -> None:
         + markdown_table(["object", "method", "Chamfer mm", "hull / concave mm", "IoU", "F@1mm", "concave", "photo-carved voxels",
                           "field PSNR dB",
                           "mesh PSNR dB", "faces", "wall s", "CPU s", "peak MB"], rows)
+        + ("\n\n### Where the time goes (report.json's stages, s)\n\n"
+           + markdown_table(["object", "method", "stages s", "of train_field: hull and carving s", "total s"],
+                            stage_rows) if stage_rows else "")
         + "\n\nPSNR is over the pixels that the true mask or the prediction covers, both composited on black; the "
         "mesh is rendered unlit (its texture as baked), the capture is lit, so mesh PSNR is a lower bound on how "
         "the texture looks.\n"
@@ -165,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
         field_cfg = replace(field_cfg, coarse_voxels=40, fine_voxels=80, coarse_steps=150, fine_steps=300)
     variants = [("field", ReconstructConfig(field=field_cfg)), ("hull", ReconstructConfig(backend="hull"))]
 
-    rows, pose_rows = [], []
+    rows, pose_rows, stage_rows = [], [], []
     with tempfile.TemporaryDirectory(prefix="bench-reconstruct-") as tmp:
         for name in args.objects.split(","):
             if args.datasets is None:
@@ -188,14 +199,15 @@ def main(argv: list[str] | None = None) -> int:
                              "-" if concave is None else f"{concave:.3f}", r.get("photo_carved_voxels", "-"),
                              r.get("psnr_field_held_out_db", "-"), r.get("psnr_mesh_held_out_db", "-"),
                              r["mesh"]["faces"], wall, cpu, peak])
-                print(rows[-1], flush=True)
-                _write(args, argv, rows, pose_rows)
+                stage_rows.append(_stage_row(name, label, r))
+                print(rows[-1], stage_rows[-1], flush=True)
+                _write(args, argv, rows, pose_rows, stage_rows)
                 if result.field is not None and name in args.tsdf.split(","):
                     rows.append(_tsdf_row(name, ds, result.field, cfg, args.seed))
                     print(rows[-1], flush=True)
-                    _write(args, argv, rows, pose_rows)
+                    _write(args, argv, rows, pose_rows, stage_rows)
 
-    _write(args, argv, rows, pose_rows)
+    _write(args, argv, rows, pose_rows, stage_rows)
     return 0
 
 
