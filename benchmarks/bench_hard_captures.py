@@ -11,6 +11,7 @@ and the wall seconds of `run`. A run that fails is a row too, with its last erro
     python benchmarks/bench_hard_captures.py                   # bottle and can, every condition (hours on 2 cores)
     python benchmarks/bench_hard_captures.py --objects can --conditions no_table,all
     python benchmarks/bench_hard_captures.py --quick           # the can, all conditions together, tiny: minutes
+    python benchmarks/bench_hard_captures.py --objects can --conditions jitter --tag jitter   # its own section file
     python benchmarks/bench_hard_captures.py --objects can --conditions low_res_256x192 --views 60 --all-unrefined
 
 --all-unrefined puts every view in the state refine-poses leaves when COLMAP registers too few frames
@@ -126,6 +127,8 @@ def main() -> int:
     parser.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
     parser.add_argument("--keep", type=Path, default=None, help="keep the captures and assets here")
+    parser.add_argument("--tag", default="", help="write docs/benchmarks/hard_captures_TAG.md (a partial run beside "
+                                                   "the main section)")
     parser.add_argument("--all-unrefined", action="store_true",
                         help="every frame as refine-poses leaves it when COLMAP refines none (see above)")
     args = parser.parse_args()
@@ -164,6 +167,8 @@ def main() -> int:
                                                "jittered and JPEG captures")
             if args.all_unrefined:
                 section, title = "hard_captures_unrefined", "Hard captures whose poses COLMAP cannot refine"
+            if args.tag:
+                section, title = f"{section}_{args.tag}", f"{title} ({args.tag})"
             print(write_section(section, title, body,
                                 "python benchmarks/bench_hard_captures.py " + " ".join(sys.argv[1:])))
     return 0

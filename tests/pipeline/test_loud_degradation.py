@@ -123,3 +123,25 @@ def test_poses_are_refined_by_default_where_there_are_poses_to_refine(tiny_captu
     assert not poses_to_refine(colmap) and poses_to_refine(tiny_capture)
     with pytest.raises(SystemExit):  # both: a usage error
         build_parser().parse_args(["run", str(tiny_capture), "--out", "a", "--refine-poses", "--no-refine-poses"])
+
+
+def test_standalone_reconstruct_repeats_its_warnings_in_the_summary_and_report_json(tiny_capture, tmp_path, capsys):
+    """`reconstruct` on its own says what degraded where its result is read: after its summary line and
+    in report.json (8 views marked as a failed refine-poses leaves them: too few to align to each other)."""
+    from real2sim.formats.dataset import POSE_REFINED_KEY
+
+    dataset = tmp_path / "can"
+    shutil.copytree(tiny_capture, dataset, ignore=shutil.ignore_patterns("ground_truth"))
+    meta = json.loads((dataset / "transforms.json").read_text())
+    for frame in meta["frames"]:
+        frame[POSE_REFINED_KEY] = False
+    (dataset / "transforms.json").write_text(json.dumps(meta))
+    out = tmp_path / "mesh"
+    code, stdout, err = run_cli(capsys, "reconstruct", dataset, "--out", out, "--backend", "hull", "--voxels", "48",
+                                "--texture-px", "64")
+    assert code == 0, err
+    said = _warning_lines(err, "poses not aligned: 8 views: too few")
+    assert len(said) == 1 and ".py" not in said[0], err
+    lines = stdout.splitlines()
+    assert lines[0].startswith("mesh: ") and lines[1:] == said
+    assert json.loads((out / "report.json").read_text())["warnings"] == [said[0][len("WARNING: "):]]

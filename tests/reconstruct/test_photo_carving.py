@@ -117,6 +117,7 @@ def test_local_contrast_is_zero_on_flat_colour_and_large_on_texture():
 def test_carving_leaves_the_can_alone(can_capture):
     grid, hull, result = _hull_and_carving(can_capture)
     assert result.carved_voxels <= 0.01 * np.count_nonzero(hull)
+    assert not result.exposure["applied"]  # one exposure for every view: the images stay as they are
 
 
 @pytest.mark.slow

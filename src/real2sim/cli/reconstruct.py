@@ -126,19 +126,26 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
 
     if (args.from_mesh is None) != (args.dataparser_transforms is None):
         raise UserInputError("--from-mesh and --dataparser-transforms go together")
-    if args.from_mesh is not None:
-        result = import_external(args.dataset, args.from_mesh, args.dataparser_transforms,
-                                 config=ReconstructConfig(table_z_m=args.table_z))
-    else:
-        config = reconstruct_config(args, args.voxels)
-        config.validate()
-        from real2sim.cli.progress import progress_display
+    from real2sim.pipeline.manifest import recorded_warnings
 
-        with progress_display() as progress:
-            result = reconstruct(args.dataset, config, device=args.device, seed=args.seed, progress=progress)
+    with recorded_warnings() as raised:
+        if args.from_mesh is not None:
+            result = import_external(args.dataset, args.from_mesh, args.dataparser_transforms,
+                                     config=ReconstructConfig(table_z_m=args.table_z))
+        else:
+            config = reconstruct_config(args, args.voxels)
+            config.validate()
+            from real2sim.cli.progress import progress_display
+
+            with progress_display() as progress:
+                result = reconstruct(args.dataset, config, device=args.device, seed=args.seed, progress=progress)
+    if raised:  # what degraded on the way, in report.json too: judge the mesh with it
+        result.report["warnings"] = list(raised)
     out = write_reconstruction(result, out, overwrite=args.overwrite,
                                inputs=tuple(p for p in (args.dataset, args.from_mesh) if p is not None))
     print(summary_line(out, result.report))
+    for text in raised:  # printed when it happened, and again here where the result is read
+        print(f"WARNING: {text}")
     return 0
 
 

@@ -97,6 +97,8 @@ class CarvingConfig:
     min_spread_to_contrast: float = 1.5
     # the hollow prior keeps every voxel within this many voxels of the visual hull's outside (or the table)
     min_wall_voxels: float = 2.0
+    # each view's exposure and white balance taken out of its images first (view_exposure.py)
+    exposure_correction: bool = True
     # the masks' re-check puts back first what lies within this many voxels of the carved solid, round
     # by round (at most ``max_restore_rounds``), and then fills the voids its skin closes off: openings
     # at most 2 * ``void_gap_voxels`` wide do not count as a way out (``mask_recheck.put_back_for_masks``)
@@ -115,6 +117,8 @@ class CarvingResult:
     rounds: int
     restored_voxels: int = 0
     opened_voxels: int = 0  # of ``carved_voxels``, those the second pass (the hollow prior) removed
+    # each view's exposure and white balance (view_exposure.py): whether they were taken out, and how large
+    exposure: dict | None = None
 
 
 #: Parts of the carved solid smaller than this fraction of it, cut off from the rest, are dropped.
@@ -134,6 +138,9 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
     floor = np.zeros(solid.shape, bool)
     floor[:, :, 0] = True
     candidates = _surface(solid) & ~floor
+    exposure = None
+    if config.exposure_correction:
+        images, exposure = _exposure_corrected(views, images, grid, solid, candidates, config)
     rounds = 0
     for rounds in range(1, config.max_rounds + 1):
         if not candidates.any():
@@ -174,7 +181,29 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
     # included; what is left of them floating is no object.
     solid &= ~_small_components(solid, FLOATER_FRACTION * solid.sum())
     return CarvingResult(solid=solid, carved_voxels=int((original & ~solid).sum()), rounds=rounds,
-                         restored_voxels=restored, opened_voxels=opened_count)
+                         restored_voxels=restored, opened_voxels=opened_count, exposure=exposure)
+
+
+#: The surface voxels the exposure is estimated on, at most (evenly spread over the surface).
+EXPOSURE_SAMPLE_VOXELS = 20_000
+
+
+def _exposure_corrected(views: PosedViews, images: np.ndarray, grid: VoxelGrid, solid: np.ndarray,
+                        surface: np.ndarray, config: CarvingConfig) -> tuple[np.ndarray, dict]:
+    """``images`` with each view's exposure and white balance divided out, as the views see the
+    ``surface`` voxels of ``solid`` (:mod:`view_exposure`), and a report of the gains."""
+    from real2sim.reconstruct.view_exposure import corrected_images, gains_summary, view_gains
+
+    idx = np.argwhere(surface)
+    idx = idx[::max(1, -(-len(idx) // EXPOSURE_SAMPLE_VOXELS))]
+    surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
+    view_of, point_of, pixel_uv, _ = _observations(views, grid, grid.origin_m + idx * grid.voxel_m, surface_mesh,
+                                                   config)
+    gains, evidence = view_gains(_bilinear(images, view_of, pixel_uv), view_of, point_of, views.count,
+                                 min_views=config.min_views)
+    if not evidence["applied"]:
+        return images, evidence
+    return corrected_images(images, gains), {**evidence, **gains_summary(gains)}
 
 
 def _tested(views: PosedViews, images: np.ndarray, grid: VoxelGrid, candidates: np.ndarray, original: np.ndarray,
@@ -281,27 +310,14 @@ def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndar
     """The verdict on each voxel of ``idx`` (P, 3): the ``spread_quantile`` of its views' colour
     distances from their median, the same for their hues, and the counts of :class:`_Verdict`."""
     points = grid.origin_m + idx * grid.voxel_m
-    uv, depth = project(views.intrinsics, views.c2w_cv, points)  # (V, P, 2), (V, P)
     height, width = views.mask.shape[1:]
-    in_image = (depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < width - 1) & (uv[..., 1] >= 0) & \
-               (uv[..., 1] < height - 1)
-    view_of, point_of = np.nonzero(in_image)
-    origins = views.c2w_cv[view_of, :3, 3]
-    offsets = points[point_of] - origins
-    distance = np.linalg.norm(offsets, axis=1)
-    directions = offsets / distance[:, None]
-    hit_at = np.full(len(origins), np.inf)
-    hits, rays, _ = surface_mesh.ray.intersects_location(origins, directions, multiple_hits=False)
-    hit_at[rays] = np.einsum("nd,nd->n", hits - origins[rays], directions[rays])
-    visible = hit_at >= distance - config.visibility_tolerance_voxels * grid.voxel_m
-    view_of, point_of = view_of[visible], point_of[visible]
+    view_of, point_of, pixel_uv, directions = _observations(views, grid, points, surface_mesh, config)
     # a view reaches the voxel through carved space when the ray is in it just before the voxel
-    before = points[point_of] - 1.5 * grid.voxel_m * directions[visible]
+    before = points[point_of] - 1.5 * grid.voxel_m * directions
     cell = np.clip(np.round((before - grid.origin_m) / grid.voxel_m).astype(int), 0, np.asarray(grid.shape) - 1)
     through = carved[tuple(cell.T)]
     through_count = np.bincount(point_of, weights=through, minlength=len(points))
     outside_count = np.bincount(point_of, weights=~through, minlength=len(points))
-    pixel_uv = uv[view_of, point_of]
     colours = _bilinear(images, view_of, pixel_uv)
     # hue: colour over brightness, damped for dark pixels whose ratios are noise
     hues = 3.0 * colours / (colours.sum(axis=1, keepdims=True) + config.hue_floor)
@@ -324,6 +340,28 @@ def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndar
         per_view[point_of, view_of] = contrast[view_of, v, u]
         median_contrast[some] = _row_nanquantile(per_view[some], 0.5)
     return _Verdict(spreads[0], spreads[1], seen, through_count, outside_count, median_contrast)
+
+
+def _observations(views: PosedViews, grid: VoxelGrid, points: np.ndarray, surface_mesh,
+                  config: CarvingConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Which views see which of ``points`` (P, 3, metres): the ray from the camera meets ``surface_mesh``
+    no nearer than the point (within ``visibility_tolerance_voxels``). Per observation: its view and
+    point indices, the pixel position (N, 2) and the ray's unit direction (N, 3)."""
+    uv, depth = project(views.intrinsics, views.c2w_cv, points)  # (V, P, 2), (V, P)
+    height, width = views.mask.shape[1:]
+    in_image = (depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < width - 1) & (uv[..., 1] >= 0) & \
+               (uv[..., 1] < height - 1)
+    view_of, point_of = np.nonzero(in_image)
+    origins = views.c2w_cv[view_of, :3, 3]
+    offsets = points[point_of] - origins
+    distance = np.linalg.norm(offsets, axis=1)
+    directions = offsets / distance[:, None]
+    hit_at = np.full(len(origins), np.inf)
+    hits, rays, _ = surface_mesh.ray.intersects_location(origins, directions, multiple_hits=False)
+    hit_at[rays] = np.einsum("nd,nd->n", hits - origins[rays], directions[rays])
+    visible = hit_at >= distance - config.visibility_tolerance_voxels * grid.voxel_m
+    view_of, point_of = view_of[visible], point_of[visible]
+    return view_of, point_of, uv[view_of, point_of], directions[visible]
 
 
 def _local_contrast(images: np.ndarray, window_px: float) -> np.ndarray:

@@ -203,6 +203,8 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         report["photo_carved_voxels"] = trained.carved_voxels
         report["photo_carving_restored_voxels"] = trained.restored_voxels  # many: poses not refined?
         report["photo_carving_opened_voxels"] = trained.opened_voxels
+        if trained.carving_exposure is not None:
+            report["photo_carving_exposure"] = trained.carving_exposure
         report["hull_and_carving_seconds"] = trained.hull_and_carving_seconds  # part of train_field's
         report["field_voxel_mm"] = 1000.0 * trained.field.grid.voxel_m
         with clock.stage("extract_mesh"):

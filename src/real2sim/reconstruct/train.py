@@ -123,6 +123,8 @@ class TrainResult:
     restored_voxels: int = 0
     # carving-grid voxels the second pass (the hollow prior, see photo_carving) removed
     opened_voxels: int = 0
+    # the views' exposure and white balance as photo carving found them (photo_carving.CarvingResult.exposure)
+    carving_exposure: dict | None = None
     # of ``seconds``, the starting density: the visual hull's score and photo-consistent carving
     hull_and_carving_seconds: float = 0.0
     # the per-view corrections learnt with the field (None when neither poses nor colours are corrected)
@@ -347,6 +349,7 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
                        carved_voxels=int(carved.sum()), restored_voxels=carving.restored_voxels if carving else 0,
                        opened_voxels=carving.opened_voxels if carving else 0,
+                       carving_exposure=carving.exposure if carving else None,
                        hull_and_carving_seconds=hull_and_carving_s, corrections=corrections,
                        c2w_cv=corrections.corrected_c2w() if corrections is not None else None)
 
