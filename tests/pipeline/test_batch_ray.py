@@ -4,6 +4,8 @@ runs one task per object on it and stops it; the catalogue is the local pool's, 
 from __future__ import annotations
 
 import csv
+import shutil
+import tempfile
 
 import pytest
 
@@ -44,3 +46,40 @@ def test_three_objects_on_ray_and_on_the_local_pool_give_the_same_catalogue(caps
         assert [r["status"] for r in _rows(out)] == ["done"] * 3
         csvs.append((out / "catalogue.csv").read_bytes())
     assert csvs[0] == csvs[1]
+
+
+def test_an_object_that_asks_for_a_gpu_holds_it_only_for_its_gpu_stages(tmp_path):
+    """With a GPU in the cluster (declared here: Ray schedules by the resources a node says it has), an
+    object whose run uses cuda is three tasks: the stages before the reconstruction on a CPU, the
+    reconstruction and the fitting with the GPU, the truth on a CPU. The run itself is on the CPU here
+    (this machine's torch has no CUDA): what is checked is what each task was given and that the three
+    make the same asset as one task."""
+    from dataclasses import replace
+
+    from real2sim.cli import build_parser
+    from real2sim.cli.batch import plan
+    from real2sim.pipeline.batch import run_batch
+
+    ds = capture(tmp_path / "can_ds", "can")
+    out = tmp_path / "cat"
+    args = build_parser().parse_args(["batch", str(ds), "--mass", "0.35", "--out", str(out), "--executor", "ray",
+                                      *FAST])
+    jobs, out, batch = plan(args)
+    jobs = [replace(job, gpu=True) for job in jobs]  # as --device cuda makes them
+    session = tempfile.mkdtemp(prefix="r2s_ray_", dir="/tmp")  # short: Ray's socket paths fit in 107 bytes
+    ray.init(num_cpus=2, num_gpus=1, include_dashboard=False, _node_ip_address="127.0.0.1", _temp_dir=session,
+             log_to_driver=False)
+    lines: list[str] = []
+    try:
+        result = run_batch(jobs, out, batch, echo=lines.append)
+    finally:
+        ray.shutdown()
+        shutil.rmtree(session, ignore_errors=True)
+    assert result.outcomes["can_ds"]["status"] == "done", result.outcomes
+    assert lines == ["can_ds: done (ran reconstruct, asset, truth)"]
+    log = (out / ".batch" / "can_ds.log").read_text().splitlines()
+    tasks = [line for line in log if line.endswith(("stages, with a CPU", "stages, with GPU 0"))]
+    assert tasks == ["before_gpu stages, with a CPU", "gpu stages, with GPU 0", "after_gpu stages, with a CPU"]
+    assert [line for line in log if line.startswith("paused before")] == ["paused before reconstruct",
+                                                                          "paused before truth"]
+    assert set(run_json(out / "can_ds")["stages"]) == {"reconstruct", "asset", "truth"}

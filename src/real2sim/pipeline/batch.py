@@ -5,8 +5,13 @@ dataset into ``CATALOGUE/<name>/`` (an ordinary asset folder, with run's own ``.
 stages of one object keep their order while different objects run side by side. Tasks run on a local
 process pool (:class:`real2sim.evaluate.executors._PoolExecutor`: a worker that dies breaks the pool,
 its jobs are resubmitted, and a job that breaks a second pool is run alone) or on Ray
-(:class:`RayObjects`: one task per object, one CPU, or one GPU where the run uses ``cuda`` and the
-cluster has one; Ray retries a task whose worker died once).
+(:class:`RayObjects`: one task per object and one CPU; Ray retries a task whose worker died once).
+Where the run uses ``cuda`` and the Ray cluster has GPUs, an object's stages are split into three
+tasks that follow each other (:data:`PHASES`): the stages before the reconstruction on a CPU, the
+reconstruction and the asset's fitting (:data:`GPU_STAGES`) with a GPU, and the rest (truth, the
+evaluation's simulations) on a CPU again, so a GPU is held only while its stages run. Each task is
+`run` on the same folder: it skips the stages an earlier task recorded and stops before the next
+task's first stage (``run_pipeline``'s ``pause``).
 
 Datasets and results move through paths, which every node must be able to read and write (a shared
 folder): datasets are tens to hundreds of megabytes of images, too big for the object store to be
@@ -24,7 +29,7 @@ import contextlib
 import json
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -40,10 +45,34 @@ EXECUTORS = ("local", "ray")
 WORKER_DIED = "the worker process died (killed, or a crash in native code)"
 
 
+#: The stages a GPU speeds up: the radiance field, and the primitives' fitting in the asset stage.
+GPU_STAGES = frozenset({"reconstruct", "asset"})
+#: An object's tasks when its stages are split by the resources they need, in order.
+PHASES = ("before_gpu", "gpu", "after_gpu")
+
+
+def phase_pause(phase: str) -> Callable[[str], bool] | None:
+    """``run_pipeline``'s ``pause`` for one of :data:`PHASES` ("all": None, every stage)."""
+    if phase == "before_gpu":
+        return lambda stage: stage in GPU_STAGES
+    if phase == "gpu":
+        reached: list[str] = []
+
+        def pause(stage: str) -> bool:  # the stages before are current by now: skipped, not paused at
+            if stage in GPU_STAGES:
+                reached.append(stage)
+                return False
+            return bool(reached)
+
+        return pause
+    return None
+
+
 @dataclass(frozen=True)
 class ObjectJob:
     """One object of the batch. ``config`` None: it cannot run, ``reason`` says why (no mass).
-    ``threads``: torch CPU threads in its worker (0: leave torch's choice); ``gpu``: ask Ray for one."""
+    ``threads``: torch CPU threads in its worker (0: leave torch's choice); ``gpu``: ask Ray for one.
+    ``phase``: which of its stages this task runs ("all", or one of :data:`PHASES`)."""
 
     name: str
     dataset: Path
@@ -53,6 +82,7 @@ class ObjectJob:
     threads: int = 0
     gpu: bool = False
     log: Path | None = None
+    phase: str = "all"
 
 
 @dataclass(frozen=True)
@@ -120,8 +150,8 @@ def object_key(job: ObjectJob) -> str:
 
 def run_object(job: ObjectJob) -> dict:
     """A worker's task: `run` for one object. Never raises for the object's own failure: returns
-    ``{"name", "status": "done"|"failed", "reason", "ran": [stages run now]}``; its progress and
-    warnings go to ``job.log``."""
+    ``{"name", "status": "done"|"failed"|"paused" (before its next task's stages), "reason", "ran": [stages
+    run now]}``; its progress and warnings go to ``job.log``."""
     from real2sim.pipeline.run import StageFailed, run_pipeline
 
     if job.threads:
@@ -134,16 +164,32 @@ def run_object(job: ObjectJob) -> dict:
             if total <= 0 or done >= total:
                 print(f"{message}" + (f": {done}/{total}" if total > 0 else ""), file=log, flush=True)
 
+        if job.phase != "all":
+            print(f"{job.phase} stages, with {_assigned(job)}", file=log, flush=True)
         try:
-            result = run_pipeline(job.dataset, job.asset_dir, job.config, progress=say)
+            result = run_pipeline(job.dataset, job.asset_dir, job.config, progress=say, pause=phase_pause(job.phase))
+            if result.paused_before is not None:
+                print(f"paused before {result.paused_before}", file=log, flush=True)
         except (StageFailed, UserInputError) as exc:
             return _failed(job.name, str(exc), log)
         except Exception as exc:  # noqa: BLE001 -- one object's crash is its own row, not the batch's end
             text = str(exc).splitlines()[0] if str(exc) else ""
             return _failed(job.name, f"{type(exc).__name__}: {text}".rstrip(": "), log)
     ran = [stage for stage, status in result.statuses.items() if status == "ran"]
+    if result.paused_before is not None:
+        return {"name": job.name, "status": "paused", "reason": "", "ran": ran}
     return {"name": job.name, "status": "done", "reason": "", "ran": ran,
             "warnings": len(result.stage_warnings)}
+
+
+def _assigned(job: ObjectJob) -> str:
+    """What the task was given, as its log says: the GPUs Ray assigned it, or a CPU."""
+    import sys
+
+    ray = sys.modules.get("ray")
+    if job.gpu and ray is not None and ray.is_initialized():
+        return f"GPU {', '.join(map(str, ray.get_gpu_ids()))}"
+    return "a CPU"
 
 
 def _failed(name: str, reason: str, log) -> dict:
@@ -306,6 +352,9 @@ def _schedule(executor, todo: list[ObjectJob], keys: dict, out: Path, result: Ba
     from real2sim.evaluate.executors import _Retry
 
     started, before = time.monotonic(), len(result.outcomes)
+    if getattr(executor, "gpus", 0) >= 1:  # split where a GPU is asked for and the cluster has one
+        todo = [replace(job, phase=PHASES[0], gpu=False) if job.gpu else job for job in todo]
+    ran: dict[str, list[str]] = {}
     handles = {executor.submit(run_object, job): job for job in todo}
     show = lambda: _show(progress, result, len(handles), total, workers, time.monotonic() - started,  # noqa: E731
                          len(result.outcomes) - before)
@@ -319,7 +368,13 @@ def _schedule(executor, todo: list[ObjectJob], keys: dict, out: Path, result: Ba
                 continue
             if "name" not in outcome:  # the executor's own failure row: its worker died
                 outcome = {"name": job.name, "status": "failed", "reason": WORKER_DIED, "ran": []}
-            _record(out, result, outcome, keys[job.name], echo)
+            ran.setdefault(job.name, []).extend(outcome.get("ran") or [])
+            if outcome["status"] == "paused" and job.phase in PHASES[:-1]:  # its next stages, with their resources
+                following = PHASES[PHASES.index(job.phase) + 1]
+                after = replace(job, phase=following, gpu=following == "gpu")
+                handles[executor.submit(run_object, after)] = after
+                continue
+            _record(out, result, {**outcome, "ran": ran.pop(job.name)}, keys[job.name], echo)
         show()
 
 

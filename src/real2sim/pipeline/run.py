@@ -36,7 +36,7 @@ import os
 import shutil
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from real2sim.formats.dataset import has_table_plane, is_model_frame, read_dataset
 from real2sim.formats.errors import UserInputError
@@ -48,7 +48,7 @@ from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
                                       EVALUATIONS, _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine,
                                       _refine_unavailable, _robot_frame, _truth, check_evaluations, rewrite_reports)
-from real2sim.pipeline.runner import RunProgress, Runner, StageFailed
+from real2sim.pipeline.runner import Paused, RunProgress, Runner, StageFailed
 from real2sim.pipeline.support import support_height_m
 from real2sim.pipeline.truth import has_ground_truth
 
@@ -116,6 +116,8 @@ class RunResult:
     #: what degraded: every warning the stages raised, ``{"stage", "message"}``, those of the stages
     #: skipped as unchanged included (from run.json); the command repeats them in its summary
     stage_warnings: list[dict] = field(default_factory=list)
+    #: the stage the run stopped before when its ``pause`` asked (None: it ran to the end)
+    paused_before: str | None = None
 
 
 def kept_note(asset_dir: Path | str) -> str:
@@ -206,7 +208,7 @@ def _discard(asset_dir: Path) -> None:
 
 
 def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, *, overwrite: bool = False,
-                 progress: ProgressFn | None = None) -> RunResult:
+                 progress: ProgressFn | None = None, pause: Callable[[str], bool] | None = None) -> RunResult:
     """Run (or resume) every stage for ``dataset`` into ``asset_dir``; see the module docstring.
 
     Bad input (unreadable dataset, frames without masks, an ASSETDIR that is neither
@@ -214,6 +216,8 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     anything is written. A failing stage raises StageFailed (or UserInputError naming
     the stage); stages finished before it stay recorded for the next call. ``progress``
     receives every stage's start and end and, prefixed by the stage, its work (:class:`RunProgress`).
+    ``pause``: asked with each stage's name before it; True stops the run there, the stages before it
+    recorded (``RunResult.paused_before``): the next call resumes from it.
     """
     from real2sim.reconstruct.stage import ReconstructConfig
 
@@ -255,12 +259,14 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
         make_output_dir(asset_dir, made_by="real2sim run")
         _remove_stale_temporaries(asset_dir)
         manifest.save()
-        return _run_locked(manifest, created, dataset, asset_dir, config, recon_cfg, asset_cfg, run_progress, phone)
+        return _run_locked(manifest, created, dataset, asset_dir, config, recon_cfg, asset_cfg, run_progress, phone,
+                           pause)
 
 
 def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: Path, config: RunConfig,
-                recon_cfg, asset_cfg, progress: RunProgress, phone=None) -> RunResult:
-    runner = Runner(manifest, progress, 0)
+                recon_cfg, asset_cfg, progress: RunProgress, phone=None,
+                pause: Callable[[str], bool] | None = None) -> RunResult:
+    runner = Runner(manifest, progress, 0, pause)
     try:
         if phone is not None:  # the dataset the stages below read is made first
             from real2sim.pipeline.phone import phone_stages
@@ -269,6 +275,9 @@ def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: 
             runner.count = 1 + (config.robot_frame() is None) + _stage_count(config, truth)
             dataset = phone_stages(runner, phone, asset_dir / mf.RUN_DIRNAME, config)
         return _counted_stages(runner, dataset, asset_dir, config, recon_cfg, asset_cfg)
+    except Paused as exc:  # asked for: what ran is recorded, the folder stays for the next call
+        return RunResult(asset_dir, runner.statuses, manifest.path, stage_warnings=runner.warnings(),
+                         paused_before=exc.stage)
     except BaseException as exc:
         if created and not manifest.data["stages"]:
             shutil.rmtree(asset_dir, ignore_errors=True)  # nothing finished: leave nothing behind

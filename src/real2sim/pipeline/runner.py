@@ -42,17 +42,32 @@ class StageFailed(RuntimeError):
         super().__init__(f"stage {stage} failed: {type(cause).__name__}: {text}")
 
 
-class Runner:
-    """Runs the stages in order, skipping the current ones; records each finished stage."""
+class Paused(Exception):
+    """Raised before stage ``stage`` when the runner's ``pause`` asks to stop there: the stages before
+    it are recorded, and the next call of `run` resumes from it (a batch runs an object's stages as
+    separate tasks, each with the resources its stages need)."""
 
-    def __init__(self, manifest: mf.Manifest, progress: RunProgress, count: int):
+    def __init__(self, stage: str):
+        self.stage = stage
+        super().__init__(f"paused before stage {stage}")
+
+
+class Runner:
+    """Runs the stages in order, skipping the current ones; records each finished stage. ``pause``:
+    called with each stage's name before it runs or is skipped; True stops the run there (:class:`Paused`)."""
+
+    def __init__(self, manifest: mf.Manifest, progress: RunProgress, count: int,
+                 pause: Callable[[str], bool] | None = None):
         self.manifest, self.progress, self.count = manifest, progress, count
+        self.pause = pause
         self.index = 0
         self.statuses: dict[str, str] = {}
 
     def stage(self, name: str, inputs: dict, settings: Any, upstream: str | None, outputs: list[str] | None,
               work: Callable[[], dict | None]) -> str:
         """Run ``work`` unless the stage is current. ``outputs`` None: ``work`` returns {"outputs": [...]}."""
+        if self.pause is not None and self.pause(name):
+            raise Paused(name)
         self.index += 1
         key = mf.stage_key(inputs, settings, upstream)
         if self.manifest.is_current(name, key):
