@@ -98,6 +98,31 @@ def _one_line_exit_2(capsys, *argv) -> str:
     return lines[0]
 
 
+def test_an_object_split_into_tasks_pauses_before_each_tasks_stages_and_ends_as_one_run(datasets, tmp_path):
+    """The tasks a batch makes of an object that asks for a GPU (on Ray with GPUs: test_batch_ray.py),
+    run here one after the other in this process: each stops before the next one's first stage, the
+    next skips what the one before recorded, and the last finishes the run."""
+    from dataclasses import replace
+
+    from real2sim.cli import build_parser
+    from real2sim.cli.batch import plan
+    from real2sim.pipeline.batch import PHASES, run_object
+
+    out = tmp_path / "cat"
+    args = build_parser().parse_args(["batch", str(datasets["can"]), "--mass", "0.35", "--out", str(out), *FAST])
+    (job,), out, _ = plan(args)
+    (out / ".batch").mkdir(parents=True)
+    outcomes = [run_object(replace(job, phase=phase, gpu=phase == "gpu")) for phase in PHASES]
+    assert [(o["status"], o["ran"]) for o in outcomes] == [("paused", []), ("paused", ["reconstruct", "asset"]),
+                                                           ("done", ["truth"])]
+    assert set(run_json(job.asset_dir)["stages"]) == {"reconstruct", "asset", "truth"}
+    assert run_object(job)["ran"] == []  # one task of the whole run now: everything is current
+    log = job.log.read_text().splitlines()
+    assert [line for line in log if line.startswith("paused before")] == ["paused before reconstruct",
+                                                                          "paused before truth"]
+    assert "gpu stages, with a CPU" in log  # asked for a GPU, and no Ray here to give one
+
+
 def test_bad_input_is_one_line_exit_2_and_nothing_written(capsys, datasets, tmp_path):
     can = datasets["can"]
     out = tmp_path / "cat"

@@ -48,6 +48,7 @@ def test_three_objects_on_ray_and_on_the_local_pool_give_the_same_catalogue(caps
     assert csvs[0] == csvs[1]
 
 
+@pytest.mark.slow
 def test_an_object_that_asks_for_a_gpu_holds_it_only_for_its_gpu_stages(tmp_path):
     """With a GPU in the cluster (declared here: Ray schedules by the resources a node says it has), an
     object whose run uses cuda is three tasks: the stages before the reconstruction on a CPU, the
