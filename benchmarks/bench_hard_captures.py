@@ -12,6 +12,8 @@ and the wall seconds of `run`. A run that fails is a row too, with its last erro
     python benchmarks/bench_hard_captures.py --objects can --conditions no_table,all
     python benchmarks/bench_hard_captures.py --quick           # the can, all conditions together, tiny: minutes
     python benchmarks/bench_hard_captures.py --objects can --conditions jitter --tag jitter   # its own section file
+    python benchmarks/bench_hard_captures.py --objects can --prepare DIR      # captures + refine-poses only, then
+    python benchmarks/bench_hard_captures.py --objects can --datasets DIR --device cuda --tag cuda   # on a GPU box
     python benchmarks/bench_hard_captures.py --objects can --conditions low_res_256x192 --views 60 --all-unrefined
 
 --all-unrefined puts every view in the state refine-poses leaves when COLMAP registers too few frames
@@ -88,17 +90,58 @@ def mark_all_unrefined(dataset: Path) -> None:
     path.write_text(json.dumps(data, indent=2))
 
 
+def _capture(name: str, condition: str, dataset: Path, views: int, width: int, height: int,
+             noise: tuple[float, float]) -> str:
+    """`capture` of ``name`` under ``condition`` into ``dataset``; "" or the failure's one line."""
+    cap = subprocess.run(_cli("capture", name, "--out", str(dataset), "--views", str(views), "--pose-noise-mm",
+                              f"{noise[0]:g}", "--pose-noise-deg", f"{noise[1]:g}", *_flags(condition, width, height)),
+                         capture_output=True, text=True)
+    return "" if cap.returncode == 0 else f"capture failed: {_last_error(cap.stderr)}"
+
+
+def prepare(names: list[str], conditions: list[str], out: Path, views: int, width: int, height: int,
+            noise: tuple[float, float]) -> None:
+    """Capture each object under each condition into ``out/<name>_<condition>`` and refine its poses as
+    `run` does (`refine-poses`): what ``--datasets`` reconstructs on a machine without Drake or COLMAP."""
+    for name in names:
+        for condition in conditions:
+            dataset = out / f"{name}_{condition}"
+            failed = _capture(name, condition, dataset, views, width, height, noise)
+            if not failed:
+                ref = subprocess.run(_cli("refine-poses", str(dataset)), capture_output=True, text=True)
+                failed = "" if ref.returncode == 0 else f"refine-poses failed: {_last_error(ref.stderr)}"
+            print(f"{dataset}: {failed or 'captured and refined'}", flush=True)
+
+
+def reconstruct_condition(name: str, condition: str, dataset: Path, device: str) -> list:
+    """One table row from a dataset made by :func:`prepare`: `run`'s reconstruction (its defaults) on
+    ``device``, judged against the dataset's ground_truth/ (the same figures as truth.json's)."""
+    import warnings
+
+    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
+
+    start = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = reconstruct(dataset, ReconstructConfig(), device=device, seed=0)
+    wall_s = time.perf_counter() - start
+    said = sorted({" ".join(str(w.message).split()) for w in caught if issubclass(w.category, RuntimeWarning)
+                   and "invalid value encountered" not in str(w.message)})
+    rec = result.report["truth"]
+    met = rec["chamfer_mm"] <= TARGET_CHAMFER_MM and rec["iou"] >= TARGET_IOU
+    return [name, condition, rec["chamfer_mm"], rec["iou"], "yes" if met else "no",
+            "; ".join("WARNING: " + w[:100].replace("|", "/") for w in said) or "-", round(wall_s)]
+
+
 def run_condition(name: str, condition: str, work: Path, views: int, width: int, height: int,
                   run_args: list[str], noise: tuple[float, float] = (5.0, 1.0), all_unrefined: bool = False) -> list:
     """One table row: object, condition, Chamfer mm, IoU, target met, WARNING lines, run seconds."""
     from real2sim.geometry.objects import OBJECTS
 
     dataset, asset = work / f"{name}_{condition}", work / f"{name}_{condition}_asset"
-    cap = subprocess.run(_cli("capture", name, "--out", str(dataset), "--views", str(views), "--pose-noise-mm",
-                              f"{noise[0]:g}", "--pose-noise-deg", f"{noise[1]:g}", *_flags(condition, width, height)),
-                         capture_output=True, text=True)
-    if cap.returncode != 0:
-        return [name, condition, "-", "-", f"capture failed: {_last_error(cap.stderr)}", "-", "-"]
+    failed = _capture(name, condition, dataset, views, width, height, noise)
+    if failed:
+        return [name, condition, "-", "-", failed, "-", "-"]
     if all_unrefined:
         mark_all_unrefined(dataset)
         run_args = [*run_args, "--no-refine-poses"]
@@ -129,6 +172,12 @@ def main() -> int:
     parser.add_argument("--keep", type=Path, default=None, help="keep the captures and assets here")
     parser.add_argument("--tag", default="", help="write docs/benchmarks/hard_captures_TAG.md (a partial run beside "
                                                    "the main section)")
+    parser.add_argument("--prepare", type=Path, default=None, metavar="DIR",
+                        help="only capture and refine each case into DIR/<object>_<condition> (for --datasets)")
+    parser.add_argument("--datasets", type=Path, default=None, metavar="DIR",
+                        help="reconstruct the cases --prepare made in DIR with run's settings (a GPU machine has "
+                             "no Drake or COLMAP): reconstruction only")
+    parser.add_argument("--device", default="cpu", help="--datasets: the reconstruction's device")
     parser.add_argument("--all-unrefined", action="store_true",
                         help="every frame as refine-poses leaves it when COLMAP refines none (see above)")
     args = parser.parse_args()
@@ -140,6 +189,11 @@ def main() -> int:
     if args.quick:
         objects, conditions, views, width, height = ["can"], ["all"], 16, 128, 96
         run_args = ["--steps", "300", "--voxels", "64"]
+    noise = (args.pose_noise_mm, args.pose_noise_deg)
+    if args.prepare is not None:
+        args.prepare.mkdir(parents=True, exist_ok=True)
+        prepare(objects, conditions, args.prepare, views, width, height, noise)
+        return 0
     work = args.keep or Path(tempfile.mkdtemp(prefix="bench_hard_captures-"))
     work.mkdir(parents=True, exist_ok=True)
     setting = (f"{views} views at {width}x{height} px (unless the condition sets its size), camera-pose noise "
@@ -152,19 +206,30 @@ def main() -> int:
     if args.all_unrefined:
         setting += (". Every frame marked not refined, as refine-poses leaves them when COLMAP refines none, and "
                     "`run --no-refine-poses`: the reconstruction aligns all views by their silhouettes")
-    rows = []
+    if args.datasets is not None:
+        setting = (f"Reconstruction only: `reconstruct` with `run`'s settings, on {args.device}, of the cases "
+                   "`--prepare` captured and refined with `refine-poses` beforehand (" + setting.split("; ")[0] + ")")
+    rows, verb = [], "run" if args.datasets is None else "reconstruct"
     for name in objects:
         for condition in conditions:
-            rows.append(run_condition(name, condition, work, views, width, height, run_args,
-                                      (args.pose_noise_mm, args.pose_noise_deg), args.all_unrefined))
+            if args.datasets is not None:
+                dataset = args.datasets / f"{name}_{condition}"
+                if not dataset.is_dir():
+                    continue
+                rows.append(reconstruct_condition(name, condition, dataset, args.device))
+            else:
+                rows.append(run_condition(name, condition, work, views, width, height, run_args, noise,
+                                          args.all_unrefined))
             print(rows[-1], flush=True)
             flags = "\n".join(f"- `{c}`: `capture {' '.join(_flags(c, width, height))}`" for c in conditions)
             body = ((args.note + "\n\n" if args.note else "") + setting + f". Target: Chamfer <= {TARGET_CHAMFER_MM} "
                     f"mm and IoU >= {TARGET_IOU} against the true object (truth.json).\n\n"
-                    + markdown_table(["object", "condition", "Chamfer mm", "IoU", "target met", "run WARNING lines",
-                                      "run wall s"], rows) + "\n\nConditions:\n\n" + flags)
+                    + markdown_table(["object", "condition", "Chamfer mm", "IoU", "target met", f"{verb} WARNING lines",
+                                      f"{verb} wall s"], rows) + "\n\nConditions:\n\n" + flags)
             section, title = "hard_captures", ("Hard captures: `run` on turntable, long-lens, cut-off, no-table, "
                                                "jittered and JPEG captures")
+            if args.datasets is not None:
+                section, title = "hard_captures_reconstruct", f"Hard captures: the reconstruction alone, on {args.device}"
             if args.all_unrefined:
                 section, title = "hard_captures_unrefined", "Hard captures whose poses COLMAP cannot refine"
             if args.tag:
