@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics
+from real2sim.formats.srgb import linear_to_srgb, srgb_to_linear
 
 #: How far past the image border a cut-off view pushes the object: a fraction of the object's
 #: extent in the image along the shift, drawn uniformly in this range (enough to matter, while
@@ -114,21 +115,13 @@ def colour_gains(views: int, exposure_stops: float, white_balance: float, seed: 
     return exposure[:, None] * np.c_[wb[:, 0], np.ones(views), wb[:, 1]]
 
 
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def _linear_to_srgb(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(np.maximum(c, 0.0031308), 1 / 2.4) - 0.055)
-
-
 def apply_colour_gains(rgb: np.ndarray, gains: np.ndarray) -> np.ndarray:
     """An 8-bit sRGB image (H, W, 3) with each channel scaled by ``gains`` (3,) in linear light,
     clipped as a sensor saturates."""
-    levels = _srgb_to_linear(np.arange(256) / 255.0)
+    levels = srgb_to_linear(np.arange(256) / 255.0)
     out = np.empty_like(rgb)
     for c in range(3):
-        lut = np.round(255.0 * np.clip(_linear_to_srgb(levels * gains[c]), 0.0, 1.0)).astype(np.uint8)
+        lut = np.round(255.0 * np.clip(linear_to_srgb(levels * gains[c]), 0.0, 1.0)).astype(np.uint8)
         out[..., c] = lut[rgb[..., c]]
     return out
 

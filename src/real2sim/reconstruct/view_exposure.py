@@ -28,24 +28,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from real2sim.formats.srgb import linear_to_srgb, srgb_to_linear
+
 #: Linear-light values below this, or sRGB values above ``CLIPPED``, say nothing about a gain.
 DARK_LINEAR = 0.01
 CLIPPED = 0.98
 #: Gains are taken out only when they bring the surface points' median spread below this share of
 #: what it was without them.
 GAIN_EVIDENCE = 0.8
-
-
-def srgb_to_linear(srgb: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] to linear light (IEC 61966-2-1)."""
-    srgb = np.asarray(srgb, dtype=np.float32)
-    return np.where(srgb <= 0.04045, srgb / 12.92, ((np.maximum(srgb, 0.0) + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
-    """Linear light to sRGB encoding (values above 1 stay above 1)."""
-    linear = np.asarray(linear, dtype=np.float32)
-    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.maximum(linear, 0.0) ** (1 / 2.4) - 0.055)
 
 
 def view_gains(colours_srgb: np.ndarray, view_of: np.ndarray, point_of: np.ndarray, views: int, *,
@@ -61,7 +51,7 @@ def view_gains(colours_srgb: np.ndarray, view_of: np.ndarray, point_of: np.ndarr
     they lower the median spread of the points below ``GAIN_EVIDENCE`` of what it was: a capture
     without exposure changes keeps its images as they are."""
     colours_srgb = np.asarray(colours_srgb, dtype=np.float64)
-    linear = srgb_to_linear(colours_srgb).astype(np.float64)
+    linear = srgb_to_linear(colours_srgb)
     usable = (colours_srgb < CLIPPED).all(axis=1) & (linear > DARK_LINEAR).all(axis=1)
     view_of, point_of, log_colour = view_of[usable], point_of[usable], np.log(linear[usable])
     points = int(point_of.max()) + 1 if len(point_of) else 0
