@@ -8,6 +8,8 @@ points back near where the true cameras see them, and a view whose mask no small
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -240,3 +242,41 @@ def test_no_silhouette_poses_takes_unrefined_poses_as_they_are(can_capture, tmp_
     assert report["unrefined_poses"].startswith("taken as given")
     assert "silhouette_poses" not in report and "unrefined_views" not in report
     assert report["config"]["silhouette_poses"] is False
+
+
+def test_photo_carving_is_left_out_after_aligning_every_view(tiny_config):
+    """Poses aligned by silhouettes alone are too coarse for colour comparisons (the no-table can lost
+    11k voxels from inside it): the field's config loses photo carving, loudly; other configs are kept."""
+    from dataclasses import replace
+
+    from real2sim.reconstruct.stage import CARVING_OFF_ALIGNED, carving_after_alignment
+
+    with pytest.warns(RuntimeWarning, match="photo carving skipped"):
+        config, said = carving_after_alignment(tiny_config)
+    assert said == CARVING_OFF_ALIGNED and tiny_config.field.photo_carving
+    assert not config.field.photo_carving and config.field.coarse_voxels == tiny_config.field.coarse_voxels
+    for kept in (replace(tiny_config, backend="hull"), replace(tiny_config, field=tiny_config.field.with_carving(False))):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert carving_after_alignment(kept)[0] == kept
+
+
+@pytest.mark.slow
+def test_field_on_aligned_poses_runs_without_photo_carving(can_capture, tmp_path, tiny_config):
+    """The stage end to end with the field backend: every pose the robot's and marked not refined; the
+    views are aligned, carving is skipped with a WARNING, and the report and its config say so."""
+    from real2sim.formats.dataset import POSE_REFINED_KEY
+    from real2sim.reconstruct.stage import CARVING_OFF_ALIGNED, reconstruct
+    from tests.reconstruct.conftest import copy_dataset, edit_transforms
+
+    def unrefined(data):
+        for frame in data["frames"]:
+            frame[POSE_REFINED_KEY] = False
+        return data
+
+    dataset = edit_transforms(copy_dataset(can_capture, tmp_path / "marked", ground_truth=True), unrefined)
+    with pytest.warns(RuntimeWarning, match="photo carving skipped"):
+        report = reconstruct(dataset, tiny_config).report
+    assert "silhouette_poses" in report and report["photo_carving"] == CARVING_OFF_ALIGNED
+    assert report["config"]["field"]["photo_carving"] is False and report["photo_carved_voxels"] == 0
+    assert report["truth"]["chamfer_mm"] < 1.5, report["truth"]
