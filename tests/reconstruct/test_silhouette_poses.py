@@ -224,20 +224,23 @@ def test_reconstruct_aligns_every_view_when_refine_poses_refined_none(can_captur
     assert "unrefined_views" not in result.report or not result.report["unrefined_views"]
 
 
+def _marked_unrefined(data: dict) -> dict:
+    """transforms.json's ``data`` with every frame marked not refined (as refine-poses leaves them)."""
+    from real2sim.formats.dataset import POSE_REFINED_KEY
+
+    for frame in data["frames"]:
+        frame[POSE_REFINED_KEY] = False
+    return data
+
+
 def test_no_silhouette_poses_takes_unrefined_poses_as_they_are(can_capture, tmp_path, tiny_config):
     """--no-silhouette-poses: frames marked not refined keep their poses, and the report says so."""
     from dataclasses import replace
 
-    from real2sim.formats.dataset import POSE_REFINED_KEY
     from real2sim.reconstruct.stage import reconstruct
     from tests.reconstruct.conftest import copy_dataset, edit_transforms
 
-    def unrefined(data):
-        for frame in data["frames"]:
-            frame[POSE_REFINED_KEY] = False
-        return data
-
-    marked = edit_transforms(copy_dataset(can_capture, tmp_path / "marked"), unrefined)
+    marked = edit_transforms(copy_dataset(can_capture, tmp_path / "marked"), _marked_unrefined)
     report = reconstruct(marked, replace(tiny_config, backend="hull", silhouette_poses=False)).report
     assert report["unrefined_poses"].startswith("taken as given")
     assert "silhouette_poses" not in report and "unrefined_views" not in report
@@ -265,16 +268,11 @@ def test_photo_carving_is_left_out_after_aligning_every_view(tiny_config):
 def test_field_on_aligned_poses_runs_without_photo_carving(can_capture, tmp_path, tiny_config):
     """The stage end to end with the field backend: every pose the robot's and marked not refined; the
     views are aligned, carving is skipped with a WARNING, and the report and its config say so."""
-    from real2sim.formats.dataset import POSE_REFINED_KEY
     from real2sim.reconstruct.stage import CARVING_OFF_ALIGNED, reconstruct
     from tests.reconstruct.conftest import copy_dataset, edit_transforms
 
-    def unrefined(data):
-        for frame in data["frames"]:
-            frame[POSE_REFINED_KEY] = False
-        return data
-
-    dataset = edit_transforms(copy_dataset(can_capture, tmp_path / "marked", ground_truth=True), unrefined)
+    dataset = edit_transforms(copy_dataset(can_capture, tmp_path / "marked", ground_truth=True),
+                              _marked_unrefined)
     with pytest.warns(RuntimeWarning, match="photo carving skipped"):
         report = reconstruct(dataset, tiny_config).report
     assert "silhouette_poses" in report and report["photo_carving"] == CARVING_OFF_ALIGNED
