@@ -228,6 +228,41 @@ def test_fill_keeps_to_the_band_and_to_inside_voxels():
     assert np.array_equal(_filled_to_table(empty, 0.08), empty)
 
 
+
+def test_the_stricter_verdicts_base_is_added_under_the_body_only():
+    """The wide-reach hull lost the body's bottom strip (its plain base looked like table); the strict
+    hull has it, with a halo around it and a skirt beside the body. Under the body's columns the strict
+    hull's voxels come back; beside the body (the halo's columns) and under a handle, where the strict
+    hull has nothing, nothing is added; above the lowest voxels nothing changes."""
+    from real2sim.reconstruct.parallax_masks import _base_added
+
+    grid = _grid()
+    wide = np.zeros(grid.shape, np.float32)
+    wide[2:6, 2:6, 5:30] = 1.0  # body, its lowest 5 voxels missing
+    wide[6:9, 3:5, 14:20] = 1.0  # handle
+    strict = np.zeros(grid.shape, np.float32)
+    strict[1:7, 1:7, 0:31] = 0.9  # body with a one-voxel halo all round
+    strict[6:9, 3:5, 14:20] = 1.0
+    out = _base_added(wide, strict)
+    assert (out[2:6, 2:6, 0:5] == 0.9).all()  # the base is back
+    assert (out[1, :, :] == 0).all() and (out[:, 1, :] == 0).all()  # the halo beside the body is not
+    assert (out[6:9, 3:5, :14] == 0).all()  # nothing under the handle
+    assert np.array_equal(out[..., 5:], wide[..., 5:])
+    assert np.array_equal(_base_added(strict, strict), strict)
+
+
+def test_match_reach_must_be_ordered_and_at_most_a_pixel():
+    """The base's reach may not be wider than the object's, nor either beyond a pixel (a 3x3 window would
+    let a black-and-white pattern on the object match the table): one clear error."""
+    from real2sim.formats.errors import UserInputError
+    from real2sim.reconstruct.parallax_masks import ParallaxConfig
+
+    ParallaxConfig().validate()
+    for bad in (dict(base_reach_px=1.0, match_reach_px=0.5), dict(match_reach_px=1.5), dict(base_reach_px=-0.1)):
+        with pytest.raises(UserInputError, match="reach"):
+            ParallaxConfig(**bad).validate()
+
+
 # ----------------------------------------------------------------------------- step 2: half-pixel range
 
 
@@ -253,6 +288,9 @@ def test_half_pixel_range_holds_a_step_edge_shifted_half_a_pixel():
     assert ((low <= shifted) & (shifted <= high)).all()
     whole = torch.cat([image[..., 1:], image[..., -1:]], dim=-1)  # one pixel off
     assert not ((low <= whole) & (whole <= high)).all()
+    # a whole pixel's reach holds it (an edge blurred differently by another view's focus)
+    low_1, high_1 = _half_pixel_range(image, 1.0)
+    assert ((low_1 <= whole) & (whole <= high_1)).all()
     # vertically too
     flipped = image.transpose(-1, -2).contiguous()
     low_t, high_t = _half_pixel_range(flipped)
