@@ -239,14 +239,14 @@ def test_the_stricter_verdicts_base_is_added_under_the_body_only():
     grid = _grid()
     wide = np.zeros(grid.shape, np.float32)
     wide[2:6, 2:6, 5:30] = 1.0  # body, its lowest 5 voxels missing
-    wide[6:9, 3:5, 14:20] = 1.0  # handle
+    wide[7:10, 3:5, 14:20] = 1.0  # handle, clear of the halo's columns
     strict = np.zeros(grid.shape, np.float32)
     strict[1:7, 1:7, 0:31] = 0.9  # body with a one-voxel halo all round
-    strict[6:9, 3:5, 14:20] = 1.0
+    strict[7:10, 3:5, 14:20] = 1.0
     out = _base_added(wide, strict)
     assert (out[2:6, 2:6, 0:5] == 0.9).all()  # the base is back
     assert (out[1, :, :] == 0).all() and (out[:, 1, :] == 0).all()  # the halo beside the body is not
-    assert (out[6:9, 3:5, :14] == 0).all()  # nothing under the handle
+    assert (out[7:10, 3:5, :14] == 0).all()  # nothing under the handle
     assert np.array_equal(out[..., 5:], wide[..., 5:])
     assert np.array_equal(_base_added(strict, strict), strict)
 
