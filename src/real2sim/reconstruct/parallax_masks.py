@@ -17,7 +17,7 @@ the table does not, by the parallax of its height. Per view:
    pixels around it (:func:`_plain_patches_decided`). Each neighbour sees the object's own
    surface at a different place, so a patterned object does not agree with all of them;
 3. everything not table is a candidate, and the candidates' visual hull
-   (:func:`real2sim.reconstruct.hull.visual_hull_mesh`, with a generous outlier allowance)
+   (:func:`real2sim.reconstruct.hull.carve`, with a generous outlier allowance)
    is the object: a voxel survives only if no more than a few views see table through it;
 4. the object stands on the table, and within a few millimetres of the plane the parallax is
    below a pixel, so the bottom of the object can look like table, the more so the wider the
@@ -50,7 +50,8 @@ import trimesh
 from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress
-from real2sim.reconstruct.hull import carve, largest_parts, surface_from_grid, visual_hull_mesh
+from real2sim.reconstruct.hull import (VoxelGrid, carve, largest_parts, object_region, surface_from_grid,
+                                      voxel_footprint_px)
 from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, project_torch
 
 
@@ -61,6 +62,9 @@ TABLE_VOTE_RATIO = 3.0
 #: median image: the capture frames the object with table around it.
 MAX_BORDER_SHARE = 0.5
 MAX_MEDIAN_COVERAGE = 0.5
+#: The hull's voxels span at least this many pixels of a typical view (the masks are its silhouettes, cast at
+#: full resolution, so finer voxels only cost time).
+MIN_VOXEL_PX = 0.5
 
 
 @dataclass(frozen=True)
@@ -303,18 +307,29 @@ def _standing_hull(views: PosedViews, table: np.ndarray, base_table: np.ndarray,
     try:
         # "not table" is a region the object lies within, not its silhouette: no view may carve alone. The
         # stricter verdict's region is the larger one: the grid covers it
-        _, grid, base_scores = visual_hull_mesh(candidates(base_table), longest_side_voxels=config.hull_voxels,
-                                                outlier_fraction=config.outlier_fraction,
-                                                table_z_m=config.table_z_m, trust_consistent=False)
+        base_views = candidates(base_table)
+        lo, hi = object_region(base_views, outlier_fraction=config.outlier_fraction, table_z_m=config.table_z_m)
+        grid = _hull_grid(views, lo, hi, config)
+        scores = base_scores = carve(base_views, grid, config.outlier_fraction, trust_consistent=False)
+        if not np.array_equal(table, base_table):
+            scores = _base_added(carve(candidates(table), grid, config.outlier_fraction, trust_consistent=False),
+                                 base_scores)
+        return largest_parts(surface_from_grid(_filled_to_table(scores, config.bottom_band), grid, 0.5,
+                                               config.table_z_m))
     except UserInputError as exc:
         raise UserInputError(f"parallax masks found no object standing on the table ({exc}); the method needs a "
                              "textured table around the object and poses accurate to a pixel") from None
-    scores = base_scores
-    if not np.array_equal(table, base_table):
-        scores = _base_added(carve(candidates(table), grid, config.outlier_fraction, trust_consistent=False),
-                             base_scores)
-    filled = _filled_to_table(scores, config.bottom_band)
-    return largest_parts(surface_from_grid(filled, grid, 0.5, config.table_z_m))
+
+def _hull_grid(views: PosedViews, lo: np.ndarray, hi: np.ndarray, config: ParallaxConfig) -> VoxelGrid:
+    """The hull's grid over (lo, hi) (metres): ``config.hull_voxels`` along its longest side, fewer where a
+    voxel would span less than :data:`MIN_VOXEL_PX` of a typical view (a small image gains nothing from them,
+    and the carving's time grows with their square)."""
+    grid = VoxelGrid.covering(lo, hi, config.hull_voxels, config.table_z_m)
+    footprint_px = voxel_footprint_px(views, grid)
+    if footprint_px >= MIN_VOXEL_PX:
+        return grid
+    voxels = max(32, int(np.ceil(config.hull_voxels * footprint_px / MIN_VOXEL_PX)))
+    return VoxelGrid.covering(lo, hi, voxels, config.table_z_m)
 
 
 def _base_added(scores: np.ndarray, base_scores: np.ndarray) -> np.ndarray:
