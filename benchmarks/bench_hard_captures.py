@@ -149,8 +149,10 @@ def run_condition(name: str, condition: str, work: Path, views: int, width: int,
     run = subprocess.run(_cli("run", str(dataset), "--mass", f"{OBJECTS[name].mass_kg:g}", "--out", str(asset),
                               *run_args), capture_output=True, text=True)
     wall_s = time.perf_counter() - start
-    warnings = sorted({ln.strip() for ln in (run.stdout + run.stderr).splitlines() if ln.strip().startswith("WARNING")})
-    warned = "; ".join(w[:100].replace("|", "/") for w in warnings) or "-"
+    # run prints each WARNING while running and again in its summary, worded alike up to their ends
+    warnings = sorted({ln.strip()[:100] for ln in (run.stdout + run.stderr).splitlines()
+                       if ln.strip().startswith("WARNING")})
+    warned = "; ".join(w.replace("|", "/") for w in warnings) or "-"
     if run.returncode != 0:
         return [name, condition, "-", "-", f"run failed (exit {run.returncode}): {_last_error(run.stderr)}", warned,
                 round(wall_s)]
