@@ -50,8 +50,7 @@ import trimesh
 from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress
-from real2sim.reconstruct.hull import (VoxelGrid, carve, largest_parts, object_region, surface_from_grid,
-                                      voxel_footprint_px)
+from real2sim.reconstruct.hull import VoxelGrid, carve, object_region, surface_from_grid, voxel_footprint_px
 from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, project_torch
 
 
@@ -130,14 +129,30 @@ def _half_pixel_range(image: torch.Tensor, reach_px: float = 0.5) -> tuple[torch
     range, at half a pixel): a sharp edge printed on the table, resampled a fraction of a pixel off, is no
     evidence of height. Wider (a whole 3x3 window) and a black-and-white pattern on the object would match
     anything."""
+    return _reached(image, _cross_extremes(image), reach_px)
+
+
+def _cross_extremes(image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(min, max) of each pixel of ``image`` (..., C, H, W) and its four neighbours (edges replicated)."""
     flat = image.reshape(-1, *image.shape[-3:])
     padded = torch.nn.functional.pad(flat, (1, 1, 1, 1), mode="replicate")
     padded = padded.reshape(*image.shape[:-2], *(n + 2 for n in image.shape[-2:]))
     h, w = image.shape[-2:]
-    halves = [(1.0 - reach_px) * image + reach_px * padded[..., 1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
-              for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1))]
-    stack = torch.stack([image, *halves])
-    return stack.amin(dim=0), stack.amax(dim=0)
+    low, high = image.clone(), image.clone()
+    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        shifted = padded[..., 1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+        torch.minimum(low, shifted, out=low)
+        torch.maximum(high, shifted, out=high)
+    return low, high
+
+
+def _reached(image: torch.Tensor, extremes: tuple[torch.Tensor, torch.Tensor],
+             reach_px: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """The range of :func:`_half_pixel_range` from the pixel's :func:`_cross_extremes`: the points ``reach_px``
+    towards each neighbour are linear blends, so their extremes are the blend of the pixel and its neighbours'
+    extremes (one pass serves every reach)."""
+    low, high = extremes
+    return torch.lerp(image, low, reach_px), torch.lerp(image, high, reach_px)
 
 
 def _local_std(gray: torch.Tensor, radius: int) -> torch.Tensor:
@@ -192,9 +207,10 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, occluders: np.ndar
                     warped[j] *= gain.clamp(0.5, 2.0)[:, None, None]
             textured = (_local_std(own.mean(dim=0) * 255.0, config.texture_px) >= config.min_texture).numpy()
             beyond = (valid.sum(dim=0) < 2).numpy()
+            extremes = _cross_extremes(warped)
             for r, reach in enumerate(reaches):
                 # per neighbour, against the range of its warped image around (Birchfield-Tomasi)
-                low, high = _half_pixel_range(warped, reach)
+                low, high = _reached(warped, extremes, reach)
                 close = torch.maximum(own - high, low - own).clamp_min(0.0).amax(dim=1) * 255.0 <= config.threshold
                 matches = _agreed(valid, close, config.agreement)
                 if hidden is not None:
@@ -314,8 +330,8 @@ def _standing_hull(views: PosedViews, table: np.ndarray, base_table: np.ndarray,
         if not np.array_equal(table, base_table):
             scores = _base_added(carve(candidates(table), grid, config.outlier_fraction, trust_consistent=False),
                                  base_scores)
-        return largest_parts(surface_from_grid(_filled_to_table(scores, config.bottom_band), grid, 0.5,
-                                               config.table_z_m))
+        filled = _without_specks(_filled_to_table(scores, config.bottom_band))
+        return surface_from_grid(filled, grid, 0.5, config.table_z_m)
     except UserInputError as exc:
         raise UserInputError(f"parallax masks found no object standing on the table ({exc}); the method needs a "
                              "textured table around the object and poses accurate to a pixel") from None
@@ -330,6 +346,22 @@ def _hull_grid(views: PosedViews, lo: np.ndarray, hi: np.ndarray, config: Parall
         return grid
     voxels = max(32, int(np.ceil(config.hull_voxels * footprint_px / MIN_VOXEL_PX)))
     return VoxelGrid.covering(lo, hi, voxels, config.table_z_m)
+
+
+def _without_specks(scores: np.ndarray, min_fraction: float = 0.05) -> np.ndarray:
+    """``scores`` with the inside voxels (>= 0.5) of each connected part (26-neighbours) smaller than
+    ``min_fraction`` of the largest part set to 0: the specks go on the grid, before the surface is made,
+    where finding them is cheap (on the surface, splitting the mesh took seconds)."""
+    from scipy import ndimage
+
+    labels, count = ndimage.label(scores >= 0.5, structure=np.ones((3, 3, 3), bool))
+    if count <= 1:
+        return scores
+    size = np.bincount(labels.ravel())
+    size[0] = 0
+    small = size < min_fraction * size.max()
+    small[0] = False
+    return np.where(small[labels], 0.0, scores).astype(scores.dtype)
 
 
 def _base_added(scores: np.ndarray, base_scores: np.ndarray) -> np.ndarray:
