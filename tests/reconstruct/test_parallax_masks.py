@@ -298,6 +298,41 @@ def test_half_pixel_range_holds_a_step_edge_shifted_half_a_pixel():
     assert ((low_t <= down) & (down <= high_t)).all()
 
 
+def test_one_pass_of_extremes_gives_the_range_of_every_reach():
+    """The range over a pixel and the four points ``r`` towards its neighbours, computed point by point, is the
+    blend of the pixel and its neighbours' extremes (what table_evidence computes once for both reaches)."""
+    from real2sim.reconstruct.parallax_masks import _cross_extremes, _reached
+
+    image = torch.rand(2, 3, 9, 11, generator=torch.Generator().manual_seed(0))
+    padded = torch.nn.functional.pad(image, (1, 1, 1, 1), mode="replicate")
+    extremes = _cross_extremes(image)
+    for reach in (0.0, 0.5, 0.8, 1.0):
+        points = [image] + [(1 - reach) * image + reach * padded[..., 1 + dy:10 + dy, 1 + dx:12 + dx]
+                            for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1))]
+        low, high = _reached(image, extremes, reach)
+        assert torch.allclose(low, torch.stack(points).amin(dim=0), atol=1e-6)
+        assert torch.allclose(high, torch.stack(points).amax(dim=0), atol=1e-6)
+
+
+def test_specks_go_on_the_grid_and_parts_of_the_object_stay():
+    """A part under 5 % of the largest one's voxels is cleared; a part above it (a handle cut off by the
+    hull) and soft scores under 0.5 stay as they were."""
+    from real2sim.reconstruct.parallax_masks import _without_specks
+
+    scores = np.zeros((20, 20, 20), np.float32)
+    scores[2:12, 2:12, 0:10] = 1.0  # 1000 voxels
+    scores[15:18, 15:18, 15:18] = 0.9  # 27: 2.7 %, a speck
+    scores[15:20, 2:7, 0:4] = 0.8  # 100: 10 %, kept
+    scores[0, 19, 19] = 0.3  # not inside
+    out = _without_specks(scores)
+    assert (out[15:18, 15:18, 15:18] == 0).all()
+    assert np.array_equal(out[2:12, 2:12, 0:10], scores[2:12, 2:12, 0:10])
+    assert (out[15:20, 2:7, 0:4] == 0.8).all() and out[0, 19, 19] == pytest.approx(0.3)
+    one = np.zeros((5, 5, 5), np.float32)
+    one[1:3, 1:3, 1:3] = 1.0
+    assert np.array_equal(_without_specks(one), one)
+
+
 def test_half_pixel_range_of_a_batch_is_per_image():
     """(K, C, H, W) in, (K, C, H, W) out, each image's range its own (padding per image: no bleeding
     between neighbours in the batch); a flat image's range is itself, edges included."""
