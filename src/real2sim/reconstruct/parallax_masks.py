@@ -164,11 +164,10 @@ def _local_std(gray: torch.Tensor, radius: int) -> torch.Tensor:
     return (mean_sq - mean * mean).clamp_min(0.0).sqrt()[0, 0]
 
 
-def table_evidence(views: PosedViews, config: ParallaxConfig, occluders: np.ndarray | None = None,
-                   progress: ProgressFn = null_progress, reaches_px: tuple[float, ...] | None = None) -> np.ndarray:
-    """(N, H, W) bool: the pixels that see the textured table (steps 1-2 of the module docstring), judged
-    with ``config.match_reach_px``; with ``reaches_px``, (len(reaches_px), N, H, W): judged with each reach
-    (the neighbours are warped once).
+def table_evidence(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[float, ...],
+                   occluders: np.ndarray | None = None, progress: ProgressFn = null_progress) -> np.ndarray:
+    """(len(reaches_px), N, H, W) bool: the pixels that see the textured table (steps 1-2 of the module
+    docstring), judged with each reach of ``reaches_px`` (pixels; the neighbours are warped once).
 
     ``occluders`` (N, H, W) bool, optional: where each view sees the object (a first estimate). A neighbour
     in whose image the table point behind a pixel falls there cannot show that point and does not vote;
@@ -179,8 +178,7 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, occluders: np.ndar
     images = torch.from_numpy(np.ascontiguousarray(views.rgb.transpose(0, 3, 1, 2)))  # (N, 3, H, W), [0, 1]
     w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
     near = neighbour_views(views, config)
-    reaches = (config.match_reach_px,) if reaches_px is None else tuple(reaches_px)
-    out = np.zeros((len(reaches), views.count, h, w), dtype=bool)
+    out = np.zeros((len(reaches_px), views.count, h, w), dtype=bool)
     occ = None if occluders is None else torch.from_numpy(occluders[:, None].astype(np.float32))
     with torch.no_grad():
         for i in range(views.count):
@@ -208,7 +206,7 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, occluders: np.ndar
             textured = (_local_std(own.mean(dim=0) * 255.0, config.texture_px) >= config.min_texture).numpy()
             beyond = (valid.sum(dim=0) < 2).numpy()
             extremes = _cross_extremes(warped)
-            for r, reach in enumerate(reaches):
+            for r, reach in enumerate(reaches_px):
                 # per neighbour, against the range of its warped image around (Birchfield-Tomasi)
                 low, high = _reached(warped, extremes, reach)
                 close = torch.maximum(own - high, low - own).clamp_min(0.0).amax(dim=1) * 255.0 <= config.threshold
@@ -220,7 +218,7 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, occluders: np.ndar
                 matches = matches.numpy()
                 out[r, i] = _plain_patches_decided(matches & textured, ~matches & textured, beyond)
             progress("parallax masks: table", i + 1, views.count)
-    return out[0] if reaches_px is None else out
+    return out
 
 
 def _agreed(voting: torch.Tensor, match: torch.Tensor, agreement: float) -> torch.Tensor:
@@ -261,12 +259,11 @@ def _filled_to_table(scores: np.ndarray, band: float) -> np.ndarray:
     inside = scores >= 0.5
     if not inside.any():
         return scores
-    z_index = np.arange(scores.shape[2])
     top = int(np.nonzero(inside.any(axis=(0, 1)))[0].max())
     band_voxels = max(2, int(np.ceil(band * (top + 1))))
-    any_in = inside.any(axis=2)
-    lowest = np.where(any_in, np.argmax(inside, axis=2), scores.shape[2])
-    fill = any_in[..., None] & (lowest[..., None] <= band_voxels) & (z_index[None, None] < lowest[..., None])
+    lowest = _lowest_inside(inside)
+    fill = (((lowest < scores.shape[2]) & (lowest <= band_voxels))[..., None]
+            & (np.arange(scores.shape[2])[None, None] < lowest[..., None]))
     out = scores.copy()
     out[fill] = 1.0
     return out
@@ -284,8 +281,8 @@ def parallax_masks(views: PosedViews, config: ParallaxConfig = ParallaxConfig(),
     masks = None
     for _ in range(2):  # the second round knows, from the first one's object, which table points each view sees
         occluders = None if masks is None else binary_dilation(masks, np.ones((1, 3, 3), bool))
-        table, base_table = table_evidence(views, config, occluders, progress,
-                                           reaches_px=(config.match_reach_px, config.base_reach_px))
+        table, base_table = table_evidence(views, config, (config.match_reach_px, config.base_reach_px),
+                                           occluders, progress)
         solid = _standing_hull(views, table, base_table, config)
         masks = render_silhouettes(solid, views.intrinsics, views.c2w_cv, progress)
     doubt = mask_doubts(masks)
@@ -336,6 +333,7 @@ def _standing_hull(views: PosedViews, table: np.ndarray, base_table: np.ndarray,
         raise UserInputError(f"parallax masks found no object standing on the table ({exc}); the method needs a "
                              "textured table around the object and poses accurate to a pixel") from None
 
+
 def _hull_grid(views: PosedViews, lo: np.ndarray, hi: np.ndarray, config: ParallaxConfig) -> VoxelGrid:
     """The hull's grid over (lo, hi) (metres): ``config.hull_voxels`` along its longest side, fewer where a
     voxel would span less than :data:`MIN_VOXEL_PX` of a typical view (a small image gains nothing from them,
@@ -367,10 +365,14 @@ def _without_specks(scores: np.ndarray, min_fraction: float = 0.05) -> np.ndarra
 def _base_added(scores: np.ndarray, base_scores: np.ndarray) -> np.ndarray:
     """``scores`` (a grid whose last axis is up) with ``base_scores`` taken wherever they are inside, below the
     lowest inside voxel of each column that has one (step 4)."""
-    inside = scores >= 0.5
-    any_in = inside.any(axis=2)
-    below = any_in[..., None] & (np.arange(scores.shape[2])[None, None] < np.argmax(inside, axis=2)[..., None])
+    lowest = _lowest_inside(scores >= 0.5)
+    below = (lowest < scores.shape[2])[..., None] & (np.arange(scores.shape[2])[None, None] < lowest[..., None])
     return np.where(below & (base_scores >= 0.5), base_scores, scores)
+
+
+def _lowest_inside(inside: np.ndarray) -> np.ndarray:
+    """(X, Y) int: each column's lowest inside voxel of ``inside`` (X, Y, Z) bool (z up); Z where it has none."""
+    return np.where(inside.any(axis=2), np.argmax(inside, axis=2), inside.shape[2])
 
 
 def render_silhouettes(mesh: trimesh.Trimesh, intrinsics: CameraIntrinsics, c2w_cv: np.ndarray,
