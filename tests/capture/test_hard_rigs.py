@@ -14,7 +14,7 @@ from PIL import Image
 from real2sim.capture.hard_rigs import apply_colour_gains, cut_off_views
 from real2sim.capture.wrist_camera import CaptureConfig, camera_poses, capture, object_frame
 from real2sim.formats.dataset import (CV_FROM_GL, TABLE_PLANE_KEY, has_table_plane, load_mask, read_dataset,
-                                      read_ground_truth)
+                                      read_ground_truth, stated_support_z_m)
 from real2sim.formats.errors import UserInputError
 
 W, H = 96, 72
@@ -165,6 +165,7 @@ def test_no_table_stand_not_in_masks_and_dataset_says_so(tmp_path):
     capture(_can(), out, CaptureConfig(views=8, width=W, height=H, no_table=True, seed=2))
     ds = read_dataset(out)
     assert ds.extra[TABLE_PLANE_KEY] is False and not has_table_plane(ds)
+    assert stated_support_z_m(ds) == 0.0  # the stand's top, where the object's lowest point is
     assert read_ground_truth(out).extra[TABLE_PLANE_KEY] is False
     mesh = _object_in_world(out)
     assert abs(mesh.bounds[0, 2]) < 1e-9, "the object's lowest point is z = 0"

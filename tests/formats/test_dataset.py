@@ -90,6 +90,9 @@ def _edit(root, fn):
     (lambda d: d.pop("fl_x"), "missing camera intrinsics"),
     (lambda d: d.update(w=0), "invalid camera intrinsics"),
     (lambda d: d.update(camera_model="EQUIRECTANGULAR"), "not supported"),
+    (lambda d: d.update(table_plane=False, support_z_m=float("nan")), "support_z_m must be a number"),
+    (lambda d: d.update(table_plane=False, support_z_m=True), "support_z_m must be a number"),
+    (lambda d: d.update(support_z_m=0.0), "support_z_m is for a dataset without a table"),
 ])
 def test_invalid_transforms_raise_one_line(tmp_path, edit, message):
     _make_dataset(tmp_path)

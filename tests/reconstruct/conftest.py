@@ -96,6 +96,8 @@ def raised_dataset(src: Path, dst: Path, dz_m: float) -> Path:
     def raise_frames(data):
         for frame in data["frames"]:
             frame["transform_matrix"][2][3] += dz_m
+        if "support_z_m" in data:
+            data["support_z_m"] += dz_m
         return data
 
     edit_transforms(dst, raise_frames)

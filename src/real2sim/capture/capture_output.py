@@ -14,7 +14,8 @@ import numpy as np
 
 from real2sim.capture.hard_rigs import apply_colour_gains, save_image
 from real2sim.capture.render_scene import OBJECT_LABEL, RenderScene
-from real2sim.formats.dataset import TABLE_PLANE_KEY, CameraIntrinsics, Dataset, Frame, write_transforms
+from real2sim.formats.dataset import (SUPPORT_Z_KEY, TABLE_PLANE_KEY, CameraIntrinsics, Dataset, Frame,
+                                      write_transforms)
 from real2sim.formats.progress import ProgressFn
 
 if TYPE_CHECKING:
@@ -65,6 +66,7 @@ def write_transforms_files(tmp: Path, config: CaptureConfig, cam: CameraIntrinsi
     if config.no_table:
         block["world_frame"] = "the object's lowest point z=0 (the top of a thin stand; no table), z up, metres"
         extra[TABLE_PLANE_KEY] = False
+        extra[SUPPORT_Z_KEY] = 0.0  # the stand's top: the rig knows where its object stands
     write_transforms(tmp / "transforms.json", Dataset(tmp, cam, tuple(frames_noisy), extra))
     for i, f in enumerate(frames_exact):
         more = {}
@@ -77,6 +79,7 @@ def write_transforms_files(tmp: Path, config: CaptureConfig, cam: CameraIntrinsi
     gt_extra: dict = {"real2sim": {"source": "exact poses of the simulated capture", "paths_relative_to": ".."}}
     if config.no_table:
         gt_extra[TABLE_PLANE_KEY] = False
+        gt_extra[SUPPORT_Z_KEY] = 0.0
     # Same file_paths as the top level: they are relative to the dataset folder, not to ground_truth/.
     write_transforms(gt / "transforms.json", Dataset(tmp, cam, tuple(frames_exact), gt_extra))
     (gt / "capture_config.json").write_text(json.dumps(cfg, indent=2, default=list))

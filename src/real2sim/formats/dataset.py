@@ -29,6 +29,7 @@ in ``ply_file_path`` (:func:`is_model_frame`).
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -92,6 +93,29 @@ TABLE_PLANE_KEY = "table_plane"
 def has_table_plane(ds: "Dataset") -> bool:
     """False when ``ds`` says its images show no table plane (:data:`TABLE_PLANE_KEY`)."""
     return ds.extra.get(TABLE_PLANE_KEY) is not False
+
+
+#: Top-level transforms.json key of a dataset without a table plane: the height (world z, metres) of the
+#: plane the object stands on, when the rig knows it (a stand's or a turntable's top; ``capture --no-table``
+#: writes 0, the stand's top). The object is then taken to lie above it: `reconstruct` cuts there and `run`
+#: closes the asset's bottom there. Absent: the object's own lowest seen points (:mod:`pipeline.support`).
+SUPPORT_Z_KEY = "support_z_m"
+
+
+def stated_support_z_m(ds: "Dataset") -> float | None:
+    """The support height a dataset without a table plane states (:data:`SUPPORT_Z_KEY`), else None.
+    UserInputError when the key holds something other than a finite number, or sits beside a table plane
+    (whose top is the support already)."""
+    if SUPPORT_Z_KEY not in ds.extra:
+        return None
+    value = ds.extra[SUPPORT_Z_KEY]
+    label = f"{ds.root / 'transforms.json'}: {SUPPORT_Z_KEY}"
+    if has_table_plane(ds):
+        raise UserInputError(f"{label} is for a dataset without a table (\"{TABLE_PLANE_KEY}\": false); "
+                             "with a table its top is the support")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise UserInputError(f"{label} must be a number (metres, world z), got {value!r}")
+    return float(value)
 
 
 #: Per-frame transforms.json key written by ``refine-poses``: whether COLMAP refined that frame's pose
@@ -279,6 +303,7 @@ def read_transforms(path: Path, root: Path | None = None, check_files: bool = Tr
     extra = {k: v for k, v in data.items() if k not in ("frames", "camera_model", "fl_x", "fl_y", "cx", "cy",
                                                          "w", "h", "k1", "k2", "p1", "p2")}
     ds = Dataset(root=root, intrinsics=intr, frames=tuple(frames), extra=extra)
+    stated_support_z_m(ds)  # refused here, before any stage writes, when it is not a height
     if check_files:
         check_frame_files(ds, label)
     return ds

@@ -3,7 +3,9 @@
 * A dataset with a table plane (the default): the table, z = ``table_z_m`` of the dataset's
   world frame (0 for a capture and for a COLMAP dataset put in the robot frame).
 * A dataset that says its images show no table (``transforms.json`` ``"table_plane": false``:
-  an object on a turntable or a thin stand): the reconstructed object's own lowest points,
+  an object on a turntable or a thin stand) and states the height of what the object stands on
+  (``"support_z_m"``, as ``capture --no-table`` does): that height (`reconstruct` has cut there).
+* Such a dataset that does not state it: the reconstructed object's own lowest points,
   :func:`lowest_seen_height_m`.
 
 Why not simply the mesh's lowest vertex (or a low percentile of its vertices): with the cameras
@@ -64,11 +66,14 @@ def lowest_seen_height_m(mesh, camera_centres_m: np.ndarray) -> float:
 def support_height_m(dataset: Path, mesh_path: Path, table_z_m: float) -> tuple[float, str]:
     """(support height, world z in metres; how it was chosen, one phrase for run.json and the docs)
     for the reconstruction ``mesh_path`` (world frame) of ``dataset``; see the module docstring."""
-    from real2sim.formats.dataset import has_table_plane, read_dataset
+    from real2sim.formats.dataset import SUPPORT_Z_KEY, has_table_plane, read_dataset, stated_support_z_m
 
     ds = read_dataset(dataset, check_files=False)
     if has_table_plane(ds):
         return float(table_z_m), f"the dataset's table plane, z = {table_z_m:g} m"
+    stated = stated_support_z_m(ds)
+    if stated is not None:
+        return stated, f"no table plane; the support the dataset states ({SUPPORT_Z_KEY}), z = {stated:g} m"
     from real2sim.formats.mesh_io import load_mesh
 
     height = lowest_seen_height_m(load_mesh(mesh_path), ds.poses_c2w_gl()[:, :3, 3])

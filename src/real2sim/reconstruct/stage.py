@@ -28,7 +28,7 @@ import numpy as np
 import torch
 import trimesh
 
-from real2sim.formats.dataset import has_table_plane, read_dataset
+from real2sim.formats.dataset import has_table_plane, read_dataset, stated_support_z_m
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.train import FieldConfig
@@ -155,6 +155,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         ds = read_dataset(dataset)
         views = load_views(ds, max_side_px=config.max_image_side_px)
         table_z_m = config.table_z_m if has_table_plane(ds) else None  # None: the images show no table
+        support_z_m = stated_support_z_m(ds)  # a stand's top the dataset states (None with a table)
         truth = load_truth(dataset)
     if config.mask_edges in ("auto", "colour"):
         with clock.stage("mask_edges"):
@@ -192,10 +193,17 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         progress("visual hull", 0, 0)
     with clock.stage("visual_hull"):
         region = object_region(train, outlier_fraction=config.hull_outlier_fraction, table_z_m=table_z_m)
-    report["region_m"] = [region[0].tolist(), region[1].tolist()]
-    if table_z_m is None:  # no table: nothing to cut at; the grids' floor is the region's own
+    if table_z_m is None and support_z_m is not None and support_z_m > region[0][2]:
+        # no table in the images, but the rig says where the object stands: nothing of it is below, and
+        # the unseen cone the views leave under its bottom (they all look down at it) is cut there
+        report["table"] = (f"none (the dataset has no table plane); cut at the support plane it states, "
+                           f"z = {support_z_m:g} m")
+        region = (np.array([*region[0][:2], support_z_m]), region[1])
+        config = replace(config, table_z_m=support_z_m)
+    elif table_z_m is None:  # no table: nothing to cut at; the grids' floor is the region's own
         report["table"] = "none (the dataset has no table plane): the object is not cut below"
         config = replace(config, table_z_m=float(region[0][2]))
+    report["region_m"] = [region[0].tolist(), region[1].tolist()]
     if config.backend == "hull":
         with clock.stage("hull_surface"):
             grid = VoxelGrid.covering(*region, config.hull_voxels, config.table_z_m)
