@@ -71,7 +71,7 @@ def register(sub) -> None:
         "refine_report.json; when COLMAP fails, the poses are kept and a warning says why.",
     )
     p.add_argument("dataset", type=Path, help="dataset folder with transforms.json")
-    p.add_argument("--neighbors", type=integer(1, 200), default=10, metavar="K", help="views matched with each view (default 10)")
+    p.add_argument("--neighbors", type=integer(1, 200), default=30, metavar="K", help="views matched with each view (default 30)")
     p.add_argument("--features", choices=["all", "object"], default="all",
                    help="where to detect features: the whole image (default; the table helps) or the object masks")
     p.add_argument("--max-features", type=integer(64, 32768), default=4096, help="SIFT features per image (default 4096)")
