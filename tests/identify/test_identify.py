@@ -34,8 +34,6 @@ def test_noise_free_torques_give_the_inertia_without_bias(small_log):
     friction does. Held at each control tick's velocity it lagged the motion by an eighth of a millisecond,
     a torque proportional to the acceleration, and the payload's inertia came out 7.1 % off on this
     one-period capture; as continuous friction, 1.3 %."""
-    from dataclasses import replace
-
     log_dir, _ = small_log
     config = ExciteConfig(mass_kg=0.3, extra_mass_kg=0.1, extra_at_m=(0.02, 0.0, 0.03), torque_noise_n_m=0.0,
                           periods=1)

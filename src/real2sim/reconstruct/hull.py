@@ -377,6 +377,17 @@ def surface_from_grid(values: np.ndarray, grid: VoxelGrid, level: float, table_z
     return trimesh.Trimesh(verts, faces[:, ::-1], process=True)
 
 
+def voxel_parts(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(labels, voxels per label) of the connected parts (26-neighbours) of the bool grid ``mask``; label 0
+    is the outside, its count set to 0."""
+    from scipy.ndimage import label
+
+    labels, count = label(mask, np.ones((3, 3, 3), bool))
+    sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    sizes[0] = 0
+    return labels, sizes
+
+
 def largest_parts(mesh: trimesh.Trimesh, min_volume_fraction: float = 0.05) -> trimesh.Trimesh:
     """The connected components holding at least ``min_volume_fraction`` of the largest one's volume (floaters go).
 

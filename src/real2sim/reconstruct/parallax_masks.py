@@ -50,7 +50,8 @@ import trimesh
 from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress
-from real2sim.reconstruct.hull import VoxelGrid, carve, object_region, surface_from_grid, voxel_footprint_px
+from real2sim.reconstruct.hull import (VoxelGrid, carve, object_region, surface_from_grid, voxel_footprint_px,
+                                      voxel_parts)
 from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, project_torch
 
 
@@ -350,13 +351,9 @@ def _without_specks(scores: np.ndarray, min_fraction: float = 0.05) -> np.ndarra
     """``scores`` with the inside voxels (>= 0.5) of each connected part (26-neighbours) smaller than
     ``min_fraction`` of the largest part set to 0: the specks go on the grid, before the surface is made,
     where finding them is cheap (on the surface, splitting the mesh took seconds)."""
-    from scipy import ndimage
-
-    labels, count = ndimage.label(scores >= 0.5, structure=np.ones((3, 3, 3), bool))
-    if count <= 1:
+    labels, size = voxel_parts(scores >= 0.5)
+    if len(size) <= 2:  # one part or none
         return scores
-    size = np.bincount(labels.ravel())
-    size[0] = 0
     small = size < min_fraction * size.max()
     small[0] = False
     return np.where(small[labels], 0.0, scores).astype(scores.dtype)

@@ -67,7 +67,7 @@ import numpy as np
 from scipy.ndimage import binary_dilation, binary_erosion, convolve, distance_transform_edt, gaussian_filter
 
 from real2sim.formats.progress import ProgressFn
-from real2sim.reconstruct.hull import VoxelGrid, surface_from_grid, voxel_footprint_px
+from real2sim.reconstruct.hull import VoxelGrid, surface_from_grid, voxel_footprint_px, voxel_parts
 from real2sim.reconstruct.mask_recheck import put_back_for_masks
 from real2sim.reconstruct.views import PosedViews, project
 
@@ -252,12 +252,7 @@ def _small_components(carved: np.ndarray, min_voxels: float) -> np.ndarray:
     inconsistent patches that carving deepens into pits; a concavity that changes how
     an object moves is a large share of its volume.
     """
-    from scipy.ndimage import label
-
-    labels, count = label(carved, np.ones((3, 3, 3), bool))
-    if count == 0:
-        return np.zeros_like(carved)
-    sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    labels, sizes = voxel_parts(carved)
     small = sizes < min_voxels
     small[0] = False
     return small[labels]
