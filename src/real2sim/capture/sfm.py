@@ -14,6 +14,9 @@ Steps (:func:`structure_from_motion`):
 3. COLMAP's incremental mapper with the OPENCV model (focal length, principal point, k1, k2, p1, p2
    estimated per camera); the largest model is kept, and every image it does not hold is listed with
    the reason (no features, no verified match, matched but not registered);
+3b. with a printed board given: each camera's focal length measured on the board where it is seen,
+   and the model adjusted to it (:mod:`real2sim.capture.board_focal`: SfM's own focal length was
+   0.7 % long on a simulated video, and the board's metres with it);
 4. every registered image resampled (OpenCV's remap) into one distortion-free pinhole camera: the
    largest group's focal length and principal point at its size. The poses do not change.
 
@@ -27,11 +30,12 @@ import os
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from real2sim.capture.board import BoardSpec
 from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress
@@ -88,11 +92,12 @@ class SfmResult:
     mean_reprojection_px: float
     matching: str
     timings_s: dict = field(default_factory=dict)
+    focal_from_board: tuple[dict, ...] = ()
 
     def to_json(self) -> dict:
         return {"registered": len(self.names), "left_out": self.left_out, "cameras": list(self.cameras),
                 "points3d": len(self.points), "mean_reprojection_px": self.mean_reprojection_px,
-                "matching": self.matching, "timings_s": self.timings_s}
+                "matching": self.matching, "timings_s": self.timings_s, "focal_from_board": list(self.focal_from_board)}
 
 
 def list_images(folder: Path) -> list[Path]:
@@ -254,6 +259,14 @@ def _opencv_adjustment(rec, config: SfmConfig) -> None:
         f, cx, cy, k1, k2 = np.asarray(camera.params, float)[:5]
         camera.model = pycolmap.CameraModelId.OPENCV
         camera.params = [f, f, cx, cy, k1, k2, 0.0, 0.0]
+    _adjust_fixed_focal(rec, config)
+
+
+def _adjust_fixed_focal(rec, config: SfmConfig) -> None:
+    """One bundle adjustment of ``rec``'s poses, points and lens distortion, focal lengths and
+    principal points held."""
+    import pycolmap
+
     options = pycolmap.BundleAdjustmentOptions()
     options.refine_focal_length = False
     options.refine_principal_point = False
@@ -315,11 +328,14 @@ def _undistort(image: np.ndarray, camera, target: CameraIntrinsics) -> np.ndarra
 
 
 def structure_from_motion(paths: list[Path], out_images: Path, config: SfmConfig = SfmConfig(), *,
-                          sequential: bool = False, progress: ProgressFn | None = None) -> SfmResult:
+                          sequential: bool = False, progress: ProgressFn | None = None,
+                          board: BoardSpec | None = None) -> SfmResult:
     """Poses and one undistorted pinhole camera for the images ``paths`` (module docstring); the
     registered images are written, undistorted, as ``out_images/<stem>.png``. ``sequential``: frames
-    of one video (one camera; sequential and loop matching). UserInputError (one line) when fewer than
-    ``config.min_registered`` images register."""
+    of one video (one camera; sequential and loop matching). ``board``: the printed board's layout
+    (its square size does not matter here), looked for in the registered images to measure each
+    camera's focal length (:mod:`real2sim.capture.board_focal`; step 3b). UserInputError (one line)
+    when fewer than ``config.min_registered`` images register."""
     import pycolmap
     from PIL import Image
 
@@ -353,9 +369,57 @@ def structure_from_motion(paths: list[Path], out_images: Path, config: SfmConfig
             raise UserInputError(f"structure from motion registered {count} of {len(paths)} images (need at least "
                                  f"{config.min_registered}): take more photos, overlapping, of a textured scene "
                                  f"around the object{_first_reason(left_out)}")
-        return _result(rec, image_dir, names, source_of, left_out, out_images, matching, timings, progress)
+        focal = ()
+        if board is not None:
+            t0 = time.perf_counter()
+            focal = _focal_from_board(rec, image_dir, board, config, progress)
+            timings["board_focal_s"] = time.perf_counter() - t0
+        return replace(_result(rec, image_dir, names, source_of, left_out, out_images, matching, timings, progress),
+                       focal_from_board=focal)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+def _focal_from_board(rec, image_dir: Path, board: BoardSpec, config: SfmConfig, progress: ProgressFn) -> tuple[dict, ...]:
+    """Step 3b: each camera's focal length from the board in its registered images; where that is
+    sound, the camera takes it and one more bundle adjustment (focal lengths held) moves the poses
+    and points to it. One record per camera (:meth:`BoardFocal.to_json`, with its images' count)."""
+    import warnings
+
+    from PIL import Image
+
+    from real2sim.capture.board import detect_board
+    from real2sim.capture.board_focal import focal_from_board
+
+    by_camera: dict[int, list] = {}
+    ids = list(rec.reg_image_ids())
+    for k, image_id in enumerate(ids):
+        image = rec.image(image_id)
+        camera = rec.camera(image.camera_id)
+        fx, fy, cx, cy, *dist = np.asarray(camera.params, float)[:8]
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        with Image.open(image_dir / image.name) as im:
+            rgb = np.asarray(im.convert("RGB"))
+        by_camera.setdefault(image.camera_id, []).append(detect_board(rgb, board, K, dist))
+        progress("structure from motion: the board's focal length", k + 1, len(ids))
+    records, changed = [], False
+    for camera_id, views in sorted(by_camera.items()):
+        camera = rec.camera(camera_id)
+        params = np.asarray(camera.params, float)
+        K = np.array([[params[0], 0.0, params[2]], [0.0, params[1], params[3]], [0.0, 0.0, 1.0]])
+        result = focal_from_board(views, K, params[4:8], (int(camera.width), int(camera.height)))
+        records.append({"camera_id": int(camera_id), "images": len(views), **result.to_json()})
+        if result.focal_px is None:
+            if result.views:  # a board was there but could not be trusted: say so
+                warnings.warn(f"the camera's focal length stays SfM's ({result.sfm_focal_px:.1f} px), not the "
+                              f"board's: {result.reason}", RuntimeWarning, stacklevel=3)
+            continue
+        params[0] = params[1] = result.focal_px
+        camera.params = params.tolist()
+        changed = True
+    if changed:
+        _adjust_fixed_focal(rec, config)
+    return tuple(records)
 
 
 def _first_reason(left_out: dict[str, str]) -> str:

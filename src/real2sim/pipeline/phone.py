@@ -170,7 +170,7 @@ def run_sfm(phone: PhoneInput, target: Path, config: PhoneConfig, progress: Prog
         else:
             paths = list_images(phone.path)
         result = structure_from_motion(paths, tmp / "images", config.sfm, sequential=phone.kind == "video",
-                                       progress=progress)
+                                       progress=progress, board=board_layout(config))
         shutil.rmtree(tmp / "frames", ignore_errors=True)
         _write_model(tmp, result.names, result.camera_to_world, result.intrinsics, result.points)
         record.update(result.to_json())
@@ -191,12 +191,19 @@ def run_sfm(phone: PhoneInput, target: Path, config: PhoneConfig, progress: Prog
     return record
 
 
-def board_spec(config: PhoneConfig):
-    from dataclasses import replace
-
+def board_layout(config: PhoneConfig):
+    """The board as printed, whatever its measured square: what the sfm stage looks for (a focal length
+    measured on it does not depend on the board's size)."""
     from real2sim.capture.board import DEFAULT_BOARD
 
-    board = config.board if config.board is not None else DEFAULT_BOARD
+    return config.board if config.board is not None else DEFAULT_BOARD
+
+
+def board_spec(config: PhoneConfig):
+    """The board with its measured square (``board_square_mm``): what the board_frame stage's metres rest on."""
+    from dataclasses import replace
+
+    board = board_layout(config)
     if config.board_square_mm is None:
         return board
     ratio = config.board_square_mm / (1000.0 * board.square_m)
@@ -266,7 +273,8 @@ def phone_stages(runner, phone: PhoneInput, run_dir: Path, config) -> Path:
     from real2sim.pipeline import manifest as mf
 
     cfg = config.phone or PhoneConfig()
-    settings = {"kind": phone.kind, "sfm": cfg.sfm, **({"frames": cfg.frames} if phone.kind == "video" else {})}
+    settings = {"kind": phone.kind, "sfm": cfg.sfm, "board_layout": board_layout(cfg).to_json(),
+                **({"frames": cfg.frames} if phone.kind == "video" else {})}
     sfm_dir, phone_dir = run_dir / SFM_DIRNAME, run_dir / PHONE_DIRNAME
 
     def sfm_work() -> dict:

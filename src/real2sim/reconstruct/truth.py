@@ -74,7 +74,8 @@ def compare_to_truth(mesh: trimesh.Trimesh, truth: trimesh.Trimesh, *, tau_m: fl
     in_rec, in_gt = inside_mask(mesh, pts), inside_mask(compact_triangles(truth), pts)
     union = np.count_nonzero(in_rec | in_gt)
     hull = compact_triangles(truth.convex_hull)
-    concave = inside_mask(hull, pts) & ~in_gt
+    concave = ~in_gt  # only these can be in the hull's concave part: the hull is asked about them alone
+    concave[concave] = inside_mask(hull, pts[concave])
     # the true surface deeper than tau inside its hull is where silhouettes cannot judge it; a
     # reconstructed point off the true surface within the hull (a lid across a cavity) is in that space
     gt_deep = surface_distance_m(gt_pts, hull) > tau_m
