@@ -69,6 +69,17 @@ def test_sfm_stage_writes_a_colmap_dataset_with_its_truth(handheld, sfm_dir):
     assert record["cameras"][0]["params"][0] == focal["board_focal_px"] == ds.intrinsics.fl_x
 
 
+def test_a_board_in_too_few_views_leaves_sfms_focal_length_with_a_warning(handheld, tmp_path, monkeypatch):
+    import real2sim.capture.board_focal as board_focal
+
+    monkeypatch.setattr(board_focal, "MIN_VIEWS", VIEWS + 1)  # the board in every view, and still too few
+    with pytest.warns(RuntimeWarning, match="focal length stays SfM's"):
+        record = run_sfm(phone_input(handheld), tmp_path / "sfm", PhoneConfig())
+    (focal,) = record["focal_from_board"]
+    assert focal["board_focal_px"] is None and f"fewer than {VIEWS + 1}" in focal["not_used"]
+    assert record["cameras"][0]["params"][0] == focal["sfm_focal_px"]
+
+
 def test_board_gives_metres_and_the_table(handheld, sfm_dir, tmp_path):
     target = tmp_path / "phone"
     record = run_board_frame(sfm_dir, target, PhoneConfig())
