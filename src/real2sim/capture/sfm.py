@@ -415,6 +415,7 @@ def _focal_from_board(rec, image_dir: Path, board: BoardSpec, config: SfmConfig,
                               f"board's: {result.reason}", RuntimeWarning, stacklevel=3)
             continue
         params[0] = params[1] = result.focal_px
+        params[4:6] = result.k1, result.k2  # the adjustment's start; it refines the distortion again
         camera.params = params.tolist()
         changed = True
     if changed:
