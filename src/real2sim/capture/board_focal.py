@@ -89,9 +89,15 @@ def focal_from_board(views: list, K: np.ndarray, dist: np.ndarray, size: tuple[i
     d[:4] = np.asarray(dist, dtype=float).ravel()[:4]
     obj = [np.ascontiguousarray(v.board_points_m, dtype=np.float32) for v in found]
     img = [np.ascontiguousarray(v.image_points_px - 0.5, dtype=np.float32) for v in found]
-    f, k1, k2, rms = _calibrate(obj, img, size, K_cv, d)
-    f_even = _calibrate(obj[0::2], img[0::2], size, K_cv, d)[0]
-    f_odd = _calibrate(obj[1::2], img[1::2], size, K_cv, d)[0]
+    import cv2
+
+    try:
+        f, k1, k2, rms = _calibrate(obj, img, size, K_cv, d)
+        f_even = _calibrate(obj[0::2], img[0::2], size, K_cv, d)[0]
+        f_odd = _calibrate(obj[1::2], img[1::2], size, K_cv, d)[0]
+    except cv2.error as exc:  # degenerate views (all alike): no calibration, SfM's value stays
+        text = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        return BoardFocal(sfm_f, len(found), reason=f"OpenCV's calibration failed on the board views: {text}")
     split = abs(f_even - f_odd) / f
     if not (np.isfinite(f) and f > 0 and split <= MAX_SPLIT_DISAGREEMENT):
         return BoardFocal(sfm_f, len(found), split_disagreement=float(split), rms_px=rms,
