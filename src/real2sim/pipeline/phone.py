@@ -3,7 +3,8 @@
 Two stages before the usual ones (:mod:`real2sim.pipeline.run`):
 
 1. ``sfm``: for a video, frames chosen for sharpness and even spacing (:mod:`real2sim.capture.video`);
-   then structure from motion from scratch (:mod:`real2sim.capture.sfm`) ->
+   then structure from motion from scratch (:mod:`real2sim.capture.sfm`; the printed board, where it
+   is seen, measures each camera's focal length: :mod:`real2sim.capture.board_focal`) ->
    ``ASSETDIR/.run/sfm/``, a COLMAP dataset: ``images/`` (undistorted, one pinhole camera),
    ``sparse/0`` (that camera, the registered images' poses and the sparse points, the model's
    arbitrary frame and scale) and ``sfm.json`` (what registered, what was left out and why, the
