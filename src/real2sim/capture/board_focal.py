@@ -16,7 +16,8 @@ length (held) and radial distortion (refined again with every SfM point).
 
 The estimate is used only when it is sound: at least ``MIN_VIEWS`` views with the board, and the
 views split in two (alternate views) agree within ``MAX_SPLIT_DISAGREEMENT``; otherwise SfM's own
-focal length stays, and the record says why.
+focal length stays, and the record says why. :func:`set_focal_from_board` does this for every camera
+of a COLMAP reconstruction (:mod:`real2sim.capture.sfm`'s step 3b).
 
 Pixel convention: the project's (a pixel's centre at u + 0.5), converted to OpenCV's inside.
 """
@@ -24,8 +25,15 @@ Pixel convention: the project's (a pixel's centre at u + 0.5), converted to Open
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from real2sim.formats.progress import ProgressFn
+
+if TYPE_CHECKING:
+    from real2sim.capture.board import BoardSpec
 
 #: The fewest views with the board for its focal length.
 MIN_VIEWS = 6
@@ -83,14 +91,14 @@ def focal_from_board(views: list, K: np.ndarray, dist: np.ndarray, size: tuple[i
     sfm_f = float(K[0, 0])
     if len(found) < MIN_VIEWS:
         return BoardFocal(sfm_f, len(found), reason=f"the board was found in {len(found)} views (fewer than {MIN_VIEWS})")
+    import cv2
+
     K_cv = K.copy()
     K_cv[:2, 2] -= 0.5
     d = np.zeros(5)
     d[:4] = np.asarray(dist, dtype=float).ravel()[:4]
     obj = [np.ascontiguousarray(v.board_points_m, dtype=np.float32) for v in found]
     img = [np.ascontiguousarray(v.image_points_px - 0.5, dtype=np.float32) for v in found]
-    import cv2
-
     try:
         f, k1, k2, rms = _calibrate(obj, img, size, K_cv, d)
         f_even = _calibrate(obj[0::2], img[0::2], size, K_cv, d)[0]
@@ -104,3 +112,43 @@ def focal_from_board(views: list, K: np.ndarray, dist: np.ndarray, size: tuple[i
                           reason=f"the two halves of the board views disagree on the focal length by "
                                  f"{100 * split:.2f} % (more than {100 * MAX_SPLIT_DISAGREEMENT:g} %)")
     return BoardFocal(sfm_f, len(found), focal_px=f, split_disagreement=float(split), rms_px=rms, k1=k1, k2=k2)
+
+
+def set_focal_from_board(rec, image_dir: Path, board: "BoardSpec", progress: ProgressFn) -> tuple[dict, ...]:
+    """Each camera of the pycolmap reconstruction ``rec`` (OPENCV model) measured on the board in its
+    registered images (``image_dir`` / each image's name); where the measure is sound the camera takes
+    its focal length and radial distortion (the caller then adjusts the model with the focal length
+    held), otherwise it keeps SfM's and a RuntimeWarning says why. One record per camera
+    (:meth:`BoardFocal.to_json`, with ``camera_id`` and its images' count)."""
+    import warnings
+
+    from PIL import Image
+
+    from real2sim.capture.board import detect_board
+
+    images_of: dict[int, list] = {}
+    for image_id in rec.reg_image_ids():
+        image = rec.image(image_id)
+        images_of.setdefault(image.camera_id, []).append(image.name)
+    total, done, records = sum(map(len, images_of.values())), 0, []
+    for camera_id, names in sorted(images_of.items()):
+        camera = rec.camera(camera_id)
+        params = np.asarray(camera.params, float)
+        K = np.array([[params[0], 0.0, params[2]], [0.0, params[1], params[3]], [0.0, 0.0, 1.0]])
+        views = []
+        for name in names:
+            with Image.open(Path(image_dir) / name) as im:
+                views.append(detect_board(np.asarray(im.convert("RGB")), board, K, params[4:8]))
+            done += 1
+            progress("structure from motion: the board's focal length", done, total)
+        result = focal_from_board(views, K, params[4:8], (int(camera.width), int(camera.height)))
+        records.append({"camera_id": int(camera_id), "images": len(views), **result.to_json()})
+        if result.focal_px is None:
+            if result.views:  # a board was there but could not be trusted: say so
+                warnings.warn(f"the camera's focal length stays SfM's ({result.sfm_focal_px:.1f} px), not the "
+                              f"board's: {result.reason}", RuntimeWarning, stacklevel=3)
+            continue
+        params[0] = params[1] = result.focal_px
+        params[4:6] = result.k1, result.k2  # the adjustment's start; it refines the distortion again
+        camera.params = params.tolist()
+    return tuple(records)

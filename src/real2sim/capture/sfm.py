@@ -370,57 +370,18 @@ def structure_from_motion(paths: list[Path], out_images: Path, config: SfmConfig
                                  f"{config.min_registered}): take more photos, overlapping, of a textured scene "
                                  f"around the object{_first_reason(left_out)}")
         focal = ()
-        if board is not None:
+        if board is not None:  # step 3b
+            from real2sim.capture.board_focal import set_focal_from_board
+
             t0 = time.perf_counter()
-            focal = _focal_from_board(rec, image_dir, board, config, progress)
+            focal = set_focal_from_board(rec, image_dir, board, progress)
+            if any(record["board_focal_px"] is not None for record in focal):
+                _adjust_fixed_focal(rec, config)
             timings["board_focal_s"] = time.perf_counter() - t0
         return replace(_result(rec, image_dir, names, source_of, left_out, out_images, matching, timings, progress),
                        focal_from_board=focal)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-
-
-def _focal_from_board(rec, image_dir: Path, board: BoardSpec, config: SfmConfig, progress: ProgressFn) -> tuple[dict, ...]:
-    """Step 3b: each camera's focal length from the board in its registered images; where that is
-    sound, the camera takes it and one more bundle adjustment (focal lengths held) moves the poses
-    and points to it. One record per camera (:meth:`BoardFocal.to_json`, with its images' count)."""
-    import warnings
-
-    from PIL import Image
-
-    from real2sim.capture.board import detect_board
-    from real2sim.capture.board_focal import focal_from_board
-
-    by_camera: dict[int, list] = {}
-    ids = list(rec.reg_image_ids())
-    for k, image_id in enumerate(ids):
-        image = rec.image(image_id)
-        camera = rec.camera(image.camera_id)
-        fx, fy, cx, cy, *dist = np.asarray(camera.params, float)[:8]
-        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-        with Image.open(image_dir / image.name) as im:
-            rgb = np.asarray(im.convert("RGB"))
-        by_camera.setdefault(image.camera_id, []).append(detect_board(rgb, board, K, dist))
-        progress("structure from motion: the board's focal length", k + 1, len(ids))
-    records, changed = [], False
-    for camera_id, views in sorted(by_camera.items()):
-        camera = rec.camera(camera_id)
-        params = np.asarray(camera.params, float)
-        K = np.array([[params[0], 0.0, params[2]], [0.0, params[1], params[3]], [0.0, 0.0, 1.0]])
-        result = focal_from_board(views, K, params[4:8], (int(camera.width), int(camera.height)))
-        records.append({"camera_id": int(camera_id), "images": len(views), **result.to_json()})
-        if result.focal_px is None:
-            if result.views:  # a board was there but could not be trusted: say so
-                warnings.warn(f"the camera's focal length stays SfM's ({result.sfm_focal_px:.1f} px), not the "
-                              f"board's: {result.reason}", RuntimeWarning, stacklevel=3)
-            continue
-        params[0] = params[1] = result.focal_px
-        params[4:6] = result.k1, result.k2  # the adjustment's start; it refines the distortion again
-        camera.params = params.tolist()
-        changed = True
-    if changed:
-        _adjust_fixed_focal(rec, config)
-    return tuple(records)
 
 
 def _first_reason(left_out: dict[str, str]) -> str:
