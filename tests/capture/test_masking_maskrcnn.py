@@ -112,6 +112,35 @@ def test_compat_is_idempotent_and_keeps_other_ops_checked():
             tv.ops.deform_conv2d(torch.zeros(1, 1, 4, 4), torch.zeros(1, 18, 2, 2), torch.zeros(1, 1, 3, 3))
 
 
+@pytest.mark.parametrize("aligned", [False, True])
+@pytest.mark.parametrize("sampling_ratio", [1, 2, 3])
+def test_roi_align_by_grid_sample_equals_torchvisions_own(aligned, sampling_ratio):
+    """Boxes inside, across and outside the feature maps' edges, two images, two scales: the same values
+    as torchvision's pure-PyTorch roi_align (uncompiled), to float rounding."""
+    from real2sim.capture.torchvision_compat import roi_align_by_grid_sample
+
+    ensure_torchvision()
+    torchvisions = sys.modules["torchvision.ops.roi_align"]._roi_align
+    torchvisions = getattr(torchvisions, "__wrapped__", torchvisions)  # without torch.compile's wrapper
+    gen = torch.Generator().manual_seed(sampling_ratio)
+    features = torch.randn(2, 5, 13, 17, generator=gen)
+    corner = torch.rand(40, 2, generator=gen) * torch.tensor([40.0, 30.0]) - 8.0
+    rois = torch.cat([torch.randint(0, 2, (40, 1), generator=gen).float(), corner,
+                      corner + torch.rand(40, 2, generator=gen) * 30.0], dim=1)
+    for scale in (0.25, 0.5):
+        expected = torchvisions(features, rois, scale, 7, 5, sampling_ratio, aligned)
+        got = roi_align_by_grid_sample(features, rois, scale, 7, 5, sampling_ratio, aligned, adaptive=None)
+        assert got.shape == (40, 5, 7, 5)
+        torch.testing.assert_close(got, expected, rtol=0, atol=2e-5)
+    # adaptive sampling (sampling_ratio 0) is torchvision's own function
+    assert roi_align_by_grid_sample(features, rois, 0.5, 7, 5, 0, aligned, adaptive=torchvisions).shape == (40, 5, 7, 5)
+
+
+def test_without_compiled_ops_roi_align_runs_by_grid_sample():
+    tv = ensure_torchvision()
+    installed = sys.modules["torchvision.ops.roi_align"]._roi_align
+    assert getattr(installed, "_real2sim_grid_sample", False) == (not tv.extension._has_ops())
+
 def test_fresh_process_plain_import_then_compat():
     """In a new interpreter: whatever the plain import does, the compat layer gives a working nms."""
     import subprocess

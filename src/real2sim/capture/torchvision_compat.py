@@ -10,8 +10,15 @@ and ``torchvision::qnms`` whether or not the ops exist.
 
 Mask R-CNN inference needs only two of torchvision's compiled ops:
 
-- ``roi_align``: torchvision already falls back to its own pure-PyTorch version when
-  the ops are missing; we leave that path alone.
+- ``roi_align``: torchvision falls back to its own pure-PyTorch version when the ops
+  are missing, but wraps it in ``torch.compile`` on its first call: about 10 s of
+  compilation in every process (most of a two-image mask run on 2 cores) and, on CPU, a C++
+  compiler the user may not have; uncompiled, its gather of every sample of every
+  channel took 7 s for the two images' 2000 proposals. Where the sampling grid is fixed
+  (Mask R-CNN's poolers: 2 x 2 samples per bin) :func:`roi_align_by_grid_sample` computes
+  the same bilinear samples with ``torch.nn.functional.grid_sample`` (one call per image;
+  equal to torchvision's to float rounding, ``tests/capture/test_masking_maskrcnn.py``);
+  adaptive sampling goes to torchvision's function, uncompiled.
 - ``nms``: has no fallback. :func:`torchvision.ops.boxes.nms` calls
   ``_assert_has_ops()`` and then ``torch.ops.torchvision.nms``.
 
@@ -167,6 +174,72 @@ def _install_nms_check_shim() -> None:
     _shim_installed = True
 
 
+def roi_align_by_grid_sample(input, rois, spatial_scale: float, pooled_height: int, pooled_width: int,
+                             sampling_ratio: int, aligned: bool, *, adaptive=None):
+    """torchvision's pure-PyTorch ``_roi_align`` (same arguments, same result) for ``sampling_ratio > 0``.
+
+    Each bin's ``sampling_ratio`` x ``sampling_ratio`` sample points are placed as torchvision places
+    them; its bilinear lookup clamps a point to the feature map's edge pixels, which is
+    ``grid_sample``'s border padding with ``align_corners=True`` (pixel centres at integer
+    coordinates). ``adaptive``: the function used for ``sampling_ratio <= 0``.
+    """
+    import torch
+    import torch.nn.functional as F
+
+    if sampling_ratio <= 0:
+        return adaptive(input, rois, spatial_scale, pooled_height, pooled_width, sampling_ratio, aligned)
+    batch, channels, height, width = input.shape
+    rois = rois.to(input.dtype)
+    offset = 0.5 if aligned else 0.0
+    start = rois[:, 1:3] * spatial_scale - offset  # (K, 2): x, y
+    size = rois[:, 3:5] * spatial_scale - offset - start
+    if not aligned:
+        size = size.clamp(min=1.0)
+    bins = torch.tensor([pooled_width, pooled_height], dtype=input.dtype, device=input.device)
+    bin_size = size / bins  # (K, 2)
+    # sample positions along x (K, PW * S) and y (K, PH * S): bin p, sample i at start + (p + (i + 0.5) / S) bin
+    steps_x = (torch.arange(pooled_width * sampling_ratio, device=input.device, dtype=input.dtype) + 0.5) / sampling_ratio
+    steps_y = (torch.arange(pooled_height * sampling_ratio, device=input.device, dtype=input.dtype) + 0.5) / sampling_ratio
+    xs = start[:, 0:1] + steps_x[None] * bin_size[:, 0:1]
+    ys = start[:, 1:2] + steps_y[None] * bin_size[:, 1:2]
+    gx = 2.0 * xs / (width - 1) - 1.0 if width > 1 else torch.zeros_like(xs)
+    gy = 2.0 * ys / (height - 1) - 1.0 if height > 1 else torch.zeros_like(ys)
+    k = len(rois)
+    grid = torch.stack((gx[:, None, :].expand(k, gy.shape[1], gx.shape[1]),
+                        gy[:, :, None].expand(k, gy.shape[1], gx.shape[1])), dim=-1)  # (K, PH S, PW S, 2)
+    out = input.new_zeros((k, channels, pooled_height, pooled_width))
+    image_of_roi = rois[:, 0].long()
+    for b in range(batch):
+        index = torch.nonzero(image_of_roi == b).flatten()
+        if not len(index):
+            continue
+        g = grid[index].reshape(1, -1, grid.shape[2], 2)  # the image's rois stacked along the grid's height
+        samples = F.grid_sample(input[b:b + 1], g, mode="bilinear", padding_mode="border", align_corners=True)
+        samples = samples.reshape(channels, len(index), pooled_height, sampling_ratio, pooled_width, sampling_ratio)
+        out[index] = samples.mean(dim=(3, 5)).permute(1, 0, 2, 3)
+    return out
+
+
+def _use_fast_roi_align() -> None:
+    """torchvision's pure-PyTorch roi_align replaced by :func:`roi_align_by_grid_sample` (module docstring)."""
+    import functools
+
+    # the module, not the function torchvision.ops exports under the same name
+    roi_module = sys.modules["torchvision.ops.roi_align"]
+    fallback = roi_module._roi_align
+    if getattr(fallback, "_real2sim_grid_sample", False):
+        return
+    # torchvision's function, without its lazy torch.compile wrapper (functools.wraps keeps it as __wrapped__)
+    adaptive = getattr(fallback, "__wrapped__", fallback)
+
+    @functools.wraps(adaptive)
+    def wrapper(*args):
+        return roi_align_by_grid_sample(*args, adaptive=adaptive)
+
+    wrapper._real2sim_grid_sample = True
+    roi_module._roi_align = wrapper
+
+
 def _forget_torchvision() -> None:
     """Drop a half-imported torchvision so that the next import starts clean."""
     for name in [m for m in sys.modules if m == "torchvision" or m.startswith("torchvision.")]:
@@ -207,6 +280,7 @@ def ensure_torchvision():
         if not torchvision.extension._has_ops():
             _define_nms_ops()  # no-op when the failed-import path above defined them
             _install_nms_check_shim()
+            _use_fast_roi_align()
         return torchvision
 
 
