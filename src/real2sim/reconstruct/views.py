@@ -224,10 +224,12 @@ def project_torch(k: CameraIntrinsics, w2c_cv, points_m) -> tuple:
     ``w2c_cv``: (N_views, 4, 4) world-to-camera tensor. Distortion is applied, so the
     positions match the images as captured.
     """
-    cam = points_m[None] @ w2c_cv[:, :3, :3].transpose(1, 2) + w2c_cv[:, None, :3, 3]
-    z = cam[..., 2]
+    # one (P, 3) x (3, 3 V) product: a batch of V products with an inner size of 3 took twice as long
+    rows = w2c_cv[:, :3, :].reshape(-1, 4)
+    cam = (points_m @ rows[:, :3].T + rows[:, 3]).T.reshape(len(w2c_cv), 3, -1)  # (V, 3, P)
+    z = cam[:, 2]
     inv_z = 1.0 / z.clamp_min(1e-9)
-    x, y = cam[..., 0] * inv_z, cam[..., 1] * inv_z
+    x, y = cam[:, 0] * inv_z, cam[:, 1] * inv_z
     if not (k.k1 == k.k2 == k.p1 == k.p2 == 0.0):
         r2 = x * x + y * y
         radial = 1 + k.k1 * r2 + k.k2 * r2 * r2
