@@ -202,10 +202,13 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
     with torch.no_grad():
         for start, pts, grid, seen, vals in _mask_votes(views, points_m, chunk):
             count = seen.sum(dim=0)
-            ordered = vals.masked_fill(~seen, 2.0).sort(dim=0).values  # the votes first, in order
             floor = torch.where(count >= 2 * min_votes, MIN_AGREEING - 1, 0)
             rank = torch.maximum(torch.floor(outlier_fraction * count).long(), floor)
             rank = torch.clamp(rank, max=torch.clamp(count - 1, min=0))
+            # the lowest rank + 1 votes in order (the unseen after them): a few of the views' votes, where a
+            # full sort of all of them took a third of the scoring
+            lowest = int(rank.max()) + 1 if len(rank) else 1
+            ordered = vals.masked_fill(~seen, 2.0).topk(min(lowest, len(vals)), dim=0, largest=False).values
             score = ordered.gather(0, rank[None])[0]
             if trusted is not None:
                 alone = seen & trusted_t[:, None]
