@@ -71,7 +71,7 @@ def main() -> int:
         f"Mask R-CNN ResNet-50 FPN, seeded random weights (91 classes), {len(images) - 1} timed 640x480 "
         f"images of the bundled can per resize, after one warm-up image (its time is the first column). "
         f"torch threads: {torch.get_num_threads()}. torchvision compiled ops loaded: "
-        f"{compiled_ops_loaded()} (False: our NMS and torchvision's pure-PyTorch roi_align, see "
+        f"{compiled_ops_loaded()} (False: our NMS and roi_align by grid_sample, see "
         "real2sim.capture.torchvision_compat). Random weights keep few detections, so the heads run on few "
         "instances: real COCO weights on a cluttered image cost more.\n\n"
         + markdown_table(["short side px", "first image s", "mean s / image", "max s / image"], rows)
