@@ -29,7 +29,6 @@ in ``ply_file_path`` (:func:`is_model_frame`).
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -37,6 +36,10 @@ from typing import Any
 
 import numpy as np
 
+# the transforms.json keys real2sim adds to nerfstudio's layout, importable from here as before
+from real2sim.formats.dataset_keys import (MODEL_FRAME_KEYS, POSE_REFINED_KEY, SUPPORT_Z_KEY,  # noqa: F401
+                                           TABLE_PLANE_KEY, describe_model_frame, has_table_plane,
+                                           is_model_frame, stated_support_z_m)
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import write_json_atomic as _write_json_atomic
 
@@ -77,50 +80,6 @@ def realsense_d435_intrinsics(width: int = 640, height: int = 480) -> CameraIntr
     fl = 615.0 * width / 640.0
     return CameraIntrinsics(width=width, height=height, fl_x=fl, fl_y=615.0 * height / 480.0,
                             cx=width / 2.0, cy=height / 2.0)
-
-
-#: transforms.json keys that say its poses are in an SfM model's frame (arbitrary scale, no table at
-#: z = 0): ``source``/``model_frame`` from :func:`read_dataset` of a COLMAP model and the masks
-#: stage's copy of one; ``applied_transform``/``ply_file_path`` from nerfstudio's ``ns-process-data``.
-MODEL_FRAME_KEYS = ("source", "model_frame", "applied_transform", "ply_file_path")
-
-
-#: Top-level transforms.json key: ``false`` when the images show no table plane (``capture --no-table``:
-#: the object on a thin stand, its lowest point at z = 0). Absent: the table top is the plane z = 0.
-TABLE_PLANE_KEY = "table_plane"
-
-
-def has_table_plane(ds: "Dataset") -> bool:
-    """False when ``ds`` says its images show no table plane (:data:`TABLE_PLANE_KEY`)."""
-    return ds.extra.get(TABLE_PLANE_KEY) is not False
-
-
-#: Top-level transforms.json key of a dataset without a table plane: the height (world z, metres) of the
-#: plane the object stands on, when the rig knows it (a stand's or a turntable's top; ``capture --no-table``
-#: writes 0, the stand's top). The object is then taken to lie above it: `reconstruct` cuts there and `run`
-#: closes the asset's bottom there. Absent: the object's own lowest seen points (:mod:`pipeline.support`).
-SUPPORT_Z_KEY = "support_z_m"
-
-
-def stated_support_z_m(ds: "Dataset") -> float | None:
-    """The support height a dataset without a table plane states (:data:`SUPPORT_Z_KEY`), else None.
-    UserInputError when the key holds something other than a finite number, or sits beside a table plane
-    (whose top is the support already)."""
-    if SUPPORT_Z_KEY not in ds.extra:
-        return None
-    value = ds.extra[SUPPORT_Z_KEY]
-    label = f"{ds.root / 'transforms.json'}: {SUPPORT_Z_KEY}"
-    if has_table_plane(ds):
-        raise UserInputError(f"{label} is for a dataset without a table (\"{TABLE_PLANE_KEY}\": false); "
-                             "with a table its top is the support")
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise UserInputError(f"{label} must be a number (metres, world z), got {value!r}")
-    return float(value)
-
-
-#: Per-frame transforms.json key written by ``refine-poses``: whether COLMAP refined that frame's pose
-#: (a frame it could not register keeps the robot's pose, with the robot's noise).
-POSE_REFINED_KEY = "real2sim_pose_refined"
 
 
 @dataclass(frozen=True)
@@ -212,19 +171,6 @@ def dataset_to_json(ds: Dataset) -> dict:
         frames.append(entry)
     out["frames"] = frames
     return out
-
-
-def is_model_frame(ds: "Dataset") -> bool:
-    """True when ``ds``'s poses are in an SfM model's frame and scale (a COLMAP model, or a
-    nerfstudio-processed capture), not metres in a frame with the table top at z = 0."""
-    return ds.extra.get("source") == "colmap" or any(k in ds.extra for k in MODEL_FRAME_KEYS[1:])
-
-
-def describe_model_frame(ds: "Dataset") -> str:
-    """What kind of model-frame dataset ``ds`` is, for messages."""
-    if ds.extra.get("source") == "colmap" or "model_frame" in ds.extra:
-        return "a COLMAP model"
-    return "a nerfstudio-processed capture (transforms.json with applied_transform: COLMAP's frame and scale)"
 
 
 def write_json_atomic(path: Path, data: Any, default: Any = None) -> None:
