@@ -300,8 +300,8 @@ def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progre
                         f"{cfg.max_change_mm} mm of the given poses", **info)
     moved_deg, moved_mm = float(np.median(rot_change[ok])), float(np.median(trans_change[ok]))
     verdict, allowed_mm, allowed_deg = judge_change(ds, moved_mm, moved_deg, noise_mm, noise_deg, reproj)
-    limit_mm, limit_deg = refusal_limit(ds, noise_mm, noise_deg, reproj)
     if verdict == "refuse":
+        limit_mm, limit_deg = refusal_limit(ds, noise_mm, noise_deg, reproj)
         return fallback(f"COLMAP moved the refined frames by {moved_mm:.1f} mm / {moved_deg:.2f} deg (median), more "
                         f"than the given poses' stated accuracy ({noise_mm:g} mm / {noise_deg:g} deg RMS) makes "
                         f"plausible (3 x that, plus {IMPLAUSIBLE_FACTOR:g} x what COLMAP's {reproj or 0:.2f} px "
@@ -335,10 +335,18 @@ def _allowance(ds: Dataset, noise_mm: float, noise_deg: float, reproj_px: float 
     return 3.0 * noise_mm, 3.0 * noise_deg, 1e3 * px_rad * distance_m, float(np.degrees(px_rad))
 
 
+def _bounds(ds: Dataset, noise_mm: float, noise_deg: float, reproj_px: float | None
+            ) -> tuple[float, float, float, float]:
+    """(allowed mm, allowed deg, refusal limit mm, refusal limit deg): 3 x the stated accuracy plus once
+    (allowed) or ``IMPLAUSIBLE_FACTOR`` times (limit) COLMAP's uncertainty (:func:`_allowance`)."""
+    stated_mm, stated_deg, colmap_mm, colmap_deg = _allowance(ds, noise_mm, noise_deg, reproj_px)
+    return (stated_mm + colmap_mm, stated_deg + colmap_deg,
+            stated_mm + IMPLAUSIBLE_FACTOR * colmap_mm, stated_deg + IMPLAUSIBLE_FACTOR * colmap_deg)
+
+
 def refusal_limit(ds: Dataset, noise_mm: float, noise_deg: float, reproj_px: float | None) -> tuple[float, float]:
     """(mm, degrees): a median move beyond this is refused (:func:`judge_change`)."""
-    stated_mm, stated_deg, colmap_mm, colmap_deg = _allowance(ds, noise_mm, noise_deg, reproj_px)
-    return stated_mm + IMPLAUSIBLE_FACTOR * colmap_mm, stated_deg + IMPLAUSIBLE_FACTOR * colmap_deg
+    return _bounds(ds, noise_mm, noise_deg, reproj_px)[2:]
 
 
 def judge_change(ds: Dataset, moved_mm: float, moved_deg: float, noise_mm: float, noise_deg: float,
@@ -349,9 +357,7 @@ def judge_change(ds: Dataset, moved_mm: float, moved_deg: float, noise_mm: float
     x COLMAP's uncertainty (:func:`refusal_limit`): under the stated noise the median frame moves about
     its RMS, and three times it for the median of many frames is not noise but a model that bent. In
     between (only where that uncertainty is a large part: poses stated nearly exact) a warning."""
-    stated_mm, stated_deg, colmap_mm, colmap_deg = _allowance(ds, noise_mm, noise_deg, reproj_px)
-    allowed_mm, allowed_deg = stated_mm + colmap_mm, stated_deg + colmap_deg
-    limit_mm, limit_deg = refusal_limit(ds, noise_mm, noise_deg, reproj_px)
+    allowed_mm, allowed_deg, limit_mm, limit_deg = _bounds(ds, noise_mm, noise_deg, reproj_px)
     if moved_mm > limit_mm or moved_deg > limit_deg:
         return "refuse", allowed_mm, allowed_deg
     if moved_mm > allowed_mm or moved_deg > allowed_deg:
