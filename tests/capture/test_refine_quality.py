@@ -16,9 +16,9 @@ import warnings
 
 import pytest
 
-from real2sim.capture.pose_refinement import (RefineConfig, RefineResult, _warn_beyond_given_accuracy,
-                                              _warn_if_worse_than_given, judge_change, refine_poses,
-                                              refusal_limit)
+from real2sim.capture.pose_refinement import RefineConfig, RefineResult, refine_poses
+from real2sim.capture.refine_quality import (_warn_beyond_given_accuracy, _warn_if_worse_than_given, judge_change,
+                                             refusal_limit)
 from real2sim.capture.wrist_camera import CaptureConfig, capture
 from real2sim.formats.dataset import read_dataset
 
