@@ -284,6 +284,15 @@ def read_board_spec(path: Path | str) -> BoardSpec:
 # ----------------------------------------------------------------------------- detection
 
 
+def opencv_camera_matrix(K: np.ndarray) -> np.ndarray:
+    """A copy of the camera matrix ``K`` (3x3, the project's pixel convention: a pixel's centre at u + 0.5)
+    in OpenCV's (the centre at u): the principal point half a pixel lower. Image points convert the same
+    way (minus 0.5)."""
+    K_cv = np.array(K, dtype=float)
+    K_cv[:2, 2] -= 0.5
+    return K_cv
+
+
 def detect_board(image_rgb: np.ndarray, spec: BoardSpec, K: np.ndarray, dist=None) -> BoardView | None:
     """The board's pose in one image, or None when it is not found well enough.
 
@@ -299,8 +308,7 @@ def detect_board(image_rgb: np.ndarray, spec: BoardSpec, K: np.ndarray, dist=Non
     grey = np.ascontiguousarray(grey, dtype=np.uint8)
     K = np.asarray(K, dtype=float)
     dist_cv = np.zeros(4) if dist is None else np.asarray(dist, dtype=float).ravel()
-    K_cv = K.copy()
-    K_cv[:2, 2] -= 0.5  # the project's pixel centres (u + 0.5) to OpenCV's (u)
+    K_cv = opencv_camera_matrix(K)
     board = _cv_board(spec)
     params = cv2.aruco.CharucoParameters()
     params.cameraMatrix, params.distCoeffs = K_cv, dist_cv
@@ -330,8 +338,7 @@ def board_view_from_corners(ids: np.ndarray, corners_px: np.ndarray, spec: Board
         return None
     K = np.asarray(K, dtype=float)
     dist_cv = np.zeros(4) if dist is None else np.asarray(dist, dtype=float).ravel()
-    K_cv = K.copy()
-    K_cv[:2, 2] -= 0.5
+    K_cv = opencv_camera_matrix(K)
     image_px = np.asarray(corners_px, dtype=float).reshape(-1, 2) - 0.5  # OpenCV's pixel centres
     board_pts = board_corners_m(spec)[ids]
     # Corners along one line leave the pose undetermined.

@@ -93,8 +93,9 @@ def focal_from_board(views: list, K: np.ndarray, dist: np.ndarray, size: tuple[i
         return BoardFocal(sfm_f, len(found), reason=f"the board was found in {len(found)} views (fewer than {MIN_VIEWS})")
     import cv2
 
-    K_cv = K.copy()
-    K_cv[:2, 2] -= 0.5
+    from real2sim.capture.board import opencv_camera_matrix
+
+    K_cv = opencv_camera_matrix(K)
     d = np.zeros(5)
     d[:4] = np.asarray(dist, dtype=float).ravel()[:4]
     obj = [np.ascontiguousarray(v.board_points_m, dtype=np.float32) for v in found]

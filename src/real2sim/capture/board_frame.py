@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from real2sim.capture.board import BoardSpec, BoardView
+from real2sim.capture.board import BoardSpec, BoardView, opencv_camera_matrix
 from real2sim.formats.dataset import CV_FROM_GL
 from real2sim.formats.errors import UserInputError
 
@@ -112,9 +112,8 @@ def _refine(rot: np.ndarray, s: float, t: np.ndarray, sfm_c2w: list[np.ndarray],
             r_bc = r @ c2w[:3, :3]  # board_from_camera rotation
             centre = scale * r @ c2w[:3, 3] + trans
             pc = (v.board_points_m - centre) @ r_bc  # points in camera axes
-            K = v.K.copy()
-            K[:2, 2] -= 0.5  # OpenCV pixel centres; image_points_px are the project's (+0.5)
-            proj, _ = cv2.projectPoints(pc, np.zeros(3), np.zeros(3), K, v.dist)
+            # OpenCV's pixel centres; image_points_px are the project's (+0.5)
+            proj, _ = cv2.projectPoints(pc, np.zeros(3), np.zeros(3), opencv_camera_matrix(v.K), v.dist)
             out.append((proj.reshape(-1, 2) - (v.image_points_px - 0.5)).ravel())
         return np.concatenate(out)
 
