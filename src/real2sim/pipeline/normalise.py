@@ -25,9 +25,17 @@ Steps (all lengths before the last one in model units):
    the silhouettes bound the top in every view, while a real capture's sparse cloud is
    thin on the object, often empty on a plain lid; (b) the asset is built from the same
    silhouettes, so with ``--object-height-m H`` the reconstruction comes out H tall (up
-   to the grids' voxels): the user's number is what the asset shows. The price: the hull
-   is an outer bound, so where no view grazes the top the measured height is too large and
-   the scale too small by the same factor -- the bias the reconstruction itself has;
+   to the grids' voxels). The price: the hull is an outer bound. Over a wide flat top
+   that no view sees edge-on (a mug shot from above), every silhouette holds the top
+   face's image, and the hull rises over it as a cone, r tan(lowest elevation) high: the
+   handheld mug's hull stood 7 % above its rim, the can's 4 %. So the top of the
+   **sparse points on the object** (surface points, not a bound: the median of the
+   ``top_points`` highest) replaces the hull's when the hull rises more than ``top_gap``
+   of its height above them *and* what stands above them is such a cap, not the object
+   going on full width (a featureless lid the SfM found no points on): the hull's volume
+   above them under ``cap_fill`` of a prism on its cross-section there (a cone's is 1/3;
+   measured: caps 0.44-0.62, a straight wall 0.77-0.89). Otherwise the hull's height, with
+   a WARNING when the two disagree by more than ``top_gap`` (:func:`object_top`);
 4. scale: ``scale`` (metres per model unit) as given, or ``object_height_m`` / measured height.
 
 Ground truth: a simulated capture moved into a COLMAP frame (tests, benchmarks) keeps
@@ -49,6 +57,7 @@ from __future__ import annotations
 import json
 import shutil
 import tempfile
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -92,6 +101,13 @@ class NormaliseConfig:
     object_vote_fraction: float = 0.8
     hull_voxels: int = 128
     hull_outlier_fraction: float = 0.03
+    # the object's top from the sparse points (step 3): the median of this many highest points on it,
+    # taken when there are at least ``min_object_points``, the hull rises more than ``top_gap`` (a
+    # fraction of its height) above them, and fills under ``cap_fill`` of the prism above them
+    top_points: int = 7
+    min_object_points: int = 20
+    top_gap: float = 0.03
+    cap_fill: float = 0.7
 
     def validate(self) -> None:
         given = [v for v in (self.object_height_m, self.scale) if v is not None]
@@ -203,8 +219,21 @@ def _masks(ds: Dataset) -> np.ndarray:
     return np.stack([load_mask(ds.root / f.mask_path) for f in ds.frames])
 
 
-def measure_object(ds: Dataset, masks: np.ndarray, table: rf.Similarity, config: NormaliseConfig) -> tuple[float, np.ndarray]:
-    """(height, footprint centre (2,)) of the masks' visual hull in the rigid table frame ``table`` (model units)."""
+@dataclass(frozen=True)
+class HullMeasure:
+    """The masks' visual hull in the rigid table frame (model units): its ``top`` above the table, its
+    footprint ``centre_xy`` (2,), and per horizontal slice of its grid the slice's height ``slice_z``
+    (Z,) and the hull's area in it ``slice_area`` (Z,)."""
+
+    top: float
+    centre_xy: np.ndarray
+    slice_z: np.ndarray
+    slice_area: np.ndarray
+    voxel: float
+
+
+def measure_object(ds: Dataset, masks: np.ndarray, table: rf.Similarity, config: NormaliseConfig) -> HullMeasure:
+    """The masks' visual hull in the rigid table frame ``table`` (model units)."""
     from real2sim.reconstruct.hull import visual_hull_mesh
     from real2sim.reconstruct.views import PosedViews
 
@@ -213,10 +242,43 @@ def measure_object(ds: Dataset, masks: np.ndarray, table: rf.Similarity, config:
     # The hull reads masks and poses only: a zero-strided stand-in for the colour images costs no memory.
     rgb = np.broadcast_to(np.zeros((1, 1, 1, 3), np.float32), (len(ds.frames), k.height, k.width, 3))
     views = PosedViews(rgb, masks.astype(np.float32), c2w_cv, k, tuple(f.file_path for f in ds.frames))
-    mesh, _, _ = visual_hull_mesh(views, longest_side_voxels=config.hull_voxels,
-                                  outlier_fraction=config.hull_outlier_fraction, table_z_m=0.0)
+    mesh, grid, scores = visual_hull_mesh(views, longest_side_voxels=config.hull_voxels,
+                                          outlier_fraction=config.hull_outlier_fraction, table_z_m=0.0)
     lo, hi = mesh.bounds
-    return float(hi[2]), 0.5 * (lo[:2] + hi[:2])
+    slice_z = grid.origin_m[2] + np.arange(grid.shape[2]) * grid.voxel_m
+    slice_area = (scores >= 0.5).sum(axis=(0, 1)) * grid.voxel_m ** 2
+    return HullMeasure(float(hi[2]), 0.5 * (lo[:2] + hi[:2]), slice_z, slice_area.astype(float), float(grid.voxel_m))
+
+
+def object_top(hull: HullMeasure, point_heights: np.ndarray, config: NormaliseConfig) -> tuple[float, dict]:
+    """The object's top above the table (model units) and a record of how it was chosen: the hull's
+    top, or that of the sparse points on the object (``point_heights``, model units above the table)
+    where the hull stands over them as a cap (module docstring, step 3)."""
+    heights = np.sort(point_heights[point_heights > 0])[::-1]
+    record = {"hull_top_units": hull.top, "object_points": len(heights)}
+    if len(heights) < config.min_object_points:
+        return hull.top, {**record, "from": f"the visual hull (fewer than {config.min_object_points} sparse "
+                                            "points on the object)"}
+    points_top = float(np.median(heights[:config.top_points]))
+    record["points_top_units"] = points_top
+    gap = (hull.top - points_top) / hull.top
+    record["hull_above_points"] = gap
+    if gap <= config.top_gap:
+        return hull.top, {**record, "from": "the visual hull (the sparse points reach its top)"}
+    above = hull.slice_z >= points_top
+    prism = np.interp(points_top, hull.slice_z, hull.slice_area) * (hull.top - points_top)
+    fill = float(hull.slice_area[above].sum() * hull.voxel / prism) if prism > 0 else 1.0
+    record["cap_fill"] = fill
+    if fill < config.cap_fill:
+        return points_top, {**record, "from": f"the top of the sparse points on the object (the median of the "
+                                              f"{config.top_points} highest): the visual hull rises {100 * gap:.1f} % "
+                                              "above them as a cap, an outer bound over a top seen only from above"}
+    warnings.warn(f"the object's height is read from the masks' visual hull, which stands {100 * gap:.1f} % above "
+                  "the highest sparse points on the object and full width: a top with no features, or a hull "
+                  "that no view bounds there; if the asset comes out small, lay the printed board under the "
+                  "object (`real2sim board`) or give --scale", stacklevel=2)
+    return hull.top, {**record, "from": "the visual hull (it stands full width above the sparse points: a top "
+                                        "with no features; warned)"}
 
 
 def points_near_object(c2w_cv: np.ndarray, points: np.ndarray, config: NormaliseConfig
@@ -244,9 +306,11 @@ def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config:
     on_object = rf.object_point_mask(near, ds.intrinsics, c2w_cv, masks, config.object_vote_fraction)
     plane = table_plane(near[~on_object], c2w_cv, distance, config, seed)
     table = rf.table_similarity(plane, centre=look_at)
-    height, centre_xy = measure_object(ds, masks, table, config)
-    if not height > 0:
+    hull = measure_object(ds, masks, table, config)
+    if not hull.top > 0:
         raise UserInputError("the masks' visual hull has no height above the fitted table plane")
+    height, top_record = object_top(hull, table.apply(near[on_object])[:, 2], config)
+    centre_xy = hull.centre_xy
     scale = config.scale if config.scale is not None else config.object_height_m / height
     centre = table.inverse().apply(np.array([centre_xy[0], centre_xy[1], 0.0]))
     robot_from_model = rf.table_similarity(plane, centre=centre, scale=scale)
@@ -255,8 +319,11 @@ def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config:
         "scale_from": "scale" if config.scale is not None else "object_height_m",
         "object_height_m_given": config.object_height_m,
         "scale_given": config.scale,
-        "hull_height_units": height,
-        "hull_height_m": height * scale,
+        "hull_height_units": hull.top,
+        "hull_height_m": hull.top * scale,
+        "height_units": height,
+        "height_m": height * scale,
+        "object_top": top_record,
         "sparse_points": {"total": len(points), "near_object": len(near), "on_object": int(on_object.sum()),
                           "table_inliers": plane.inliers},
         "table_plane_model": {"normal": plane.normal.tolist(), "offset_units": plane.offset},
@@ -264,7 +331,8 @@ def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config:
         "inlier_threshold_mm": 1000.0 * plane.threshold * scale,
         "median_camera_distance_m": distance * scale,
         "seed": seed,
-        "height_from": f"visual hull of the masks in the table frame, {config.hull_voxels} voxels on its longest side",
+        "height_from": f"{top_record['from']}; the visual hull of the masks in the table frame, {config.hull_voxels} "
+                       "voxels on its longest side",
     }
     return robot_from_model, record
 
