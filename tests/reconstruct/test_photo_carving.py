@@ -194,3 +194,54 @@ def test_the_fields_start_leaves_the_opened_cavity_empty(mug_capture):
     assert np.median(density[~carved & (density > 0.5 * config.init_density)]) > 0.9 * config.init_density
     _, no_carving, nothing = hull_density(views, grid, FieldConfig(photo_carving=False))
     assert nothing is None and not no_carving.any()
+
+
+def test_the_voxel_walk_sees_what_embree_sees(mug_hull):
+    """The two visibility tests (``CarvingConfig.visibility``) agree on which views see the mug hull's
+    surface voxels (measured: 97.7 % of the sightings of either; the walk's trilinear surface and
+    the marching-cubes triangles differ by a little inside a voxel; the nearest voxel's cubes,
+    standing proud at the corners, gave 94 %), and a voxel deep inside is seen by no view in either."""
+    from real2sim.reconstruct.carving_views import observations, occluder
+    from real2sim.reconstruct.photo_carving import _surface
+
+    views, grid, hull = mug_hull
+    surface = np.argwhere(_surface(hull))
+    inner = np.argwhere(hull & ~_surface(hull) & ~np.roll(_surface(hull), 1, 0) & ~np.roll(_surface(hull), -1, 0))
+    points = grid.origin_m + np.r_[surface, inner[:50]] * grid.voxel_m
+    seen = {}
+    for method in ("mesh", "voxels"):
+        view_of, point_of, _, _ = observations(views, grid, points, occluder(grid, hull, method, "cpu"), 1.0)
+        seen[method] = set(zip(view_of.tolist(), point_of.tolist()))
+        assert not (point_of >= len(surface)).any(), method  # the inner voxels: hidden from every view
+    both, either = seen["mesh"] & seen["voxels"], seen["mesh"] | seen["voxels"]
+    assert len(both) > 0.95 * len(either), (len(both), len(seen["mesh"]), len(seen["voxels"]))
+
+
+@pytest.mark.slow
+def test_carving_by_the_voxel_walk_opens_the_mug_as_by_embree(mug_capture, mug_hull):
+    """What a GPU runs (the voxel walk; about 4x slower than Embree on 2 CPU cores): the same
+    carving within 2 % of the voxels (measured: 17478 against 17453, 28 rounds each)."""
+    from real2sim.reconstruct.photo_carving import CarvingConfig
+
+    _, hull, by_mesh = _hull_and_carving(mug_capture, CarvingConfig(visibility="mesh"), mug_hull)
+    grid, _, by_voxels = _hull_and_carving(mug_capture, CarvingConfig(visibility="voxels"), mug_hull)
+    assert abs(by_voxels.carved_voxels - by_mesh.carved_voxels) < 0.02 * by_mesh.carved_voxels
+    inside, concave = _truth_labels(mug_capture, grid)
+    assert np.count_nonzero(by_voxels.solid & concave) < 0.75 * np.count_nonzero(hull & concave)
+    assert np.count_nonzero(hull & inside & ~by_voxels.solid) < 0.02 * np.count_nonzero(hull & inside)
+
+
+@pytest.mark.cuda
+def test_carving_on_cuda_matches_the_voxel_walk_on_the_cpu(mug_capture, mug_hull):
+    """``visibility="auto"`` on CUDA walks the voxels; its carving is the CPU's walk (the same samples;
+    float64 on both, so a sample on a voxel face may round the other way)."""
+    import torch
+
+    from real2sim.reconstruct.photo_carving import CarvingConfig, photo_carve
+
+    if not torch.cuda.is_available():
+        pytest.skip("needs a CUDA GPU")
+    views, grid, hull = mug_hull
+    gpu = photo_carve(views, grid, hull, CarvingConfig(), device="cuda")
+    cpu = photo_carve(views, grid, hull, CarvingConfig(visibility="voxels"), device="cpu")
+    assert np.count_nonzero(gpu.solid ^ cpu.solid) <= 0.002 * np.count_nonzero(hull)

@@ -78,8 +78,9 @@ def jittered_can(tmp_path_factory):
 def test_carving_leaves_a_can_shot_with_changing_exposure_alone(jittered_can):
     """Without the gains taken out, carving removed 23 % of this can's hull (8624 of 37314 voxels): every
     view disagreed with the others in colour. The gains found match the capture's own."""
-    from real2sim.reconstruct.hull import VoxelGrid, carve, object_region, surface_from_grid
-    from real2sim.reconstruct.photo_carving import CarvingConfig, _bilinear, _observations, _surface, photo_carve
+    from real2sim.reconstruct.carving_views import observations, occluder
+    from real2sim.reconstruct.hull import VoxelGrid, carve, object_region
+    from real2sim.reconstruct.photo_carving import CarvingConfig, _bilinear, _surface, photo_carve
     from real2sim.reconstruct.views import load_views
 
     views = load_views(jittered_can)
@@ -95,8 +96,8 @@ def test_carving_leaves_a_can_shot_with_changing_exposure_alone(jittered_can):
     floor = np.zeros(hull.shape, bool)
     floor[:, :, 0] = True
     idx = np.argwhere(_surface(hull) & ~floor)
-    surface = surface_from_grid(hull.astype(np.float32), grid, 0.5, 0.0)
-    view_of, point_of, uv, _ = _observations(views, grid, grid.origin_m + idx * grid.voxel_m, surface, CarvingConfig())
+    view_of, point_of, uv, _ = observations(views, grid, grid.origin_m + idx * grid.voxel_m,
+                                            occluder(grid, hull, "mesh", "cpu"), 1.0)
     gains, _ = view_gains(_bilinear(views.rgb, view_of, uv), view_of, point_of, views.count)
     # measured: log-gain errors of 0.084 (median) against the capture's spread of 0.22; correlation 0.94
     assert np.median(np.abs(np.log(gains / true))) < 0.12

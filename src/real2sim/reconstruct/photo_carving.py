@@ -67,9 +67,10 @@ import numpy as np
 from scipy.ndimage import binary_dilation, binary_erosion, convolve, distance_transform_edt, gaussian_filter
 
 from real2sim.formats.progress import ProgressFn
-from real2sim.reconstruct.hull import VoxelGrid, surface_from_grid, voxel_footprint_px, voxel_parts
+from real2sim.reconstruct.carving_views import Occluder, observations, occluder
+from real2sim.reconstruct.hull import VoxelGrid, voxel_footprint_px, voxel_parts
 from real2sim.reconstruct.mask_recheck import put_back_for_masks
-from real2sim.reconstruct.views import PosedViews, project
+from real2sim.reconstruct.views import PosedViews
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,10 @@ class CarvingConfig:
     blur_voxels: float = 0.5
     max_rounds: int = 150
     visibility_tolerance_voxels: float = 1.0
+    # how a view's line of sight to a voxel is tested against the solid: "mesh" (Embree on its
+    # marching-cubes surface, rebuilt each round), "voxels" (the ray walked through the voxels with
+    # torch, voxel_rays.segments_clear), or "auto": the mesh on a CPU, the voxels on a GPU
+    visibility: str = "auto"
     min_component_fraction: float = 0.1
     # the second pass, the hollow prior (see module docstring); the image contrast (RGB std over a
     # window of ``contrast_window_voxels`` footprints) below which a view cannot place a surface
@@ -140,12 +145,12 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
     candidates = _surface(solid) & ~floor
     exposure = None
     if config.exposure_correction:
-        images, exposure = _exposure_corrected(views, images, grid, solid, candidates, config)
+        images, exposure = _exposure_corrected(views, images, grid, solid, candidates, config, device)
     rounds = 0
     for rounds in range(1, config.max_rounds + 1):
         if not candidates.any():
             break
-        idx, verdict = _tested(views, images, grid, candidates, original, solid, config)
+        idx, verdict = _tested(views, images, grid, candidates, original, solid, config, device)
         # a carve starts only where the views disagree in hue, and grows wherever they disagree
         # at all: brightness alone differs between views of a shiny or curved true surface
         bad, hue_bad = np.zeros(solid.shape, bool), np.zeros(solid.shape, bool)
@@ -170,7 +175,7 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
     restored, opened_count = int(put_back.sum()), 0
     if config.hollow_prior and (original & ~solid).any():
         contrast = _local_contrast(images, config.contrast_window_voxels * footprint_px)
-        opened = _open_concavity(views, images, contrast, grid, original, solid, floor, config, progress)
+        opened = _open_concavity(views, images, contrast, grid, original, solid, floor, config, progress, device)
         # the masks judge the second pass on its own: a ray it emptied gets back what that pass took
         # from it (the concavity the first pass opened stays open)
         again = put_back_for_masks(views, grid, solid, opened, **recheck)
@@ -189,16 +194,16 @@ EXPOSURE_SAMPLE_VOXELS = 20_000
 
 
 def _exposure_corrected(views: PosedViews, images: np.ndarray, grid: VoxelGrid, solid: np.ndarray,
-                        surface: np.ndarray, config: CarvingConfig) -> tuple[np.ndarray, dict]:
+                        surface: np.ndarray, config: CarvingConfig, device: str) -> tuple[np.ndarray, dict]:
     """``images`` with each view's exposure and white balance divided out, as the views see the
     ``surface`` voxels of ``solid`` (:mod:`view_exposure`), and a report of the gains."""
     from real2sim.reconstruct.view_exposure import corrected_images, gains_summary, view_gains
 
     idx = np.argwhere(surface)
     idx = idx[::max(1, -(-len(idx) // EXPOSURE_SAMPLE_VOXELS))]
-    surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
-    view_of, point_of, pixel_uv, _ = _observations(views, grid, grid.origin_m + idx * grid.voxel_m, surface_mesh,
-                                                   config)
+    view_of, point_of, pixel_uv, _ = observations(views, grid, grid.origin_m + idx * grid.voxel_m,
+                                                  occluder(grid, solid, config.visibility, device),
+                                                  config.visibility_tolerance_voxels)
     gains, evidence = view_gains(_bilinear(images, view_of, pixel_uv), view_of, point_of, views.count,
                                  min_views=config.min_views)
     if not evidence["applied"]:
@@ -207,18 +212,18 @@ def _exposure_corrected(views: PosedViews, images: np.ndarray, grid: VoxelGrid, 
 
 
 def _tested(views: PosedViews, images: np.ndarray, grid: VoxelGrid, candidates: np.ndarray, original: np.ndarray,
-            solid: np.ndarray, config: CarvingConfig,
+            solid: np.ndarray, config: CarvingConfig, device: str,
             contrast: np.ndarray | None = None) -> tuple[np.ndarray, _Verdict]:
     """The indices (P, 3) of the ``candidates`` voxels and the views' :class:`_Verdict` on each, seen
     against the current ``solid`` (carved so far: ``original & ~solid``)."""
     idx = np.argwhere(candidates)
-    surface_mesh = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
-    return idx, _spread(views, images, grid, idx, surface_mesh, original & ~solid, config, contrast)
+    sight = occluder(grid, solid, config.visibility, device)
+    return idx, _spread(views, images, grid, idx, sight, original & ~solid, config, contrast)
 
 
 def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray, grid: VoxelGrid,
                     original: np.ndarray, solid: np.ndarray, floor: np.ndarray, config: CarvingConfig,
-                    progress: ProgressFn | None) -> np.ndarray:
+                    progress: ProgressFn | None, device: str) -> np.ndarray:
     """``solid`` (a copy) with the space behind an opened concavity that the images cannot place a
     surface in removed, round by round (the hollow prior of the module docstring). ``contrast``:
     :func:`_local_contrast` of ``images``; ``floor``: voxels never carved."""
@@ -229,7 +234,7 @@ def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray,
     for rounds in range(1, config.max_rounds + 1):
         if not candidates.any():
             break
-        idx, verdict = _tested(views, images, grid, candidates, original, solid, config, contrast)
+        idx, verdict = _tested(views, images, grid, candidates, original, solid, config, device, contrast)
         unplaced = (verdict.contrast < config.featureless_contrast) | \
             (verdict.spread >= config.min_spread_to_contrast * verdict.contrast)
         open_ = (verdict.through >= config.min_views) & (verdict.outside < config.min_views) & unplaced
@@ -300,13 +305,14 @@ class _Verdict(NamedTuple):
     contrast: np.ndarray
 
 
-def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndarray, surface_mesh,
+def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndarray, sight: Occluder,
             carved: np.ndarray, config: CarvingConfig, contrast: np.ndarray | None = None) -> _Verdict:
     """The verdict on each voxel of ``idx`` (P, 3): the ``spread_quantile`` of its views' colour
     distances from their median, the same for their hues, and the counts of :class:`_Verdict`."""
     points = grid.origin_m + idx * grid.voxel_m
     height, width = views.mask.shape[1:]
-    view_of, point_of, pixel_uv, directions = _observations(views, grid, points, surface_mesh, config)
+    view_of, point_of, pixel_uv, directions = observations(views, grid, points, sight,
+                                                           config.visibility_tolerance_voxels)
     # a view reaches the voxel through carved space when the ray is in it just before the voxel
     before = points[point_of] - 1.5 * grid.voxel_m * directions
     cell = np.clip(np.round((before - grid.origin_m) / grid.voxel_m).astype(int), 0, np.asarray(grid.shape) - 1)
@@ -335,28 +341,6 @@ def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndar
         per_view[point_of, view_of] = contrast[view_of, v, u]
         median_contrast[some] = _row_nanquantile(per_view[some], 0.5)
     return _Verdict(spreads[0], spreads[1], seen, through_count, outside_count, median_contrast)
-
-
-def _observations(views: PosedViews, grid: VoxelGrid, points: np.ndarray, surface_mesh,
-                  config: CarvingConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Which views see which of ``points`` (P, 3, metres): the ray from the camera meets ``surface_mesh``
-    no nearer than the point (within ``visibility_tolerance_voxels``). Per observation: its view and
-    point indices, the pixel position (N, 2) and the ray's unit direction (N, 3)."""
-    uv, depth = project(views.intrinsics, views.c2w_cv, points)  # (V, P, 2), (V, P)
-    height, width = views.mask.shape[1:]
-    in_image = (depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < width - 1) & (uv[..., 1] >= 0) & \
-               (uv[..., 1] < height - 1)
-    view_of, point_of = np.nonzero(in_image)
-    origins = views.c2w_cv[view_of, :3, 3]
-    offsets = points[point_of] - origins
-    distance = np.linalg.norm(offsets, axis=1)
-    directions = offsets / distance[:, None]
-    hit_at = np.full(len(origins), np.inf)
-    hits, rays, _ = surface_mesh.ray.intersects_location(origins, directions, multiple_hits=False)
-    hit_at[rays] = np.einsum("nd,nd->n", hits - origins[rays], directions[rays])
-    visible = hit_at >= distance - config.visibility_tolerance_voxels * grid.voxel_m
-    view_of, point_of = view_of[visible], point_of[visible]
-    return view_of, point_of, uv[view_of, point_of], directions[visible]
 
 
 def _local_contrast(images: np.ndarray, window_px: float) -> np.ndarray:

@@ -1,0 +1,136 @@
+"""Photo-consistent carving's visibility test: Embree on the solid's surface, or rays walked through
+the voxels with torch (``CarvingConfig.visibility``: "mesh" / "voxels"; "auto" takes the mesh on a
+CPU and the voxels on a GPU).
+
+For each object: the field's starting density as ``reconstruct`` makes it (the visual hull on the
+field's coarse grid, photo carving with both passes: ``train.hull_density``), once per visibility
+test, on all views of a capture (100 views at 320x240, exact poses, when captured here). Reported:
+wall seconds of the whole step, the voxels carved, and how many voxels the two tests' carvings
+disagree on.
+
+    python benchmarks/bench_carving.py                                  # mug, captured here, on the CPU
+    python benchmarks/bench_carving.py --datasets DIR --device cuda     # DIR/mug ... captured earlier
+    python benchmarks/bench_carving.py --datasets DIR --device cuda --reconstruct   # the whole reconstruction
+
+Writes docs/benchmarks/carving_visibility[_TAG].md (machine and date included).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import markdown_table, write_section  # noqa: E402
+
+HEADER = ["object", "device", "visibility", "hull and carving s", "carved voxels", "rounds",
+          "voxels the two disagree on"]
+
+
+def carve_both(dataset: Path, device: str, methods: tuple[str, ...]) -> list[list]:
+    """The rows of one dataset: ``train.hull_density`` with each visibility test."""
+    import torch
+
+    from real2sim.reconstruct.hull import VoxelGrid, object_region
+    from real2sim.reconstruct.train import FieldConfig, hull_density
+    from real2sim.reconstruct.views import load_views
+
+    views = load_views(dataset)
+    config = FieldConfig()
+    lo, hi = object_region(views, outlier_fraction=config.hull_outlier_fraction, table_z_m=0.0)
+    grid = VoxelGrid.covering(lo, hi, config.coarse_voxels, 0.0)
+    rows, carved = [], {}
+    for method in methods:
+        run_config = replace(config, carving=replace(config.carving, visibility=method))
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        start = time.perf_counter()
+        _, carved[method], result = hull_density(views, grid, run_config, device=device)
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        seconds = time.perf_counter() - start
+        rows.append([dataset.name, device, method, round(seconds, 2), int(carved[method].sum()),
+                     result.rounds if result is not None else "-", ""])
+    if len(methods) == 2:
+        rows[-1][-1] = int((carved[methods[0]] ^ carved[methods[1]]).sum())
+    return rows
+
+
+RECONSTRUCT_HEADER = ["object", "device", "visibility", "wall s", "hull and carving s", "carved voxels",
+                      "Chamfer mm", "IoU", "concave"]
+
+
+def reconstruct_both(dataset: Path, device: str, methods: tuple[str, ...]) -> list[list]:
+    """The rows of one dataset: the whole field reconstruction (``reconstruct``'s defaults, judged
+    against the dataset's ground truth) with each visibility test, in one process."""
+    import torch
+
+    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
+    from real2sim.reconstruct.train import FieldConfig
+
+    if device.startswith("cuda"):  # the one-off imports (torch.optim pulls in dynamo) outside the timings
+        torch.optim.Adam([torch.zeros(1, device=device, requires_grad=True)])
+    rows = []
+    for method in methods:
+        config = ReconstructConfig(field=FieldConfig(carving=CarvingConfig(visibility=method)))
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        start = time.perf_counter()
+        report = reconstruct(dataset, config, device=device, seed=0).report
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        truth = report.get("truth", {})
+        rows.append([dataset.name, device, method, round(time.perf_counter() - start, 2),
+                     round(report.get("hull_and_carving_seconds", float("nan")), 2), report.get("photo_carved_voxels"),
+                     round(truth.get("chamfer_mm", float("nan")), 3), round(truth.get("iou", float("nan")), 4),
+                     round(truth["concave_recovered"], 3) if truth.get("concave_recovered") is not None else "-"])
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--objects", default="mug")
+    ap.add_argument("--datasets", type=Path, default=None, metavar="DIR",
+                    help="DIR/<object>: datasets captured earlier (a GPU machine has no Drake)")
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--methods", default="mesh,voxels")
+    ap.add_argument("--tag", default="")
+    ap.add_argument("--reconstruct", action="store_true",
+                    help="time and judge the whole field reconstruction with each test instead")
+    args = ap.parse_args(argv)
+    header, measure = (RECONSTRUCT_HEADER, reconstruct_both) if args.reconstruct else (HEADER, carve_both)
+    rows = []
+    for name in args.objects.split(","):
+        with tempfile.TemporaryDirectory() as tmp:
+            dataset = args.datasets / name if args.datasets else Path(tmp) / name
+            if args.datasets is None:
+                from real2sim.capture.wrist_camera import CaptureConfig, capture
+                from real2sim.geometry.objects import make_textured_object
+
+                capture(make_textured_object(name), dataset, CaptureConfig(views=100, width=320, height=240,
+                                                                       pose_noise_mm=0, pose_noise_deg=0))
+            rows += measure(dataset, args.device, tuple(args.methods.split(",")))
+        print(markdown_table(header, rows), flush=True)
+    body = ("Photo carving's visibility test, Embree on the solid's marching-cubes surface (`mesh`, rebuilt each "
+            "round) or the rays walked through the voxels with torch (`voxels`, `reconstruct.voxel_rays`); "
+            "`CarvingConfig.visibility` \"auto\" takes the mesh on a CPU and the voxels on a GPU. The step timed is the "
+            "field's starting density as `reconstruct` makes it (`train.hull_density`: the visual hull on the coarse "
+            "grid, both carving passes and the masks' re-checks), on every view of the dataset"
+            + (" (with --reconstruct: the whole field reconstruction, `reconstruct`'s defaults, every 10th view held "
+               "out, judged against the true object)" if args.reconstruct else "") + ".\n\n"
+            + markdown_table(header, rows))
+    suffix = f"_{args.tag}" if args.tag else ""
+    command = "python benchmarks/bench_carving.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    path = write_section(f"carving_visibility{suffix}", "Photo carving: visibility by mesh or by voxels", body,
+                         command.strip())
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
