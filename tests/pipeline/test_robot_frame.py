@@ -287,6 +287,10 @@ def test_normalised_poses_match_the_robot_poses_up_to_yaw_and_xy(assets, capture
     assert abs(errors["table_origin_height_mm"]) < 0.5 and max(map(abs, errors["xy_shift_mm"])) < 1.0
     assert record["hull_height_m"] == pytest.approx(CAN_HEIGHT_M)
     assert record["robot_from_model"]["scale"] == pytest.approx(1 / captures["scale"], rel=0.01)
+    # the can seen from a hemisphere that reaches its side: the sparse points reach the hull's top
+    assert "reach its top" in record["object_top"]["from"], record["object_top"]
+    by_scale = json.loads((assets["scale"] / ".run" / "robot_frame" / "robot_frame.json").read_text())
+    assert "--scale given" in by_scale["object_top"]["from"]  # the height sets nothing: not measured, no warning
 
 
 @pytest.mark.parametrize("run", ["height", "nerfstudio", "raised"])

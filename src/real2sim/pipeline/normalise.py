@@ -246,7 +246,10 @@ def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config:
     hull = measure_object(ds, masks, table, config)
     if not hull.top > 0:
         raise UserInputError("the masks' visual hull has no height above the fitted table plane")
-    height, top_record = object_top(hull, table.apply(near[on_object])[:, 2], config)
+    if config.scale is None:
+        height, top_record = object_top(hull, table.apply(near[on_object])[:, 2], config)
+    else:  # the height sets nothing
+        height, top_record = hull.top, {"hull_top_units": hull.top, "from": "the visual hull (--scale given)"}
     centre_xy = hull.centre_xy
     scale = config.scale if config.scale is not None else config.object_height_m / height
     centre = table.inverse().apply(np.array([centre_xy[0], centre_xy[1], 0.0]))
