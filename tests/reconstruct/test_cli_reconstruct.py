@@ -152,6 +152,7 @@ def test_small_field_reconstruction(can_without_truth, tmp_path, capsys):
     # carving is on by default and finds nothing to open on a can
     assert report["config"]["field"]["photo_carving"] is True and report["photo_carved_voxels"] == 0
     assert report["config"]["field"]["carving"]["hollow_prior"] is True
+    assert report["photo_carving_visibility"] == "mesh"  # "auto" on a CPU: Embree (the voxel walk on a GPU)
     assert report["photo_carving_opened_voxels"] == 0  # the hollow prior works only behind what was carved
     assert 0 < report["hull_and_carving_seconds"] < report["stages"]["train_field"]["seconds"]
     mesh = trimesh.load(out / "mesh.obj", force="mesh")

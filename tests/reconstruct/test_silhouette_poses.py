@@ -277,4 +277,5 @@ def test_field_on_aligned_poses_runs_without_photo_carving(can_capture, tmp_path
         report = reconstruct(dataset, tiny_config).report
     assert "silhouette_poses" in report and report["photo_carving"] == CARVING_OFF_ALIGNED
     assert report["config"]["field"]["photo_carving"] is False and report["photo_carved_voxels"] == 0
+    assert "photo_carving_visibility" not in report
     assert report["truth"]["chamfer_mm"] < 1.5, report["truth"]

@@ -29,14 +29,19 @@ class Occluder(NamedTuple):
     device: str
 
 
+def visibility_method(method: str, device: str) -> str:
+    """``method`` ("mesh", "voxels" or "auto") as it runs on ``device``: "auto" is the mesh on a CPU and
+    the voxels elsewhere."""
+    if method not in ("mesh", "voxels", "auto"):
+        raise ValueError(f"visibility: mesh, voxels or auto, not {method!r}")
+    return method if method != "auto" else ("mesh" if device == "cpu" else "voxels")
+
+
 def occluder(grid: VoxelGrid, solid: np.ndarray, method: str, device: str) -> Occluder:
     """What :func:`observations` tests against: ``method`` "mesh", "voxels" or "auto" (the mesh on a CPU,
     the voxels elsewhere; ``CarvingConfig.visibility``)."""
-    method = method if method != "auto" else ("mesh" if device == "cpu" else "voxels")
-    if method == "voxels":
+    if visibility_method(method, device) == "voxels":
         return Occluder(None, solid, grid, device)
-    if method != "mesh":
-        raise ValueError(f"visibility: mesh, voxels or auto, not {method!r}")
     return Occluder(surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2])), None,
                      grid, device)
 

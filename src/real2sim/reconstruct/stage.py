@@ -236,6 +236,10 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         report["photo_carved_voxels"] = trained.carved_voxels
         report["photo_carving_restored_voxels"] = trained.restored_voxels  # many: poses not refined?
         report["photo_carving_opened_voxels"] = trained.opened_voxels
+        if config.field.photo_carving:  # how it decided which views see a voxel (carving_views.py)
+            from real2sim.reconstruct.carving_views import visibility_method
+
+            report["photo_carving_visibility"] = visibility_method(config.field.carving.visibility, device)
         if trained.carving_exposure is not None:
             report["photo_carving_exposure"] = trained.carving_exposure
         report["hull_and_carving_seconds"] = trained.hull_and_carving_seconds  # part of train_field's
