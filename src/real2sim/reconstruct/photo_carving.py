@@ -89,8 +89,9 @@ class CarvingConfig:
     max_rounds: int = 150
     visibility_tolerance_voxels: float = 1.0
     # how a view's line of sight to a voxel is tested against the solid: "mesh" (Embree on its
-    # marching-cubes surface, rebuilt each round), "voxels" (the ray walked through the voxels with
-    # torch, voxel_rays.segments_clear), or "auto": the mesh on a CPU, the voxels on a GPU
+    # marching-cubes surface, rebuilt each round), "voxels" (the ray walked through the solid's
+    # trilinear interpolation with torch, voxel_rays.segments_clear), or "auto": the mesh on a CPU,
+    # the voxels on a GPU (carving_views.py)
     visibility: str = "auto"
     min_component_fraction: float = 0.1
     # the second pass, the hollow prior (see module docstring); the image contrast (RGB std over a
