@@ -32,22 +32,23 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import os
 import shutil
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
-from real2sim.formats.dataset import has_table_plane, is_model_frame, read_dataset
+from real2sim.formats.dataset import has_table_plane, read_dataset
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import check_output_dir, make_output_dir, output_lock
 from real2sim.formats.progress import ProgressFn
 from real2sim.pipeline import manifest as mf
 from real2sim.pipeline.masks import PARALLAX
-from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig, check_frame_options, sparse_point_files
+from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
                                       EVALUATIONS, _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine,
                                       _refine_unavailable, _robot_frame, _truth, check_evaluations, rewrite_reports)
+from real2sim.pipeline.run_folder import (check_dataset, dataset_files, discard, kept_note,  # noqa: F401
+                                          poses_to_refine, prepare_asset_dir, remove_stale_temporaries)
 from real2sim.pipeline.runner import Paused, RunProgress, Runner, StageFailed
 from real2sim.pipeline.support import support_height_m
 from real2sim.pipeline.truth import has_ground_truth
@@ -120,93 +121,6 @@ class RunResult:
     paused_before: str | None = None
 
 
-def kept_note(asset_dir: Path | str) -> str:
-    """What a run that stopped leaves in ``asset_dir``, for its one-line message: the finished stages
-    kept for a resume (a deliberate cache, docs/reliability.md), or that nothing was kept."""
-    manifest = mf.Manifest.load(Path(asset_dir))
-    stages = list(manifest.data["stages"]) if manifest is not None else []
-    if not stages:
-        return f"no finished stage is kept in {asset_dir}" if Path(asset_dir).is_dir() else "nothing was written"
-    return (f"the finished stages ({', '.join(stages)}) are kept in {Path(asset_dir) / mf.RUN_DIRNAME}: fix the "
-            "cause and run the same command again to resume from them")
-
-
-def poses_to_refine(dataset: Path | str) -> bool:
-    """Whether ``dataset`` has poses that COLMAP refinement can improve: a transforms.json of given poses
-    (a robot's, a calibration's) that `refine-poses` has not refined yet. A COLMAP model or an
-    ns-process-data folder holds COLMAP's own poses already: nothing to refine."""
-    ds = read_dataset(Path(dataset), check_files=False)
-    return not is_model_frame(ds) and "real2sim_refinement" not in ds.extra
-
-
-def _dataset_files(root: Path) -> list[str]:
-    """What the stages read from a dataset: transforms.json, the frames' images and masks, ground_truth/."""
-    ds = read_dataset(root, check_files=False)
-    files = ["transforms.json"]
-    if is_model_frame(ds):  # its poses' frame and the sparse points the table is found in
-        files += sparse_point_files(ds)
-    for frame in ds.frames:
-        files.append(frame.file_path)
-        if frame.mask_path:
-            files.append(frame.mask_path)
-    for folder in ("ground_truth", "background"):  # background/: the empty scene, for background masks
-        if (root / folder).is_dir():
-            files += [f"{folder}/{rel}" for rel in mf.tree_files(root / folder)]
-    return files
-
-
-def check_dataset(dataset: Path, masks_needed: bool = True, scale_given: bool = False) -> Path:
-    """The resolved dataset folder; UserInputError when it cannot be used as it is (one line).
-
-    ``scale_given``: --object-height-m or --scale was given; a COLMAP dataset needs one, a
-    transforms.json dataset (metric already) takes neither.
-    """
-    dataset = Path(dataset).resolve()
-    if dataset.is_file() and dataset.name == "transforms.json":
-        dataset = dataset.parent
-    ds = read_dataset(dataset)
-    check_frame_options(ds, scale_given)
-    missing = [f.file_path for f in ds.frames if not f.mask_path]
-    if missing and masks_needed:
-        # `real2sim mask` writes mask paths into a transforms.json, which a bare COLMAP model lacks
-        later = "" if ds.extra.get("source") == "colmap" else ", or make them first with `real2sim mask`"
-        raise UserInputError(f"{len(missing)} of {len(ds.frames)} frames of {dataset} have no mask; pass "
-                             f"--mask provided|maskrcnn|background{later}")
-    return dataset
-
-
-def _prepare_asset_dir(asset_dir: Path, dataset: Path, overwrite: bool) -> tuple[mf.Manifest, bool]:
-    """The manifest to resume from (or a fresh one) and whether ASSETDIR is new. Writes nothing yet."""
-    if asset_dir.exists() and not asset_dir.is_dir():
-        raise UserInputError(f"output path {asset_dir} exists and is not a folder")
-    if not asset_dir.exists():
-        return mf.Manifest(asset_dir, dataset), True
-    if overwrite:
-        return mf.Manifest(asset_dir, dataset), False
-    previous = mf.Manifest.load(asset_dir)
-    if previous is None:
-        raise UserInputError(f"output folder {asset_dir} exists and holds no run to resume; "
-                             "pass --overwrite to replace it")
-    if previous.dataset != dataset:
-        raise UserInputError(f"output folder {asset_dir} holds a run of another dataset ({previous.dataset}); "
-                             "pass --overwrite to replace it")
-    return previous, False
-
-
-def _remove_stale_temporaries(asset_dir: Path) -> None:
-    """Temporary folders and files a killed run left behind (names from mkdtemp: '.NAME.tmp-XXXX')."""
-    for folder in (asset_dir, asset_dir / mf.RUN_DIRNAME):
-        for path in folder.glob(".*"):
-            if ".tmp-" in path.name or ".old-" in path.name:
-                shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
-
-
-def _discard(asset_dir: Path) -> None:
-    old = asset_dir.with_name(f".{asset_dir.name}.old-{os.getpid()}")
-    asset_dir.rename(old)
-    shutil.rmtree(old, ignore_errors=True)
-
-
 def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, *, overwrite: bool = False,
                  progress: ProgressFn | None = None, pause: Callable[[str], bool] | None = None) -> RunResult:
     """Run (or resume) every stage for ``dataset`` into ``asset_dir``; see the module docstring.
@@ -252,12 +166,12 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     # the output helper (inputs, working folder, foreign folders) holds even for a resume.
     asset_dir = check_output_dir(asset_dir, overwrite=True, inputs=[dataset], what="ASSETDIR")
     with output_lock(asset_dir):
-        manifest, created = _prepare_asset_dir(asset_dir, dataset, overwrite)
+        manifest, created = prepare_asset_dir(asset_dir, dataset, overwrite)
         if overwrite and asset_dir.exists():
-            _discard(asset_dir)
+            discard(asset_dir)
             created = True
         make_output_dir(asset_dir, made_by="real2sim run")
-        _remove_stale_temporaries(asset_dir)
+        remove_stale_temporaries(asset_dir)
         manifest.save()
         return _run_locked(manifest, created, dataset, asset_dir, config, recon_cfg, asset_cfg, run_progress, phone,
                            pause)
@@ -340,7 +254,7 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
         settings = {"method": config.mask_method, "config": mask_cfg}
         if config.mask_method == PARALLAX:
             settings = {"method": PARALLAX, "table_z_m": table_z_m, "seed": config.seed}
-        return runner.stage("masks", {"dataset": mf.files_digest(source, _dataset_files(source))}, settings,
+        return runner.stage("masks", {"dataset": mf.files_digest(source, dataset_files(source))}, settings,
                             upstream, [f"{mf.RUN_DIRNAME}/masked"],
                             lambda: _masks(source, run_dir, config.mask_method, mask_cfg, progress, table_z_m,
                                            config.seed))
@@ -353,7 +267,7 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
         shutil.rmtree(run_dir / "masked", ignore_errors=True)
     if robot_frame is not None:
         source = used
-        upstream = runner.stage("robot_frame", {"dataset": mf.files_digest(source, _dataset_files(source))},
+        upstream = runner.stage("robot_frame", {"dataset": mf.files_digest(source, dataset_files(source))},
                                 {"config": robot_frame, "seed": config.seed}, upstream,
                                 [f"{mf.RUN_DIRNAME}/robot_frame"],
                                 lambda: _robot_frame(source, run_dir, robot_frame, config.seed, progress))
@@ -363,7 +277,7 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
         shutil.rmtree(run_dir / "robot_frame", ignore_errors=True)
     if config.refine is not None:
         source = used
-        inputs = {"dataset": mf.files_digest(source, _dataset_files(source))}
+        inputs = {"dataset": mf.files_digest(source, dataset_files(source))}
         if importlib.util.find_spec("pycolmap") is not None:
             upstream = runner.stage("refine_poses", inputs, config.refine, upstream, [f"{mf.RUN_DIRNAME}/dataset"],
                                     lambda: _refine(source, run_dir, config.refine, progress))
@@ -388,7 +302,7 @@ def _run_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfi
 
     recon_dir = run_dir / "reconstruct"
     upstream = runner.stage(
-        "reconstruct", {"dataset": mf.files_digest(used, _dataset_files(used))},
+        "reconstruct", {"dataset": mf.files_digest(used, dataset_files(used))},
         {"config": recon_cfg, "device": config.device, "seed": config.seed}, upstream,
         [f"{mf.RUN_DIRNAME}/reconstruct/mesh.obj", f"{mf.RUN_DIRNAME}/reconstruct/report.json"],
         lambda: _reconstruct(used, recon_dir, recon_cfg, config.device, config.seed, progress))
@@ -401,7 +315,7 @@ def _run_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfi
                                       "evaluation_mesh": evaluation_mesh, "support": support_from})
     asset_outputs = manifest.entry("asset")["outputs"]
 
-    gt_files = [f for f in _dataset_files(truth_root) if f.startswith("ground_truth/")] if with_truth else []
+    gt_files = [f for f in dataset_files(truth_root) if f.startswith("ground_truth/")] if with_truth else []
     files = [f"{top}/{rel}" for top in asset_outputs if (asset_dir / top).is_dir()
              for rel in mf.tree_files(asset_dir / top)]
     files += [top for top in asset_outputs if (asset_dir / top).is_file()]
