@@ -17,8 +17,8 @@ import warnings
 import pytest
 
 from real2sim.capture.pose_refinement import RefineConfig, RefineResult, refine_poses
-from real2sim.capture.refine_quality import (_warn_beyond_given_accuracy, _warn_if_worse_than_given, judge_change,
-                                             refusal_limit)
+from real2sim.capture.refine_quality import (judge_change, refusal_limit, warn_beyond_given_accuracy,
+                                             warn_if_worse_than_given)
 from real2sim.capture.wrist_camera import CaptureConfig, capture
 from real2sim.formats.dataset import read_dataset
 
@@ -47,7 +47,7 @@ def test_correction_beyond_the_stated_accuracy_warns_and_far_beyond_is_refused(e
     ds = read_dataset(exact_capture)
     verdict, allowed_mm, allowed_deg = judge_change(ds, 1.0, 0.1, 0.0, 0.0, 0.3)
     assert verdict == "warn" and 0.2 < allowed_mm < 1.0 and 0.03 < allowed_deg < 0.1, (allowed_mm, allowed_deg)
-    told = _messages(_warn_beyond_given_accuracy, 1.0, 0.1, 0.0, 0.0, 0.3, allowed_mm, allowed_deg)
+    told = _messages(warn_beyond_given_accuracy, 1.0, 0.1, 0.0, 0.0, 0.3, allowed_mm, allowed_deg)
     assert len(told) == 1 and "moved the refined frames by 1.00 mm / 0.100 deg (median)" in told[0], told
     assert "stated accuracy (0 mm / 0 deg)" in told[0] and "0.30 px reprojection error" in told[0]
     assert judge_change(ds, 4.0, 0.9, 5.0, 1.0, 0.3)[0] == "ok"
@@ -67,12 +67,12 @@ def test_worse_against_ground_truth_warns():
                 mean_reproj_error_px=0.3, sim3_scale=1.0)
     worse = RefineResult(**base, rot_error_before_deg=0.0, trans_error_before_mm=0.0, rot_error_after_deg=0.149,
                          trans_error_after_mm=1.32)
-    told = _messages(_warn_if_worse_than_given, worse)
+    told = _messages(warn_if_worse_than_given, worse)
     assert len(told) == 1 and "position 0.00 -> 1.32 mm, rotation 0.000 -> 0.149 deg" in told[0], told
     better = RefineResult(**base, rot_error_before_deg=0.9, trans_error_before_mm=4.2, rot_error_after_deg=0.24,
                           trans_error_after_mm=2.0)
-    assert _messages(_warn_if_worse_than_given, better) == []
-    assert _messages(_warn_if_worse_than_given, RefineResult(**base)) == []  # no ground truth: nothing to compare
+    assert _messages(warn_if_worse_than_given, better) == []
+    assert _messages(warn_if_worse_than_given, RefineResult(**base)) == []  # no ground truth: nothing to compare
 
 
 @pytest.mark.slow

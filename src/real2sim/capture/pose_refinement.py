@@ -38,8 +38,8 @@ from pathlib import Path
 import numpy as np
 
 from real2sim.capture.colmap import ColmapFailure, colmap_logging, refine_steps, run_colmap
-from real2sim.capture.refine_quality import (IMPLAUSIBLE_FACTOR, _warn_beyond_given_accuracy,
-                                             _warn_if_worse_than_given, _with_errors, judge_change, refusal_limit)
+from real2sim.capture.refine_quality import (IMPLAUSIBLE_FACTOR, judge_change, refusal_limit,
+                                             warn_beyond_given_accuracy, warn_if_worse_than_given, with_errors)
 from real2sim.formats.dataset import (
     CV_FROM_GL,
     POSE_REFINED_KEY,
@@ -315,7 +315,7 @@ def refine_dataset_poses(ds: Dataset, cfg: RefineConfig = RefineConfig(), progre
                         "--pose-noise-mm/--pose-noise-deg, or transforms.json's real2sim.pose_noise_mm/pose_noise_deg)",
                         **info, median_correction_mm=moved_mm, median_correction_deg=moved_deg)
     if verdict == "warn":
-        _warn_beyond_given_accuracy(moved_mm, moved_deg, noise_mm, noise_deg, reproj, allowed_mm, allowed_deg)
+        warn_beyond_given_accuracy(moved_mm, moved_deg, noise_mm, noise_deg, reproj, allowed_mm, allowed_deg)
     return aligned, RefineResult(refined=True, reason="ok", num_frames=n, num_refined_frames=int(ok.sum()),
                                  sim3_scale=float(s), seconds=time.perf_counter() - t_start,
                                  frame_refined=tuple(bool(x) for x in ok), median_correction_mm=moved_mm,
@@ -342,8 +342,8 @@ def refine_poses(dataset_dir: Path | str, cfg: RefineConfig = RefineConfig(),
     check_replaceable(root / "transforms.json", what="refine-poses output")
     poses, result = refine_dataset_poses(ds, cfg, progress)
     names = [f.file_path for f in ds.frames]
-    result = _with_errors(result, read_ground_truth(root), names, ds.poses_c2w_gl(), poses)
-    _warn_if_worse_than_given(result)
+    result = with_errors(result, read_ground_truth(root), names, ds.poses_c2w_gl(), poses)
+    warn_if_worse_than_given(result)
     if progress:
         progress("writing", refine_steps(cfg) - 1, refine_steps(cfg))
     unrefined = root / "transforms_unrefined.json"

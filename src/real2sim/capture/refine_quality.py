@@ -67,7 +67,7 @@ def judge_change(ds: Dataset, moved_mm: float, moved_deg: float, noise_mm: float
     return "ok", allowed_mm, allowed_deg
 
 
-def _warn_beyond_given_accuracy(moved_mm: float, moved_deg: float, noise_mm: float, noise_deg: float,
+def warn_beyond_given_accuracy(moved_mm: float, moved_deg: float, noise_mm: float, noise_deg: float,
                                 reproj_px: float | None, allowed_mm: float, allowed_deg: float) -> None:
     """Warn when COLMAP moved the refined frames by more than :func:`judge_change` allows (but not so far
     that it refuses): given poses that are already right (a noise-free capture) are then made worse, not
@@ -79,7 +79,7 @@ def _warn_beyond_given_accuracy(moved_mm: float, moved_deg: float, noise_mm: flo
                   "given poses are accurate", RuntimeWarning, stacklevel=4)
 
 
-def _with_errors(result: RefineResult, gt: Dataset | None, names: list[str], before: np.ndarray,
+def with_errors(result: RefineResult, gt: Dataset | None, names: list[str], before: np.ndarray,
                  after: np.ndarray) -> RefineResult:
     if gt is None:
         return result
@@ -107,7 +107,7 @@ WORSE_TOLERANCE_MM = 0.1
 WORSE_TOLERANCE_DEG = 0.02
 
 
-def _warn_if_worse_than_given(result: RefineResult) -> None:
+def warn_if_worse_than_given(result: RefineResult) -> None:
     """With ground truth: warn when the refined poses are further from it than the given ones were."""
     if not result.refined or result.trans_error_after_mm is None:
         return

@@ -46,7 +46,8 @@ class VoxelIndex:
         self.voxel_m = float(grid.voxel_m)
         shape = np.asarray(grid.shape)
         self.shape = torch.as_tensor(shape, dtype=torch.int64, device=device)
-        self.lo = torch.as_tensor(grid.origin_m - 0.5 * grid.voxel_m, dtype=torch.float64, device=device)
+        self.lo_m = np.asarray(grid.origin_m, dtype=float) - 0.5 * grid.voxel_m  # the grid's corner
+        self.lo = torch.as_tensor(self.lo_m, dtype=torch.float64, device=device)
         self.strides = torch.as_tensor([shape[1] * shape[2], shape[2], 1], dtype=torch.int64, device=device)
 
     def tensor(self, a, dtype=torch.float64) -> torch.Tensor:
@@ -62,9 +63,8 @@ class VoxelIndex:
     def occupied_box(self, solid: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         """The corners (lo, hi), metres, of the box around ``solid``'s voxels."""
         occupied = np.argwhere(solid)
-        lo = self.lo.cpu().numpy()
-        return (self.tensor(lo + occupied.min(axis=0) * self.voxel_m),
-                self.tensor(lo + (occupied.max(axis=0) + 1) * self.voxel_m))
+        return (self.tensor(self.lo_m + occupied.min(axis=0) * self.voxel_m),
+                self.tensor(self.lo_m + (occupied.max(axis=0) + 1) * self.voxel_m))
 
 
 def segments_clear(solid: np.ndarray, grid: VoxelGrid, origins: np.ndarray, directions: np.ndarray,
@@ -91,8 +91,9 @@ def segments_clear(solid: np.ndarray, grid: VoxelGrid, origins: np.ndarray, dire
     centre_0 = index.lo + 0.5 * index.voxel_m
     blocked = torch.zeros(len(o), dtype=torch.bool, device=device)
     # counted back from the segment's end, so that its last sample is the end itself: a surface just
-    # short of it is met whatever the box's entry. Counted from the entry, the mug's hull (48 voxels,
-    # 100 views) agreed with Embree on 86.5 % of the (view, voxel) sightings, from the end 94.3 %
+    # short of it is met whatever the box's entry. Measured with the walk's first, nearest-voxel lookup:
+    # counted from the entry, the mug's hull (48 voxels, 100 views) agreed with Embree on 86.5 % of the
+    # (view, voxel) sightings, from the end 94.3 % (trilinear, from the end: 97.7 %)
     start = end - (count - 1).clamp_min(0).to(end.dtype) * step_m
     for rays, ray_of, t in flat_samples(start, count, step_m, samples_per_chunk):
         at = ((o[rays][ray_of] + t[:, None] * d[rays][ray_of] - centre_0) / index.voxel_m) * to_unit - 1.0
