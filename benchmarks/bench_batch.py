@@ -7,6 +7,11 @@ no pose refinement. Measured, each on a fresh CATALOGUE, as the wall time of the
 * one by one: `real2sim run` on each object, one after another (the baseline a batch replaces);
 * `real2sim batch --executor local|ray --workers N` for each N.
 
+Before the timed passes, one object goes through `real2sim run` untimed, so that every pass finds the
+libraries (torch, Drake, Open3D: about 2 GB) in the page cache: the first command after a while reads them
+from disk, which made one worker's time vary from 70 to 103 s on the same idle machine. With
+``--repeats R`` the passes run R times, interleaved, and the median is reported beside every time.
+
 Reported: objects per hour, speed-up against one worker of the same executor, overhead of the
 one-worker local batch against one by one, Ray against the local pool with the same workers, and the
 mean stage times (from timings.csv), which docs/scaling.md turns into the cost of a 100-object batch.
@@ -21,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import shutil
 import statistics
 import subprocess
 import sys
@@ -40,11 +46,21 @@ MASSES_KG = {"can": 0.35, "mug": 0.3, "bottle": 0.6}
 
 def _cli(*argv) -> float:
     """Wall seconds of ``real2sim ARGV`` in its own process; raises when it fails."""
+    return _cli_timed(*argv)[0]
+
+
+def _cli_timed(*argv) -> tuple[float, float]:
+    """Wall and CPU seconds (user + system, its whole process tree) of ``real2sim ARGV``."""
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.monotonic()
     done = subprocess.run([sys.executable, "-m", "real2sim", *map(str, argv)], capture_output=True, text=True)
+    wall_s = time.monotonic() - start
     if done.returncode != 0:
         raise SystemExit(f"real2sim {' '.join(map(str, argv[:2]))} failed:\n{done.stdout}\n{done.stderr}")
-    return time.monotonic() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall_s, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def make_captures(root: Path, views: int, width: int, height: int) -> list[Path]:
@@ -80,7 +96,9 @@ def passes(executors: list[str], workers: list[int], serial: bool) -> list[tuple
     return first + [p for p in wanted if p not in first]
 
 
-def report(results: dict, n: int, means: dict, args, views: str) -> None:
+def report(timings: dict, n: int, means: dict, args, views: str) -> None:
+    """``timings``: (executor, workers) -> [(wall s, CPU s) per repeat]; the medians make the table."""
+    results = {key: statistics.median(w for w, _ in runs) for key, runs in timings.items()}
     rows = []
     serial_s = results.get(("one by one", 1))
     for (executor, workers), wall_s in results.items():
@@ -88,12 +106,19 @@ def report(results: dict, n: int, means: dict, args, views: str) -> None:
             continue
         one = results.get((executor, 1))
         local = results.get(("local", workers))
-        rows.append([executor, workers, round(wall_s), round(n * 3600 / wall_s, 1),
+        runs = timings[executor, workers]
+        rows.append([executor, workers, round(wall_s), " ".join(f"{w:.0f}" for w, _ in runs),
+                     # Ray's workers are its daemons' children, not the command's: their CPU is not counted
+                     round(statistics.median(c for _, c in runs)) if executor != "ray" else "-",
+                     round(n * 3600 / wall_s, 1),
                      f"{one / wall_s:.2f}x" if one else "-",
                      f"{100 * (wall_s / local - 1):+.0f} %" if local and executor == "ray" else "-"])
     body = [f"{n} captures ({views}), `{' '.join(RUN_FLAGS)}`, no evaluation; each row a fresh CATALOGUE, the "
-            "whole command's wall time (Ray's start included).", "",
-            markdown_table(["executor", "workers", "wall s", "objects / h", "vs 1 worker", "vs local pool"], rows)]
+            "whole command's wall time (Ray's start included); the libraries warmed into the page cache first; "
+            f"{args.repeats} repeat(s) interleaved, medians (each repeat's wall time beside them; CPU: user + "
+            "system seconds of the whole process tree).", "",
+            markdown_table(["executor", "workers", "wall s (median)", "each repeat s", "CPU s", "objects / h",
+                            "vs 1 worker", "vs local pool"], rows)]
     if serial_s is not None:
         body += ["", f"One by one (`real2sim run` x {n}): {serial_s:.0f} s, {n * 3600 / serial_s:.1f} objects / h."]
         if ("local", 1) in results:
@@ -117,6 +142,7 @@ def main() -> None:
     parser.add_argument("--height", type=int, default=120)
     parser.add_argument("--no-serial", action="store_true", help="skip the one-by-one baseline")
     parser.add_argument("--tag", default="batch", help="section name in docs/benchmarks/")
+    parser.add_argument("--repeats", type=int, default=1, help="run every pass this many times, interleaved")
     args = parser.parse_args()
     views = (f"{', '.join(OBJECTS)} x seeds {SEEDS}; {args.views} views at {args.width}x{args.height}")
 
@@ -124,20 +150,26 @@ def main() -> None:
         root = Path(tmp)
         datasets = make_captures(root, args.views, args.width, args.height)
         masses = _masses(root, datasets)
-        results: dict[tuple[str, int], float] = {}
+        first = datasets[0]
+        _cli("run", first, "--mass", MASSES_KG[first.name.split("_")[0]], "--out", root / "warm_up", *RUN_FLAGS)
+        timings: dict[tuple[str, int], list[tuple[float, float]]] = {}
         means: dict[str, float] = {}
-        for executor, workers in passes(args.executors, args.workers, not args.no_serial):
-            if executor == "one by one":
-                results[executor, 1] = sum(
-                    _cli("run", ds, "--mass", MASSES_KG[ds.name.split("_")[0]], "--out", root / "serial" / ds.name,
-                         *RUN_FLAGS) for ds in datasets)
-            else:
-                out = root / f"{executor}_{workers}"
-                results[executor, workers] = _cli("batch", *datasets, "--masses", masses, "--out", out,
-                                                  "--executor", executor, "--workers", workers, *RUN_FLAGS)
-                means = means or stage_means(out)
-            print(f"{executor} x{workers}: {results[executor, workers]:.0f} s", flush=True)
-            report(results, len(datasets), means, args, views)
+        for repeat in range(args.repeats):
+            for executor, workers in passes(args.executors, args.workers, not args.no_serial):
+                if executor == "one by one":
+                    serial = [_cli_timed("run", ds, "--mass", MASSES_KG[ds.name.split("_")[0]], "--out",
+                                         root / f"serial_{repeat}" / ds.name, *RUN_FLAGS) for ds in datasets]
+                    wall_cpu = (sum(w for w, _ in serial), sum(c for _, c in serial))
+                else:
+                    out = root / f"{executor}_{workers}_{repeat}"
+                    wall_cpu = _cli_timed("batch", *datasets, "--masses", masses, "--out", out,
+                                          "--executor", executor, "--workers", workers, *RUN_FLAGS)
+                    means = means or stage_means(out)
+                    shutil.rmtree(out, ignore_errors=True)
+                timings.setdefault((executor, workers), []).append(wall_cpu)
+                print(f"repeat {repeat + 1}: {executor} x{workers}: {wall_cpu[0]:.0f} s wall, {wall_cpu[1]:.0f} s CPU",
+                      flush=True)
+                report(timings, len(datasets), means, args, views)
 
 
 if __name__ == "__main__":

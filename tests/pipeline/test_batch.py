@@ -249,3 +249,24 @@ def test_an_evaluated_batch_recommends_from_the_simulations(capsys, datasets, tm
     assert row["basis"] == "evaluation" and row["report"] == "can_ds/results/report.html"
     assert row["accuracy_representation"].startswith(("spheres_4", "mesh"))
     assert float(row["accuracy_ocae_m"]) >= 0 and float(row["accuracy_sim_time_s"]) > 0
+
+
+def test_a_worker_holds_every_numeric_library_to_its_share_of_the_cpus():
+    """Two workers on two cores each start a thread per CPU in torch, numpy's BLAS and OpenMP unless held to
+    one: four busy threads on two cores (bench_batch: 52-54 s against 44-45 s for the six captures). numpy's
+    BLAS loads with real2sim's first import, before the worker's job: its limit must reach a loaded library.
+    In a fresh interpreter, as a spawned worker starts, so that this process keeps its own thread pools."""
+    script = (
+        "import real2sim.pipeline.batch as b, numpy, threadpoolctl, json\n"
+        "b.limit_threads(1)\n"
+        "import torch, scipy.linalg\n"
+        "pools = threadpoolctl.threadpool_info()\n"
+        "print(json.dumps({'torch': torch.get_num_threads(), 'pools': [(p['internal_api'], p['num_threads']) "
+        "for p in pools]}))\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
+                          env={**__import__("os").environ, "OMP_NUM_THREADS": "", "OPENBLAS_NUM_THREADS": ""})
+    found = json.loads(done.stdout.strip().splitlines()[-1])
+    assert found["torch"] == 1
+    apis = {api for api, _ in found["pools"]}
+    assert any("blas" in api for api in apis), found  # numpy's BLAS was found and held
+    assert all(n == 1 for _, n in found["pools"]), found

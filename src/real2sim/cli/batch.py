@@ -144,7 +144,8 @@ def plan(args: argparse.Namespace):
     batch = BatchConfig(executor=args.executor, address=args.address, workers=args.workers,
                         timeout_s=args.ray_timeout_s)
     workers = max(1, min(args.workers or cpu_count(), len(names)))
-    threads = max(1, cpu_count() // workers) if args.executor == "local" else 0
+    # Ray gives a task with one CPU one thread (OMP_NUM_THREADS); numpy's BLAS is held to it as well
+    threads = max(1, cpu_count() // workers) if args.executor == "local" else 1
     jobs = []
     for name, dataset in zip(names, args.datasets):
         mass, reason = _mass_of(name, dataset_folder(dataset), args, table)

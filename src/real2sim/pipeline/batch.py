@@ -155,9 +155,7 @@ def run_object(job: ObjectJob) -> dict:
     from real2sim.pipeline.run import StageFailed, run_pipeline
 
     if job.threads:
-        import torch
-
-        torch.set_num_threads(job.threads)  # this worker's own process: several share the CPUs
+        limit_threads(job.threads)
     log = open(job.log, "a", encoding="utf-8") if job.log else open(os.devnull, "w")
     with log, contextlib.redirect_stderr(log):
         def say(message: str, done: int, total: int) -> None:
@@ -180,6 +178,26 @@ def run_object(job: ObjectJob) -> dict:
         return {"name": job.name, "status": "paused", "reason": "", "ran": ran}
     return {"name": job.name, "status": "done", "reason": "", "ran": ran,
             "warnings": len(result.stage_warnings)}
+
+
+#: The thread pools of the numeric libraries an object's stages load: OpenMP (torch, Open3D), OpenBLAS and MKL
+#: (numpy, scipy).
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def limit_threads(threads: int) -> None:
+    """This worker process's numeric libraries to ``threads`` threads each. Called in a pool's worker before
+    the stages import them: each library otherwise starts a thread per CPU, and two workers on two cores then
+    run four busy threads (the 6 small captures of bench_batch on 2 cores, 2 workers: 88-102 CPU s with torch
+    alone limited, 79-84 with these too; 52-54 -> 42-45 s wall). Ray does the same for its tasks itself."""
+    from threadpoolctl import threadpool_limits
+
+    for name in THREAD_VARIABLES:  # the libraries not loaded yet
+        os.environ[name] = str(threads)
+    threadpool_limits(limits=threads)  # and those loaded already (numpy's OpenBLAS, with real2sim's first import)
+    import torch
+
+    torch.set_num_threads(threads)
 
 
 def _assigned(job: ObjectJob) -> str:
