@@ -133,6 +133,59 @@ def reconstruct_condition(name: str, condition: str, dataset: Path, device: str)
             "; ".join("WARNING: " + w[:100].replace("|", "/") for w in said) or "-", round(wall_s)]
 
 
+def shape_error(mesh_path: Path, dataset: Path) -> tuple[float, float, float]:
+    """The reconstruction's mesh (world frame) against the true object after the translation that best lays
+    it on the truth (nearest points, 40 rounds): (Chamfer mm, IoU, that translation's length mm). Apart from
+    the world frame: with every pose off, where the object stands in the world is only as sure as the
+    poses' mean, which the images cannot fix."""
+    import numpy as np
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    from real2sim.reconstruct.truth import compare_to_truth, load_truth
+
+    truth = load_truth(dataset)
+    mesh = trimesh.load(mesh_path, force="mesh")
+    rng = np.random.default_rng(0)
+    true_points = trimesh.sample.sample_surface(truth, 30000, seed=rng)[0]
+    points = trimesh.sample.sample_surface(mesh, 30000, seed=rng)[0]
+    tree, shift = cKDTree(true_points), np.zeros(3)
+    for _ in range(40):
+        _, nearest = tree.query(points + shift)
+        shift += (true_points[nearest] - (points + shift)).mean(axis=0)
+    moved = mesh.copy()
+    moved.apply_translation(shift)
+    rec = compare_to_truth(moved, truth)
+    return round(rec["chamfer_mm"], 3), round(rec["iou"], 4), round(1000.0 * float(np.linalg.norm(shift)), 2)
+
+
+def frame_bound(dataset: Path, noise: tuple[float, float], trials: int = 200) -> dict:
+    """How far the views' common point (``silhouette_poses.common_point``, from the true masks) lands from
+    where the true poses put it, over ``trials`` draws of the capture's pose noise (``perturb_poses``): with
+    every pose off, that is how well the given poses place the object in the world, whatever aligns the views
+    to each other afterwards. mm: RMS per world axis, median and 90th percentile of the 3-D distance."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from real2sim.capture.wrist_camera import perturb_poses
+    from real2sim.formats.dataset import read_ground_truth
+    from real2sim.reconstruct.silhouette_poses import common_point, mask_centres
+    from real2sim.reconstruct.views import load_views
+
+    views = load_views(dataset)
+    truth = read_ground_truth(dataset)
+    true = dict(zip((f.file_path for f in truth.frames), truth.poses_c2w_cv()))
+    true_c2w = np.stack([true[n] for n in views.names])
+    centres, whole, _ = mask_centres(views)
+    exact, _ = common_point(replace(views, c2w_cv=true_c2w), centres, whole)
+    errors = np.array([common_point(replace(views, c2w_cv=perturb_poses(true_c2w, *noise, seed=1000 + t)),
+                                    centres, whole)[0] - exact for t in range(trials)]) * 1000.0
+    distance = np.linalg.norm(errors, axis=1)
+    return {"rms_per_axis_mm": [round(float(x), 2) for x in np.sqrt((errors ** 2).mean(axis=0))],
+            "median_mm": round(float(np.median(distance)), 2), "p90_mm": round(float(np.quantile(distance, 0.9)), 2)}
+
+
 def run_condition(name: str, condition: str, work: Path, views: int, width: int, height: int,
                   run_args: list[str], noise: tuple[float, float] = (5.0, 1.0), all_unrefined: bool = False) -> list:
     """One table row: object, condition, Chamfer mm, IoU, target met, WARNING lines, run seconds."""
@@ -141,7 +194,7 @@ def run_condition(name: str, condition: str, work: Path, views: int, width: int,
     dataset, asset = work / f"{name}_{condition}", work / f"{name}_{condition}_asset"
     failed = _capture(name, condition, dataset, views, width, height, noise)
     if failed:
-        return [name, condition, "-", "-", failed, "-", "-"]
+        return [name, condition, "-", "-", failed, "-", "-", "-", "-", "-", "-"]
     if all_unrefined:
         mark_all_unrefined(dataset)
         run_args = [*run_args, "--no-refine-poses"]
@@ -154,11 +207,14 @@ def run_condition(name: str, condition: str, work: Path, views: int, width: int,
                        if ln.strip().startswith("WARNING")})
     warned = "; ".join(w.replace("|", "/") for w in warnings) or "-"
     if run.returncode != 0:
-        return [name, condition, "-", "-", f"run failed (exit {run.returncode}): {_last_error(run.stderr)}", warned,
-                round(wall_s)]
+        return [name, condition, "-", "-", f"run failed (exit {run.returncode}): {_last_error(run.stderr)}",
+                "-", "-", "-", "-", warned, round(wall_s)]
     rec = json.loads((asset / "truth.json").read_text())["reconstruction"]
     met = rec["chamfer_mm"] <= TARGET_CHAMFER_MM and rec["iou"] >= TARGET_IOU
-    return [name, condition, rec["chamfer_mm"], rec["iou"], "yes" if met else "no", warned, round(wall_s)]
+    shape = shape_error(asset / ".run" / "reconstruct" / "mesh.obj", dataset)
+    bound = frame_bound(dataset, noise)
+    return [name, condition, rec["chamfer_mm"], rec["iou"], "yes" if met else "no", *shape,
+            f"{bound['median_mm']} ({bound['p90_mm']})", warned, round(wall_s)]
 
 
 def main() -> int:
@@ -226,8 +282,16 @@ def main() -> int:
             flags = "\n".join(f"- `{c}`: `capture {' '.join(_flags(c, width, height))}`" for c in conditions)
             body = ((args.note + "\n\n" if args.note else "") + setting + f". Target: Chamfer <= {TARGET_CHAMFER_MM} "
                     f"mm and IoU >= {TARGET_IOU} against the true object (truth.json).\n\n"
-                    + markdown_table(["object", "condition", "Chamfer mm", "IoU", "target met", f"{verb} WARNING lines",
-                                      f"{verb} wall s"], rows) + "\n\nConditions:\n\n" + flags)
+                    + markdown_table(["object", "condition", "Chamfer mm", "IoU", "target met"]
+                                     + (["shape Chamfer mm", "shape IoU", "frame offset mm",
+                                         "frame bound mm, median (p90)"] if verb == "run" else [])
+                                     + [f"{verb} WARNING lines", f"{verb} wall s"], rows)
+                    + "\n\nConditions:\n\n" + flags
+                    + ("\n\nShape: the reconstruction's mesh moved by the translation that best lays it on the true "
+                       "object (frame offset: that translation's length); the world frame is as sure as the given "
+                       "poses' mean when every pose is off. Frame bound: how far the given poses alone place the "
+                       "object, over 200 draws of the capture's pose noise on its true poses (the views' common "
+                       "point, `silhouette_poses.common_point`, from the true masks)." if verb == "run" else ""))
             section, title = "hard_captures", ("Hard captures: `run` on turntable, long-lens, cut-off, no-table, "
                                                "jittered and JPEG captures")
             if args.datasets is not None:
