@@ -163,6 +163,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--tag", default="", help="write docs/benchmarks/reconstruct_TAG.md instead (a partial run)")
+    ap.add_argument("--variants", default="field,hull",
+                    help="among field (the defaults), field-poses and field-no-poses (the field with its per-view pose "
+                         "correction on or off), hull")
     args = ap.parse_args(argv)
 
     from dataclasses import replace
@@ -174,7 +177,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.views, args.width, args.height = 40, 160, 120
         field_cfg = replace(field_cfg, coarse_voxels=40, fine_voxels=80, coarse_steps=150, fine_steps=300)
-    variants = [("field", ReconstructConfig(field=field_cfg)), ("hull", ReconstructConfig(backend="hull"))]
+    known = {"field": ReconstructConfig(field=field_cfg),
+             "field-poses": ReconstructConfig(field=replace(field_cfg, pose_refinement=True)),
+             "field-no-poses": ReconstructConfig(field=replace(field_cfg, pose_refinement=False)),
+             "hull": ReconstructConfig(backend="hull")}
+    unknown = [v for v in args.variants.split(",") if v not in known]
+    if unknown:
+        ap.error(f"unknown variant(s) {', '.join(unknown)}; choose among {', '.join(known)}")
+    variants = [(v, known[v]) for v in args.variants.split(",")]
 
     rows, pose_rows, stage_rows = [], [], []
     with tempfile.TemporaryDirectory(prefix="bench-reconstruct-") as tmp:

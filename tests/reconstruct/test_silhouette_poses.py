@@ -89,7 +89,7 @@ def test_the_stage_moves_unrefined_training_views_and_leaves_unrefined_held_out_
         can_capture, can_without_truth, tiny_config, tmp_path):
     from dataclasses import replace
 
-    from real2sim.formats.dataset import CV_FROM_GL, POSE_REFINED_KEY
+    from real2sim.formats.dataset import POSE_REFINED_KEY
     from real2sim.reconstruct.stage import reconstruct
 
     from tests.reconstruct.conftest import copy_dataset, edit_transforms

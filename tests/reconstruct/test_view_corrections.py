@@ -77,10 +77,11 @@ def test_wrong_poses_move_toward_the_true_ones(views, region):
     assert after[BAD_VIEWS].mean() < 0.5 * before[BAD_VIEWS].mean(), (before[BAD_VIEWS], after[BAD_VIEWS])
     good = np.setdiff1d(np.arange(views.count), BAD_VIEWS)
     assert after[good].mean() < 1.0
+    # learnt on the coarse grid, then kept through the fine one: no gradient reaches them there
+    assert not trained.corrections.poses_learning and not trained.corrections.rotation_rad.requires_grad
 
 
-# pose corrections are opt-in; the default suite keeps the test that they move wrong poses back
-@pytest.mark.slow
+# pose corrections are on by default: on exact poses they must stay out of the way
 def test_exact_poses_stay_nearly_where_they_are(views, region):
     """With the true poses the corrections stay small beside the errors they are for (1 degree, 5 mm):
     the object's box moves by less than 0.75 px in the images (about 0.55 px measured). (On this tiny grid, 1.4 mm voxels, rotations
@@ -194,11 +195,11 @@ def test_jpeg_photos_load_as_the_png_ones(can_capture, tmp_path, views):
     assert np.abs(jpeg.rgb - views.rgb).mean() < 0.02
 
 
-@pytest.mark.parametrize("flags, poses, colours", [([], False, True), (["--field-poses"], True, True),
+@pytest.mark.parametrize("flags, poses, colours", [([], True, True), (["--no-field-poses"], False, True),
                                                     (["--field-poses", "--no-field-colours"], True, False)])
 def test_command_line_turns_the_corrections_off(flags, poses, colours):
-    """`reconstruct` (and `run`, which shares the flags): colours corrected by default (--no-field-colours turns
-    them off), poses with --field-poses."""
+    """`reconstruct` (and `run`, which shares the flags): colours and poses corrected by default
+    (--no-field-colours and --no-field-poses turn them off)."""
     from real2sim.cli import build_parser
     from real2sim.cli.reconstruct import reconstruct_config
 

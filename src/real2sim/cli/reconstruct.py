@@ -79,10 +79,11 @@ def add_field_arguments(p) -> None:
     p.add_argument("--no-photo-carving", dest="photo_carving", action="store_false",
                    help="field backend: train from the visual hull as it is, without opening the concavities "
                         "the views disagree about (see docs/reconstruct.md)")
-    p.add_argument("--field-poses", dest="field_poses", action="store_true",
-                   help="field backend: correct each view's pose while the field trains (a small rotation and "
-                        "a shift of a few millimetres; the corrections are in report.json); off by default: it "
-                        "brings back a few bad views among good ones, not a capture whose every pose is off")
+    p.add_argument("--field-poses", dest="field_poses", action=argparse.BooleanOptionalAction, default=True,
+                   help="field backend: correct each view's pose while the field trains on its coarse grid (a "
+                        "small rotation and a shift of a few millimetres; the corrections are in report.json); on "
+                        "by default: it brings a few bad views among good ones back, and sharpens refined poses "
+                        "(the can: field PSNR +0.9 dB); --no-field-poses takes the poses as they are")
     p.add_argument("--no-field-colours", dest="field_colours", action="store_false",
                    help="field backend: no per-view colour correction (a gain and an offset per channel "
                         "that absorb each photo's exposure and white balance)")
@@ -100,7 +101,7 @@ def reconstruct_config(args: argparse.Namespace, field_voxels: int | None):
     from real2sim.reconstruct.train import FieldConfig
 
     field = FieldConfig().with_budget(args.steps, field_voxels).with_carving(args.photo_carving, args.hollow_prior)
-    field = replace(field, pose_refinement=getattr(args, "field_poses", False),
+    field = replace(field, pose_refinement=getattr(args, "field_poses", True),
                     colour_correction=getattr(args, "field_colours", True))
     return ReconstructConfig(backend=args.backend, extraction=args.extraction, surface_level=args.surface_level,
                              field=field, texture_px=args.texture_px, max_image_side_px=args.max_image_px,

@@ -54,11 +54,12 @@ class FieldConfig:
     coarse grid) of what carving kept; deeper carved space is not part of the field, so
     rays into an opened cavity skip it (a negative margin keeps all of it in the field).
 
-    ``pose_refinement``: each training view's pose is corrected with the field (off by default:
-    on a capture whose every pose is off it cost about a quarter more CPU time and did not lower
-    the Chamfer, 5.12 against 5.14 mm on 60 noisy views of the can; it does bring back a few bad
-    views among good ones); ``colour_correction`` (on): each view's exposure and white balance.
-    Both coarse to fine, with the rates and priors of ``corrections``; see
+    ``pose_refinement`` (on): each training view's pose is corrected with the field while it is on its
+    coarse grid, then kept (it brings a few bad views among good ones back; on the bundled can and
+    bottle after refine-poses, field PSNR +0.9 and +0.2 dB, Chamfer 0.146 -> 0.141 and 0.291 -> 0.287
+    mm, for 14 % and -3 % CPU time, docs/benchmarks/reconstruct_field_poses.md; learnt on the fine
+    grid as well it had cost a quarter more time); ``colour_correction`` (on): each view's exposure
+    and white balance, all through training. Both with the rates and priors of ``corrections``; see
     :mod:`real2sim.reconstruct.view_corrections`.
     """
 
@@ -82,7 +83,7 @@ class FieldConfig:
     photo_carving: bool = True
     carved_margin_voxels: int = 2
     carving: CarvingConfig = dataclass_field(default_factory=CarvingConfig)
-    pose_refinement: bool = False
+    pose_refinement: bool = True
     colour_correction: bool = True
     corrections: CorrectionConfig = dataclass_field(default_factory=CorrectionConfig)
 
@@ -269,7 +270,7 @@ class _PoolRanges:
     def __init__(self, field: VoxelRadianceField, pool: RayPool, corrections: ViewCorrections | None,
                  pad_voxels: int = 4, min_interval: int = 50):
         self.field, self.pool, self.corrections = field, pool, corrections
-        self.moving = corrections is not None and corrections.poses
+        self.moving = corrections is not None and corrections.poses_learning
         self.grow = pad_voxels if self.moving else 1
         self.allowance_m = (self.grow - 1) * field.grid.voxel_m
         self.min_interval = min_interval
@@ -282,7 +283,7 @@ class _PoolRanges:
         origins, directions, view = self.pool.origins, self.pool.directions, self.pool.view
         if index is not None:
             origins, directions, view = origins[index], directions[index], view[index]
-        if not self.moving:
+        if self.corrections is None or not self.corrections.poses:
             return origins, directions
         with torch.no_grad():
             return self.corrections.rays(view, origins, directions)
@@ -345,6 +346,12 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
                                        init_density=init_density, device=device, generator=gen)
         else:
             field = field.upsampled(grid, occupancy)
+            if corrections is not None and corrections.poses_learning:
+                # The poses learn on the coarse grid only, whose big voxels give a misplaced pixel a gradient
+                # that reaches millimetres; on the fine grid they would chase its detail, and learning them
+                # there cost a quarter more time (rays cast again as they move, gradients through every
+                # sample's position) for no gain measured.
+                corrections.freeze_poses()
         done = _optimise(field, pool, config, steps, done, total, gen, progress, curve, learner)
     return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
                        carved_voxels=int(carved.sum()), restored_voxels=carving.restored_voxels if carving else 0,

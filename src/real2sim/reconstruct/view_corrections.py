@@ -21,8 +21,8 @@ Three things keep the corrections honest:
   table at z = 0;
 * coarse to fine: the poses learn while the field is on its coarse grid, where the
   trilinear blend of big voxels gives every misaligned pixel a gradient that reaches a
-  few millimetres (the idea of BARF's band-limited start), and their learning rate
-  decays a hundredfold over training, so on the fine grid they settle instead of
+  few millimetres (the idea of BARF's band-limited start), with a decaying rate, and are
+  kept as they are on the fine grid (:meth:`ViewCorrections.freeze_poses`) instead of
   chasing its detail. They start after ``warmup_steps``, once the field's colours
   roughly match the images (before that every gradient says "change colour").
 
@@ -100,6 +100,7 @@ class ViewCorrections(torch.nn.Module):
         super().__init__()
         views = len(c2w_cv)
         self.config, self.poses, self.colours = config, poses, colours
+        self.poses_learning = poses  # False once frozen: applied to the rays, no longer learnt
         self.rotation_rad = torch.nn.Parameter(torch.zeros(views, 3, device=device))
         self.translation_m = torch.nn.Parameter(torch.zeros(views, 3, device=device))
         self.log_gain = torch.nn.Parameter(torch.zeros(views, 3, device=device))
@@ -133,6 +134,13 @@ class ViewCorrections(torch.nn.Module):
             else:
                 group["lr"] = group["base"] * c.lr_final_fraction ** ((done - start) / max(total - start, 1))
 
+    def freeze_poses(self) -> None:
+        """Keep the pose corrections as they are from now on (the fine grid): they still move the rays, but
+        get no gradients, no prior and no gauge, and the rays' stretches need no recasting."""
+        self.poses_learning = False
+        self.rotation_rad.requires_grad_(False)
+        self.translation_m.requires_grad_(False)
+
     # -- applying them ---------------------------------------------------------------------------
     def rays(self, view: torch.Tensor, origins: torch.Tensor, directions: torch.Tensor):
         """Corrected world rays (R, 3) of the pool rays ``origins``, ``directions`` of views ``view`` (R,)."""
@@ -152,7 +160,7 @@ class ViewCorrections(torch.nn.Module):
         """The Gaussian prior toward no correction, averaged over the views (added to the photometric loss)."""
         c = self.config
         terms = torch.zeros((), device=self.rotation_rad.device)
-        if self.poses:
+        if self.poses_learning:
             terms = terms + (self.rotation_rad ** 2).sum(-1).mean() / np.radians(c.prior_deg) ** 2 \
                 + (self.translation_m ** 2).sum(-1).mean() / (1e-3 * c.prior_mm) ** 2
         if self.colours:
@@ -164,7 +172,7 @@ class ViewCorrections(torch.nn.Module):
     def fix_gauge(self) -> None:
         """Take out of the corrections the rigid motion of the whole rig (pose) and the common
         gain and bias (colour) that best explain them; see the module docstring."""
-        if self.poses:
+        if self.poses_learning:
             w, _, _, moves = rig_motion(self.rotation_rad, self.translation_m, self._arm_m, self.distance_m)
             self.rotation_rad -= w
             self.translation_m -= moves
