@@ -264,6 +264,26 @@ def test_photo_carving_is_left_out_after_aligning_every_view(tiny_config):
             assert carving_after_alignment(kept)[0] == kept
 
 
+def test_field_pose_corrections_are_left_out_after_aligning_every_view(tiny_config):
+    """On the long-lens can with every pose aligned by its silhouettes, learning the poses again with the field
+    doubled the shape's error (0.61 -> 1.23 mm): left out there, loudly; the hull and a config without them
+    are kept."""
+    from dataclasses import replace
+
+    from real2sim.reconstruct.stage import FIELD_POSES_OFF_ALIGNED, field_poses_after_alignment
+
+    assert tiny_config.field.pose_refinement  # the default
+    with pytest.warns(RuntimeWarning, match="field pose corrections skipped"):
+        config, said = field_poses_after_alignment(tiny_config)
+    assert said == FIELD_POSES_OFF_ALIGNED and not config.field.pose_refinement
+    assert config.field.colour_correction and config.field.photo_carving == tiny_config.field.photo_carving
+    off = replace(tiny_config, field=replace(tiny_config.field, pose_refinement=False))
+    for kept in (replace(tiny_config, backend="hull"), off):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert field_poses_after_alignment(kept)[0] == kept
+
+
 @pytest.mark.slow
 def test_field_on_aligned_poses_runs_without_photo_carving(can_capture, tmp_path, tiny_config):
     """The stage end to end with the field backend: every pose the robot's and marked not refined; the
@@ -276,6 +296,7 @@ def test_field_on_aligned_poses_runs_without_photo_carving(can_capture, tmp_path
     with pytest.warns(RuntimeWarning, match="photo carving skipped"):
         report = reconstruct(dataset, tiny_config).report
     assert "silhouette_poses" in report and report["photo_carving"] == CARVING_OFF_ALIGNED
+    assert report["config"]["field"]["pose_refinement"] is False and report["field_poses"].startswith("off")
     assert report["config"]["field"]["photo_carving"] is False and report["photo_carved_voxels"] == 0
     assert "photo_carving_visibility" not in report
     assert report["truth"]["chamfer_mm"] < 1.5, report["truth"]
