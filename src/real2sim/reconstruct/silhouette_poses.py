@@ -258,7 +258,7 @@ def remove_rig_motion(given_c2w: np.ndarray, moved_c2w: np.ndarray, pivot_m: np.
 #: Cameras farther from the object than this many times its size (median view) are not moved along their
 #: optical axes by the rounds: through a long lens that move only scales the silhouette a little, and the
 #: one-sided fit, which lets a camera come closer to cover its mask at almost no cost, walked them 8-11 mm
-#: a round (up to 74 mm) on the can at fx = 1650 px, 1.4 m away. Nearer cameras see depth by perspective.
+#: a round (up to 74 mm) on the can at fx = 1650 px, 1.3 m away. Nearer cameras see depth by perspective.
 FAR_RATIO = 8.0
 
 #: The views are turned onto a common point when their mask centres miss it by more than this share of the

@@ -122,7 +122,7 @@ FIELD_POSES_OFF_ALIGNED = ("off: every pose came from aligning the silhouettes; 
 def field_poses_after_alignment(config: ReconstructConfig) -> tuple[ReconstructConfig, str]:
     """``config`` without the field's per-view pose corrections, when it had them, and what was done.
 
-    Measured on the can under every hard condition at once (a 1650 px lens 1.4 m away, level ring, cut-off
+    Measured on the can under every hard condition at once (a 1650 px lens 1.3 m away, level ring, cut-off
     views, exposure jitter, JPEG; 5 mm / 1 deg on every pose, all aligned by their silhouettes; 2026-11-27):
     the shape after the best translation 0.61 mm (IoU 0.95) without them, 1.23 mm (0.90) with them learnt on
     the coarse grid (docs/benchmarks/hard_captures_can_all_field_poses.md). One capture, and why is not
