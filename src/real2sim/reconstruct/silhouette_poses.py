@@ -28,7 +28,7 @@ import numpy as np
 
 from real2sim.formats.dataset import pose_errors
 from real2sim.formats.errors import UserInputError
-from real2sim.reconstruct.views import MIN_VIEWS, PosedViews, project
+from real2sim.reconstruct.views import MIN_VIEWS, PosedViews, project, undistorted_normalized
 
 SPILL_WEIGHT = 0.03
 BLUR_PX = 1.5
@@ -290,16 +290,15 @@ def common_point(views: PosedViews, centres: np.ndarray, whole: np.ndarray) -> t
     camera and its mask centre's image line on each whole axis, and (N, 2) each view's miss (px) on its
     whole axes (0 on the others)."""
     k = views.intrinsics
-    normals, origins, index = [], [], []
+    x, y = undistorted_normalized(k, centres[:, 0], centres[:, 1])  # the centre's line, in the camera's x / z, y / z
+    normals, origins = [], []
     for i in range(views.count):
         rot, centre = views.c2w_cv[i, :3, :3], views.c2w_cv[i, :3, 3]
         for axis in np.nonzero(whole[i])[0]:
-            n_cam = (np.array([k.fl_x, 0.0, k.cx - centres[i, 0]]) if axis == 0
-                     else np.array([0.0, k.fl_y, k.cy - centres[i, 1]]))
+            n_cam = np.array([1.0, 0.0, -x[i]]) if axis == 0 else np.array([0.0, 1.0, -y[i]])
             normal = rot @ n_cam
             normals.append(normal / np.linalg.norm(normal))
             origins.append(centre)
-            index.append((i, axis))
     if len(normals) < 3:
         raise UserInputError("too few views show their whole mask to find where they look")
     normals, origins = np.asarray(normals), np.asarray(origins)
@@ -326,12 +325,14 @@ def turned_onto(views: PosedViews, point_m: np.ndarray, centres: np.ndarray, who
     target = np.where(whole, centres, uv[:, 0])
     out = views.c2w_cv.copy()
 
-    def ray(u: np.ndarray) -> np.ndarray:
-        d = np.array([(u[0] - k.cx) / k.fl_x, (u[1] - k.cy) / k.fl_y, 1.0])
-        return d / np.linalg.norm(d)
+    def rays(pixels: np.ndarray) -> np.ndarray:  # (N, 2) px -> (N, 3) unit directions, camera frame
+        x, y = undistorted_normalized(k, pixels[:, 0], pixels[:, 1])
+        d = np.stack([x, y, np.ones_like(x)], axis=-1)
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
+    seen_all, wanted_all = rays(uv[:, 0]), rays(target)  # where the point is seen, where it should be
     for i in range(views.count):
-        seen, wanted = ray(uv[i, 0]), ray(target[i])  # camera frame: where the point is seen, where it should be
+        seen, wanted = seen_all[i], wanted_all[i]
         axis = np.cross(wanted, seen)
         sin = np.linalg.norm(axis)
         if sin < 1e-12:

@@ -100,7 +100,6 @@ class ViewCorrections(torch.nn.Module):
         super().__init__()
         views = len(c2w_cv)
         self.config, self.poses, self.colours = config, poses, colours
-        self.poses_learning = poses  # False once frozen: applied to the rays, no longer learnt
         self.rotation_rad = torch.nn.Parameter(torch.zeros(views, 3, device=device))
         self.translation_m = torch.nn.Parameter(torch.zeros(views, 3, device=device))
         self.log_gain = torch.nn.Parameter(torch.zeros(views, 3, device=device))
@@ -134,10 +133,14 @@ class ViewCorrections(torch.nn.Module):
             else:
                 group["lr"] = group["base"] * c.lr_final_fraction ** ((done - start) / max(total - start, 1))
 
+    @property
+    def poses_learning(self) -> bool:
+        """The pose corrections are learnt (False when off, or once frozen: then only applied to the rays)."""
+        return self.poses and self.rotation_rad.requires_grad
+
     def freeze_poses(self) -> None:
         """Keep the pose corrections as they are from now on (the fine grid): they still move the rays, but
         get no gradients, no prior and no gauge, and the rays' stretches need no recasting."""
-        self.poses_learning = False
         self.rotation_rad.requires_grad_(False)
         self.translation_m.requires_grad_(False)
 
