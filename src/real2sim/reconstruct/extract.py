@@ -25,7 +25,7 @@ from scipy.ndimage import binary_fill_holes
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.field import VoxelRadianceField
 from real2sim.reconstruct.hull import VoxelGrid, largest_parts, surface_from_grid
-from real2sim.reconstruct.train import occupancy_ranges
+from real2sim.reconstruct.ray_pool import occupancy_ranges
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
 SURFACE_DENSITY_PER_VOXEL = float(np.log(2.0))
