@@ -58,8 +58,9 @@ def _uniform_errors(mesh, mass_kg: float, truth: dict) -> tuple[float, float]:
             float(np.max(np.abs(np.linalg.eigvalsh(inertia) - true_i) / true_i)))
 
 
-def one_case(obj: str, extra: bool, noise: float, work: Path, seed: int = 0) -> dict:
+def one_case(obj: str, extra: bool, noise: float, work: Path, seed: int = 0, duration_s: float | None = None) -> dict:
     from real2sim.geometry.objects import make_object
+    from real2sim.identify.excitation import DEFAULT_DURATION_S, periods_for
     from real2sim.identify.stage import ExciteConfig, errors_against_truth, run_excite, run_identify
 
     mesh = make_object(obj)
@@ -71,8 +72,9 @@ def one_case(obj: str, extra: bool, noise: float, work: Path, seed: int = 0) -> 
     if saved.is_file():  # --work of an earlier run: its results are kept, not recomputed
         return json.loads(saved.read_text())
     start = time.perf_counter()
+    periods = periods_for(duration_s or DEFAULT_DURATION_S)
     truth = run_excite(mesh, ExciteConfig(mass_kg=body, extra_mass_kg=extra_kg, extra_at_m=at, torque_noise_n_m=noise,
-                                          seed=seed), log_dir, overwrite=True, say=lambda *_: None)
+                                          seed=seed, periods=periods), log_dir, overwrite=True, say=lambda *_: None)
     excite_s = time.perf_counter() - start
     start = time.perf_counter()
     result, props = run_identify(log_dir)
@@ -123,6 +125,7 @@ def main() -> int:
     parser.add_argument("--no-sweep", action="store_true", help="skip the torque-noise sweep")
     parser.add_argument("--evaluate", action="store_true", help="also the Drake evaluation of the non-uniform can")
     parser.add_argument("--runs", type=int, default=3, help="evaluation runs per task (with --evaluate)")
+    parser.add_argument("--duration", type=float, default=None, help="seconds of exciting motion (default: excite's)")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a shared machine)")
     parser.add_argument("--work", type=Path, default=None,
                         help="working folder (default: a new temporary one); cases already done there are reused")
@@ -131,15 +134,18 @@ def main() -> int:
     work = args.work or Path(tempfile.mkdtemp(prefix="bench_identify_"))
     work.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("REAL2SIM_CACHE", str(work / "cache"))
-    cases = [one_case(obj, extra, 0.05, work) for obj in args.objects.split(",") for extra in (False, True)]
-    sweep = [] if args.no_sweep else [one_case("can", True, noise, work) for noise in (0.01, 0.2)]
+    cases = [one_case(obj, extra, 0.05, work, duration_s=args.duration) for obj in args.objects.split(",")
+             for extra in (False, True)]
+    sweep = [] if args.no_sweep else [one_case("can", True, noise, work, duration_s=args.duration) for noise in (0.01, 0.2)]
+    trajectory = cases[0]["truth"]["trajectory"]
+    duration_s = trajectory["periods"] * trajectory["period_s"] + 2 * trajectory["ramp_s"]
     target = lambda c: c["mass_rel"] <= 0.02 and c["com_m"] <= 2e-3 and c["inertia_rel"] <= 0.15  # noqa: E731
     rows = [[c["object"], c["case"], f"{MASSES_KG[c['object']]:.2f}", f"{100 * c['mass_rel']:.2f}",
              f"{1000 * c['com_m']:.2f}", f"{100 * c['inertia_rel']:.1f}", f"{1000 * c['uniform_com_m']:.2f}",
              f"{100 * c['uniform_inertia_rel']:.1f}", f"{c['excite_s']:.0f} + {c['identify_s']:.0f}",
              "yes" if target(c) else "no"] for c in cases]
     body = ("Identified against the truth (default torque noise 0.05 N m RMS, 1 kHz, friction, 2^20-count encoders; "
-            "a 32 s exciting trajectory, torques from a 4 kHz controller averaged over each 1 ms sample). Uniform density: what `asset --mass` assumes, at the payload's true mass. "
+            f"a {duration_s:.0f} s exciting trajectory, designed for the smallest predicted inertia error; torques from a 4 kHz controller averaged over each 1 ms sample). Uniform density: what `asset --mass` assumes, at the payload's true mass. "
             "Target: mass within 2 %, CoM within 2 mm, inertia within 15 %." + (f" {args.note}" if args.note else "")
             + "\n\n" + markdown_table(["object", "case", "mass kg", "mass err %", "CoM err mm", "inertia err %",
                                        "uniform CoM err mm", "uniform inertia err %", "excite + identify s",

@@ -123,16 +123,17 @@ def test_bad_excite_inputs_are_one_line_and_exit_2(tmp_path, capsys):
         ["can", "--mass", "0", "--out", tmp_path / "c"],
         ["no_such.obj", "--mass", "0.3", "--out", tmp_path / "d"],
         ["can", "--mass", "0.3", "--extra-mass-at", "0", "0", "0.03", "--out", tmp_path / "e"],
+        ["can", "--mass", "0.3", "--duration", "2", "--out", tmp_path / "f"],
     ]
     for argv in cases:
         code, _, err = run_cli(capsys, "excite", *argv)
         _one_line(code, err)
-    assert not any((tmp_path / n).exists() for n in "abcde")
+    assert not any((tmp_path / n).exists() for n in "abcdef")
 
 
 @pytest.mark.slow
 def test_excite_then_identify_from_the_command_line_meets_the_mass_and_com_targets(tmp_path, capsys, monkeypatch):
-    """The verbs as typed, with the default 32 s trajectory and noise: mass within 2 %, CoM within 2 mm."""
+    """The verbs as typed, with the default 3-minute trajectory and noise: mass within 2 %, CoM within 2 mm."""
     monkeypatch.setenv("REAL2SIM_CACHE", str(tmp_path / "cache"))
     code, out, err = run_cli(capsys, "excite", "bottle", "--mass", "0.4", "--extra-mass", "0.2", "--extra-mass-at",
                              "0.01", "0.01", "0.05", "--out", tmp_path / "log")

@@ -31,6 +31,9 @@ def register(sub) -> None:
                    help="where the point mass is, metres, in the mesh's own frame")
     p.add_argument("--torque-noise", type=nonnegative(10.0), default=0.05, metavar="NM",
                    help="RMS joint torque noise, N m (default 0.05)")
+    p.add_argument("--duration", type=number(8.0, 3600.0), default=None, metavar="S",
+                   help="how long the arm moves, seconds (default 182, whole 6 s periods plus 2 s of rise and fall): "
+                   "the rotational inertia's error falls with one over its square root")
     p.add_argument("--robot", type=Path, default=None, metavar="URDF",
                    help="arm model with a frame named 'flange' (default: our iiwa 14-like arm)")
     p.add_argument("--mesh-units", choices=("m", "cm", "mm", "in"), default="m", help="units of a mesh file (default m)")
@@ -45,6 +48,8 @@ def run(args: argparse.Namespace) -> int:
     from real2sim.formats.errors import UserInputError
     from real2sim.formats.outputs import check_output_dir
     from real2sim.geometry.objects import OBJECTS, make_object
+    from real2sim.cli.progress import progress_display
+    from real2sim.identify.excitation import DEFAULT_DURATION_S, periods_for
     from real2sim.identify.stage import ExciteConfig, run_excite
 
     check_output_dir(args.out, args.overwrite)
@@ -58,8 +63,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("--extra-mass-at needs --extra-mass KG")
     config = ExciteConfig(mass_kg=args.mass, extra_mass_kg=args.extra_mass,
                           extra_at_m=tuple(args.extra_mass_at) if args.extra_mass_at else None,
-                          torque_noise_n_m=args.torque_noise, seed=args.seed, robot_urdf=args.robot)
-    truth = run_excite(mesh, config, Path(args.out), overwrite=args.overwrite)
+                          torque_noise_n_m=args.torque_noise, seed=args.seed, robot_urdf=args.robot,
+                          periods=periods_for(args.duration if args.duration is not None else DEFAULT_DURATION_S))
+    with progress_display() as progress:
+        truth = run_excite(mesh, config, Path(args.out), overwrite=args.overwrite, progress=progress)
     print(f"wrote {args.out} (payload {truth['mass_kg']:.4g} kg, CoM {', '.join(f'{v:.4f}' for v in truth['com_m'])} m "
           f"in the mesh frame); next: real2sim identify {args.out} --out props.json")
     return 0

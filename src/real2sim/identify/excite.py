@@ -107,6 +107,7 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
     kp, kd = 2500.0, 100.0
     q_log = np.empty((samples + 1, n))
     tau_applied = np.empty((steps + 1, n))
+    v_before = v_d[0]
     for i in range(steps + 1):
         q, v = plant.GetPositions(ctx), plant.GetVelocities(ctx)
         if i % sub == 0:
@@ -129,6 +130,8 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
         simulator.AdvanceTo(times[i + 1])
         if progress is not None and i % (500 * sub) == 0:
             progress(i, steps)
+    if progress is not None:
+        progress(steps, steps)
     res = measurement.encoder_resolution_rad
     q_meas = np.round(q_log / res) * res if res > 0 else q_log
     v_meas = np.gradient(q_meas, log_period_s, axis=0)

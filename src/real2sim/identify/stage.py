@@ -14,14 +14,17 @@ import numpy as np
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.joint_log import ROBOT_FILE, TRUTH_FILE, read_joint_log, write_joint_log
 from real2sim.formats.physical import MESH_FRAME
+from real2sim.formats.progress import ProgressFn
 from real2sim.identify.arm import default_arm_urdf, load_arm
+from real2sim.identify.excitation import DEFAULT_DURATION_S, periods_for
 from real2sim.identify.solve import PARAMETER_NAMES, Identification, identify
 
 
 @dataclass(frozen=True)
 class ExciteConfig:
     """``mass_kg``: the object's body at uniform density; ``extra_mass_kg`` at ``extra_at_m`` (mesh
-    frame, m) inside it; ``torque_noise_n_m``: RMS per joint; ``robot_urdf``: None for our arm."""
+    frame, m) inside it; ``torque_noise_n_m``: RMS per joint; ``robot_urdf``: None for our arm;
+    ``periods``: of the exciting motion (6 s each, plus 2 s of rise and fall)."""
 
     mass_kg: float
     extra_mass_kg: float = 0.0
@@ -29,7 +32,7 @@ class ExciteConfig:
     torque_noise_n_m: float = 0.05
     seed: int = 0
     robot_urdf: Path | None = None
-    periods: int = 5
+    periods: int = periods_for(DEFAULT_DURATION_S)
 
 
 def default_grasp(mesh) -> np.ndarray:
@@ -47,7 +50,8 @@ def excitation_cache_dir() -> Path:
     return (Path(root) if root else Path.home() / ".cache" / "real2sim") / "excitation"
 
 
-def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = False, say=print) -> dict:
+def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = False, say=print,
+               progress: ProgressFn | None = None) -> dict:
     """Simulate the arm holding ``mesh`` (closed, metres) and write the log into ``out_dir`` (whole or
     not at all). Returns the truth written to ``truth.json``."""
     from real2sim.formats.outputs import atomic_output_dir
@@ -71,15 +75,18 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
     traj, quality = cached_excitation(nominal, hashlib.sha256(urdf_text.encode()).hexdigest(), grasp,
                                       excitation_cache_dir(), seed=config.seed, periods=config.periods)
     say(f"trajectory: {traj.duration_s:.0f} s, regressor condition number {quality.condition_number:.2f}, "
-        f"smallest singular value {quality.smallest_singular_value:.3f}")
+        f"smallest singular value {quality.smallest_singular_value:.3f}, predicted inertia standard error "
+        f"{quality.inertia_standard_error_kg_m2 * config.torque_noise_n_m / 0.05:.2g} kg m^2")
     truth = payload_truth(mesh, config.mass_kg, config.extra_mass_kg, config.extra_at_m)
     say(f"simulating the arm holding {truth.mass_kg:.3f} kg for {traj.duration_s:.0f} s, logged at 1 kHz")
+    report = None if progress is None else (lambda done, total: progress("simulating the arm", done, total))
     log = simulate_excitation(arm, nominal, traj, truth, Measurement(torque_noise_n_m=config.torque_noise_n_m),
-                              seed=config.seed)
+                              seed=config.seed, progress=report)
     record = {**truth.to_json(), "mass_body_kg": config.mass_kg, "extra_mass_kg": config.extra_mass_kg,
               "extra_mass_at_m": list(config.extra_at_m) if config.extra_at_m is not None else None,
               "torque_noise_n_m": config.torque_noise_n_m, "seed": config.seed,
-              "trajectory": traj.to_json(), "condition_number": quality.condition_number}
+              "trajectory": traj.to_json(), "condition_number": quality.condition_number,
+              "predicted_inertia_standard_error_kg_m2": quality.inertia_standard_error_kg_m2 * config.torque_noise_n_m / 0.05}
     with atomic_output_dir(out_dir, overwrite=overwrite, made_by="real2sim excite") as tmp:
         write_joint_log(tmp, log, urdf_text, truth=record)
     return record
