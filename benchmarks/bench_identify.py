@@ -32,6 +32,8 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from common import markdown_table, write_section  # noqa: E402
 
+from real2sim.identify.stage import errors_against_truth  # noqa: E402
+
 MASSES_KG = {"bottle": 0.45, "can": 0.35, "mug": 0.30}
 
 
@@ -61,7 +63,7 @@ def _uniform_errors(mesh, mass_kg: float, truth: dict) -> tuple[float, float]:
 def one_case(obj: str, extra: bool, noise: float, work: Path, seed: int = 0, duration_s: float | None = None) -> dict:
     from real2sim.geometry.objects import make_object
     from real2sim.identify.excitation import DEFAULT_DURATION_S, periods_for
-    from real2sim.identify.stage import ExciteConfig, errors_against_truth, run_excite, run_identify
+    from real2sim.identify.stage import ExciteConfig, run_excite, run_identify
 
     mesh = make_object(obj)
     body = MASSES_KG[obj] / (1.5 if extra else 1.0)
@@ -86,6 +88,33 @@ def one_case(obj: str, extra: bool, noise: float, work: Path, seed: int = 0, dur
             "condition": result.condition_number, "log": str(log_dir), "props": props, "truth": truth}
     saved.write_text(json.dumps(case))
     return case
+
+
+def noise_spread(obj: str, work: Path, draws: int, noise: float = 0.05, duration_s: float | None = None) -> list[dict]:
+    """The inertia error over ``draws`` independent draws of the torque noise on one motion: the object
+    with its point mass simulated once without noise, then identified with fresh noise each time."""
+    import dataclasses
+
+    from real2sim.formats.joint_log import ROBOT_FILE, read_joint_log
+    from real2sim.identify.arm import load_arm
+    from real2sim.identify.solve import identify
+
+    saved = work / f"{obj}_spread_{draws}.json"
+    if saved.is_file():
+        return json.loads(saved.read_text())
+    clean_case = one_case(obj, True, 0.0, work, duration_s=duration_s)
+    log_dir = Path(clean_case["log"])
+    clean = read_joint_log(log_dir)
+    arm = load_arm(log_dir / ROBOT_FILE, clean.flange_frame, clean.flange_from_object)
+    rng = np.random.default_rng(1000)
+    out = []
+    for _ in range(draws):
+        noisy = dataclasses.replace(clean, tau_n_m=clean.tau_n_m + rng.normal(scale=noise, size=clean.tau_n_m.shape))
+        mass, com, inertia = identify(arm, noisy).properties()
+        out.append(errors_against_truth({"mass_kg": mass, "com_m": com.tolist(), "inertia_kg_m2": inertia.tolist()},
+                                        clean_case["truth"]))
+    saved.write_text(json.dumps(out))
+    return out
 
 
 def evaluate_case(case: dict, work: Path, runs: int) -> list[list]:
@@ -125,6 +154,8 @@ def main() -> int:
     parser.add_argument("--no-sweep", action="store_true", help="skip the torque-noise sweep")
     parser.add_argument("--evaluate", action="store_true", help="also the Drake evaluation of the non-uniform can")
     parser.add_argument("--runs", type=int, default=3, help="evaluation runs per task (with --evaluate)")
+    parser.add_argument("--draws", type=int, default=10,
+                        help="noise draws on one motion of the can with its point mass, for the spread (0: none)")
     parser.add_argument("--duration", type=float, default=None, help="seconds of exciting motion (default: excite's)")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a shared machine)")
     parser.add_argument("--work", type=Path, default=None,
@@ -134,8 +165,9 @@ def main() -> int:
     work = args.work or Path(tempfile.mkdtemp(prefix="bench_identify_"))
     work.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("REAL2SIM_CACHE", str(work / "cache"))
-    cases = [one_case(obj, extra, 0.05, work, duration_s=args.duration) for obj in args.objects.split(",")
-             for extra in (False, True)]
+    # each case its own noise draw (seed), so that the cases do not share their luck
+    cases = [one_case(obj, extra, 0.05, work, seed=2 * i + extra, duration_s=args.duration)
+             for i, obj in enumerate(args.objects.split(",")) for extra in (False, True)]
     sweep = [] if args.no_sweep else [one_case("can", True, noise, work, duration_s=args.duration) for noise in (0.01, 0.2)]
     trajectory = cases[0]["truth"]["trajectory"]
     duration_s = trajectory["periods"] * trajectory["period_s"] + 2 * trajectory["ramp_s"]
@@ -145,7 +177,7 @@ def main() -> int:
              f"{100 * c['uniform_inertia_rel']:.1f}", f"{c['excite_s']:.0f} + {c['identify_s']:.0f}",
              "yes" if target(c) else "no"] for c in cases]
     body = ("Identified against the truth (default torque noise 0.05 N m RMS, 1 kHz, friction, 2^20-count encoders; "
-            f"a {duration_s:.0f} s exciting trajectory, designed for the smallest predicted inertia error; torques from a 4 kHz controller averaged over each 1 ms sample). Uniform density: what `asset --mass` assumes, at the payload's true mass. "
+            f"a {duration_s:.0f} s exciting trajectory, designed for the smallest predicted inertia error; torques from a 2 kHz controller averaged over each 1 ms sample). Uniform density: what `asset --mass` assumes, at the payload's true mass. "
             "Target: mass within 2 %, CoM within 2 mm, inertia within 15 %." + (f" {args.note}" if args.note else "")
             + "\n\n" + markdown_table(["object", "case", "mass kg", "mass err %", "CoM err mm", "inertia err %",
                                        "uniform CoM err mm", "uniform inertia err %", "excite + identify s",
@@ -157,6 +189,14 @@ def main() -> int:
                                       key=lambda c: c["noise"])]
         body += ("\nHow the errors grow with torque noise (the can with its point mass):\n\n"
                  + markdown_table(["torque noise N m", "mass err %", "CoM err mm", "inertia err %"], noise_rows) + "\n")
+    if args.draws:
+        spread = noise_spread("can", work, args.draws, duration_s=args.duration)
+        inertia = np.array([d["inertia_rel"] for d in spread]) * 100
+        com = np.array([d["com_m"] for d in spread]) * 1000
+        body += (f"\nThe spread over noise: the can with its point mass simulated once without noise, identified under "
+                 f"{len(spread)} independent draws of 0.05 N m noise: inertia error median {np.median(inertia):.1f} %, "
+                 f"90th percentile {np.percentile(inertia, 90):.1f} %, largest {inertia.max():.1f} % "
+                 f"({int(np.sum(inertia <= 15))} of {len(spread)} within 15 %); CoM error largest {com.max():.2f} mm.\n")
     command = "python benchmarks/bench_identify.py " + " ".join(sys.argv[1:])
     write_section("identify", "Mass properties identified from joint torques (issue #30)", body, command)
     if args.evaluate:

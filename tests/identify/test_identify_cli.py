@@ -133,7 +133,7 @@ def test_bad_excite_inputs_are_one_line_and_exit_2(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_excite_then_identify_from_the_command_line_meets_the_mass_and_com_targets(tmp_path, capsys, monkeypatch):
-    """The verbs as typed, with the default 3-minute trajectory and noise: mass within 2 %, CoM within 2 mm."""
+    """The verbs as typed, with the default 6-minute trajectory and noise: mass within 2 %, CoM within 2 mm."""
     monkeypatch.setenv("REAL2SIM_CACHE", str(tmp_path / "cache"))
     code, out, err = run_cli(capsys, "excite", "bottle", "--mass", "0.4", "--extra-mass", "0.2", "--extra-mass-at",
                              "0.01", "0.01", "0.05", "--out", tmp_path / "log")

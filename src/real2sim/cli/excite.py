@@ -32,7 +32,7 @@ def register(sub) -> None:
     p.add_argument("--torque-noise", type=nonnegative(10.0), default=0.05, metavar="NM",
                    help="RMS joint torque noise, N m (default 0.05)")
     p.add_argument("--duration", type=number(8.0, 3600.0), default=None, metavar="S",
-                   help="how long the arm moves, seconds (default 182, whole 6 s periods plus 2 s of rise and fall): "
+                   help="how long the arm moves, seconds (default 362, whole 6 s periods plus 2 s of rise and fall): "
                    "the rotational inertia's error falls with one over its square root")
     p.add_argument("--robot", type=Path, default=None, metavar="URDF",
                    help="arm model with a frame named 'flange' (default: our iiwa 14-like arm)")
