@@ -134,18 +134,29 @@ def evaluate_case(case: dict, work: Path, runs: int) -> list[list]:
     for label, props in (("identified", given), ("uniform density", None)):
         config = AssetConfig(mass_kg=props.mass_kg if props else truth["mass_kg"], specs=(parse_spec("cylinders:10"),),
                              given_properties=props, given_properties_frame="mesh", given_properties_source="bench")
-        asset = work / f"asset_{label.replace(' ', '_')}"
+        tag = f"{case['object']}_{label.replace(' ', '_')}"
+        asset = work / f"asset_{tag}"
         build_asset(mesh_path, asset, config, overwrite=True)
         transform = np.asarray(json.loads((asset / "canonical_transform.json").read_text())["T_asset_from_input"])
         true_props = PhysicalProperties(truth["mass_kg"], tuple(truth["com_m"]), tuple(map(tuple, truth["inertia_kg_m2"])))
-        reference = work / f"reference_{label.replace(' ', '_')}.json"
+        reference = work / f"reference_{tag}.json"
         write_physical_properties(moved_properties(true_props, transform), reference)
-        result = evaluate([asset], work / f"results_{label.replace(' ', '_')}",
+        result = evaluate([asset], work / f"results_{tag}",
                           EvaluationConfig(tasks=("push", "ramp"), contact_models=("hydroelastic",), runs=runs),
                           reference_properties=reference, overwrite=True)
         for r in result.summary:
-            rows.append([label, r["representation"], r["ocae_m"], r["ate_m"]])
+            for task in ("push", "ramp"):
+                runs = [x for x in result.runs if x["task"] == task and x["representation"] == r["collision"]
+                        and not x.get("error")]
+                rows.append([case["object"], label, r["representation"], task, _mean(runs, "ocae_m"),
+                             _mean(runs, "ate_m")])
+            rows.append([case["object"], label, r["representation"], "both", r["ocae_m"], r["ate_m"]])
     return rows
+
+
+def _mean(runs: list[dict], key: str) -> str:
+    values = [float(x[key]) for x in runs]
+    return f"{sum(values) / len(values):.4g}" if values else "-"
 
 
 def main() -> int:
@@ -200,11 +211,10 @@ def main() -> int:
     command = "python benchmarks/bench_identify.py " + " ".join(sys.argv[1:])
     write_section("identify", "Mass properties identified from joint torques (issue #30)", body, command)
     if args.evaluate:
-        can = next(c for c in cases if c["object"] == "can" and c["case"] == "point mass")
-        body += ("\nThe non-uniform can in the evaluation (cylinders:10, hydroelastic, push and ramp, "
+        rows = [row for c in cases if c["case"] == "point mass" for row in evaluate_case(c, work, args.runs)]
+        body += ("\nThe non-uniform objects in the evaluation (cylinders:10, hydroelastic, push and ramp, "
                  f"{args.runs} runs each) against a reference with the true mass properties:\n\n"
-                 + markdown_table(["properties", "representation", "OCAE m", "ATE m"], evaluate_case(can, work, args.runs))
-                 + "\n")
+                 + markdown_table(["object", "properties", "representation", "task", "OCAE m", "ATE m"], rows) + "\n")
     print(write_section("identify", "Mass properties identified from joint torques (issue #30)", body, command))
     return 0
 
