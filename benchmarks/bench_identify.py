@@ -146,10 +146,10 @@ def evaluate_case(case: dict, work: Path, runs: int) -> list[list]:
                           reference_properties=reference, overwrite=True)
         for r in result.summary:
             for task in ("push", "ramp"):
-                runs = [x for x in result.runs if x["task"] == task and x["representation"] == r["collision"]
+                done = [x for x in result.runs if x["task"] == task and x["representation"] == r["collision"]
                         and not x.get("error")]
-                rows.append([case["object"], label, r["representation"], task, _mean(runs, "ocae_m"),
-                             _mean(runs, "ate_m")])
+                rows.append([case["object"], label, r["representation"], task, _mean(done, "ocae_m"),
+                             _mean(done, "ate_m")])
             rows.append([case["object"], label, r["representation"], "both", r["ocae_m"], r["ate_m"]])
     return rows
 
