@@ -28,6 +28,7 @@ import numpy as np
 
 from real2sim.identify.arm import ArmWithPayload
 from real2sim.identify.regressor import friction_regressor, payload_regressor
+from real2sim.identify.solve import CUTOFF_HZ, MIN_SPEED_RAD_PER_S
 
 #: A neutral pose: elbow up, the flange in front of the base at about table height + 0.5 m.
 DEFAULT_Q0_RAD = (0.0, 0.5, 0.0, -1.3, 0.0, 0.9, 0.0)
@@ -37,17 +38,14 @@ DEFAULT_ACCEL_LIMITS_RAD_PER_S2 = (3.0, 3.0, 5.0, 5.0, 15.0, 15.0, 20.0)
 #: One period of the Fourier series and the rise (and fall) at each end, seconds.
 PERIOD_S = 6.0
 RAMP_S = 1.0
-#: How long the arm moves by default, seconds: the rotational inertia's error falls with one over
-#: the root of it. Six minutes (60 periods) bring the can with a point mass to 8 % median, 12 % at
-#: the 90th percentile over noise draws (3 minutes: 13 % / 20 %), with excitation and identification
+#: How long the arm moves by default: the rotational inertia's error falls with one over the root
+#: of it. Six minutes (60 periods) bring the can with a point mass to 8-11 % median, 12-14 % at the
+#: 90th percentile over noise draws (3 minutes: 13 % / 20 %), with excitation and identification
 #: together about a minute and a half on 2 cores.
-DEFAULT_DURATION_S = 362.0
+DEFAULT_PERIODS = 60
+DEFAULT_DURATION_S = DEFAULT_PERIODS * PERIOD_S + 2.0 * RAMP_S
 #: A design must keep every inertial parameter excited (column-scaled regressor).
 MAX_DESIGN_CONDITION = 20.0
-#: Rows near a joint's velocity reversal that identification leaves out: slower than this, rad/s ...
-_SLOW_RAD_PER_S = 0.1
-#: ... or within this many seconds of being so (identify's filter reach, ~1 / 8 Hz).
-_REVERSAL_REACH_S = 0.125
 
 
 @dataclass(frozen=True)
@@ -128,9 +126,10 @@ def quality(arm: ArmWithPayload, traj: FourierTrajectory, samples: int = 160,
     _, y = payload_regressor(arm, q, v, a)
     stacked = y.reshape(-1, 10)
     sv = np.linalg.svd(stacked / np.linalg.norm(stacked, axis=0).clip(1e-12), compute_uv=False)
-    # identification keeps a joint's rows only away from its reversals (|v| > 0.1 rad/s over the
-    # filter's reach); approximated here by the time the joint needs to get back to that speed
-    kept = np.abs(v) >= _SLOW_RAD_PER_S + _REVERSAL_REACH_S * np.abs(a)
+    # identification keeps a joint's rows only away from its reversals (faster than its minimum speed
+    # over the filter's reach, about a period of its cut-off); approximated here by the time the joint
+    # needs to get back to that speed
+    kept = np.abs(v) >= MIN_SPEED_RAD_PER_S + np.abs(a) / CUTOFF_HZ
     rows = (np.concatenate([y, friction_regressor(v)], axis=2) * kept[..., None]).reshape(-1, 10 + 2 * v.shape[1])
     # each row stands for (duration / samples) s of white noise logged at log_rate_hz
     per_row = traj.duration_s / samples * log_rate_hz
@@ -173,7 +172,7 @@ def periods_for(duration_s: float, period_s: float = PERIOD_S, ramp_s: float = R
 
 
 def design_excitation(arm: ArmWithPayload, *, seed: int = 0, harmonics: int = 6, period_s: float = PERIOD_S,
-                      periods: int = 5, ramp_s: float = RAMP_S, candidates: int = 24, refinements: int = 24,
+                      periods: int = DEFAULT_PERIODS, ramp_s: float = RAMP_S, candidates: int = 24, refinements: int = 24,
                       margin: float = 0.8, accel_limit_rad_per_s2=DEFAULT_ACCEL_LIMITS_RAD_PER_S2, clearance_m: float = 0.2,
                       q0_rad: tuple[float, ...] = DEFAULT_Q0_RAD) -> tuple[FourierTrajectory, ExcitationQuality]:
     """The feasible trajectory found that predicts the smallest inertia error (module docstring), made
@@ -211,7 +210,7 @@ def design_excitation(arm: ArmWithPayload, *, seed: int = 0, harmonics: int = 6,
 
 
 def cached_excitation(arm: ArmWithPayload, robot_key: str, grasp: np.ndarray, cache_dir: Path | None,
-                      seed: int = 0, periods: int = 5) -> tuple[FourierTrajectory, ExcitationQuality]:
+                      seed: int = 0, periods: int = DEFAULT_PERIODS) -> tuple[FourierTrajectory, ExcitationQuality]:
     """:func:`design_excitation`, computed once per robot model, grasp, seed and length and kept in
     ``cache_dir`` (None: not kept)."""
     key = hashlib.sha256(json.dumps([robot_key, np.round(grasp, 9).tolist(), seed, periods, 2]).encode()).hexdigest()[:16]

@@ -34,6 +34,10 @@ PARAMETER_NAMES = ("mass_kg", "first_moment_x_kg_m", "first_moment_y_kg_m", "fir
 #: Worst condition number of the column-scaled payload regressor at which every parameter still
 #: counts as excited.
 MAX_CONDITION = 1e3
+#: The parallel low-pass of the regressor and the torques, Hz, and the speed below which a joint's rows
+#: (with the filter's reach, about a period of it, around them) are left out, rad/s.
+CUTOFF_HZ = 8.0
+MIN_SPEED_RAD_PER_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -95,8 +99,8 @@ def prepared_signals(log: JointLog, rate_hz: float = 250.0, cutoff_hz: float = 4
 
 
 def identify(arm: ArmWithPayload, log: JointLog, *, shape: ShapePrior | None = None, solver: str = "clarabel",
-             cutoff_hz: float = 8.0, rate_hz: float = 100.0, trim_s: float = 0.25,
-             signal_cutoff_hz: float = 40.0, min_speed_rad_per_s: float = 0.1,
+             cutoff_hz: float = CUTOFF_HZ, rate_hz: float = 100.0, trim_s: float = 0.25,
+             signal_cutoff_hz: float = 40.0, min_speed_rad_per_s: float = MIN_SPEED_RAD_PER_S,
              physical: bool = True) -> Identification:
     """Identify the payload of ``arm`` (loaded with ``log``'s grasp) from ``log``: the regressor and the
     torques low-passed alike at ``cutoff_hz`` (zero phase), ``trim_s`` of filter transients cut at

@@ -16,7 +16,7 @@ from real2sim.formats.joint_log import ROBOT_FILE, TRUTH_FILE, read_joint_log, w
 from real2sim.formats.physical import MESH_FRAME
 from real2sim.formats.progress import ProgressFn
 from real2sim.identify.arm import default_arm_urdf, load_arm
-from real2sim.identify.excitation import DEFAULT_DURATION_S, periods_for
+from real2sim.identify.excitation import DEFAULT_PERIODS
 from real2sim.identify.solve import PARAMETER_NAMES, Identification, identify
 
 
@@ -32,7 +32,7 @@ class ExciteConfig:
     torque_noise_n_m: float = 0.05
     seed: int = 0
     robot_urdf: Path | None = None
-    periods: int = periods_for(DEFAULT_DURATION_S)
+    periods: int = DEFAULT_PERIODS
 
 
 def default_grasp(mesh) -> np.ndarray:
@@ -76,7 +76,7 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
                                       excitation_cache_dir(), seed=config.seed, periods=config.periods)
     say(f"trajectory: {traj.duration_s:.0f} s, regressor condition number {quality.condition_number:.2f}, "
         f"smallest singular value {quality.smallest_singular_value:.3f}, predicted inertia standard error "
-        f"{quality.inertia_standard_error_kg_m2 * config.torque_noise_n_m / 0.05:.2g} kg m^2")
+        f"{quality.inertia_standard_error_kg_m2:.2g} kg m^2 at 0.05 N m of torque noise")
     truth = payload_truth(mesh, config.mass_kg, config.extra_mass_kg, config.extra_at_m)
     say(f"simulating the arm holding {truth.mass_kg:.3f} kg for {traj.duration_s:.0f} s, logged at 1 kHz")
     report = None if progress is None else (lambda done, total: progress("simulating the arm", done, total))
@@ -86,7 +86,7 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
               "extra_mass_at_m": list(config.extra_at_m) if config.extra_at_m is not None else None,
               "torque_noise_n_m": config.torque_noise_n_m, "seed": config.seed,
               "trajectory": traj.to_json(), "condition_number": quality.condition_number,
-              "predicted_inertia_standard_error_kg_m2": quality.inertia_standard_error_kg_m2 * config.torque_noise_n_m / 0.05}
+              "predicted_inertia_standard_error_kg_m2_at_0_05_n_m": quality.inertia_standard_error_kg_m2}
     with atomic_output_dir(out_dir, overwrite=overwrite, made_by="real2sim excite") as tmp:
         write_joint_log(tmp, log, urdf_text, truth=record)
     return record
