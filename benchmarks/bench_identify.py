@@ -117,7 +117,7 @@ def noise_spread(obj: str, work: Path, draws: int, noise: float = 0.05, duration
     return out
 
 
-def evaluate_case(case: dict, work: Path, runs: int) -> list[list]:
+def evaluate_case(case: dict, work: Path, runs: int, spec: str = "cylinders:10") -> list[list]:
     """OCAE of the non-uniform object's asset with identified and with uniform properties, against a reference
     with the true ones (hydroelastic, push and ramp)."""
     from real2sim.asset.build import AssetConfig, build_asset
@@ -132,9 +132,9 @@ def evaluate_case(case: dict, work: Path, runs: int) -> list[list]:
                                tuple(map(tuple, case["props"]["inertia_kg_m2"])), "identified")
     rows = []
     for label, props in (("identified", given), ("uniform density", None)):
-        config = AssetConfig(mass_kg=props.mass_kg if props else truth["mass_kg"], specs=(parse_spec("cylinders:10"),),
+        config = AssetConfig(mass_kg=props.mass_kg if props else truth["mass_kg"], specs=(parse_spec(spec),),
                              given_properties=props, given_properties_frame="mesh", given_properties_source="bench")
-        tag = f"{case['object']}_{label.replace(' ', '_')}"
+        tag = f"{case['object']}_{label.replace(' ', '_')}_{spec.replace(':', '')}"
         asset = work / f"asset_{tag}"
         build_asset(mesh_path, asset, config, overwrite=True)
         transform = np.asarray(json.loads((asset / "canonical_transform.json").read_text())["T_asset_from_input"])
@@ -165,6 +165,9 @@ def main() -> int:
     parser.add_argument("--no-sweep", action="store_true", help="skip the torque-noise sweep")
     parser.add_argument("--evaluate", action="store_true", help="also the Drake evaluation of the non-uniform can")
     parser.add_argument("--runs", type=int, default=3, help="evaluation runs per task (with --evaluate)")
+    parser.add_argument("--representation", default="coacd",
+                        help="collision geometry of the evaluated assets (default coacd: the nearest to the true "
+                             "shape, so that what differs between the two assets is their mass properties)")
     parser.add_argument("--draws", type=int, default=10,
                         help="noise draws on one motion of the can with its point mass, for the spread (0: none)")
     parser.add_argument("--duration", type=float, default=None, help="seconds of exciting motion (default: excite's)")
@@ -211,8 +214,9 @@ def main() -> int:
     command = "python benchmarks/bench_identify.py " + " ".join(sys.argv[1:])
     write_section("identify", "Mass properties identified from joint torques (issue #30)", body, command)
     if args.evaluate:
-        rows = [row for c in cases if c["case"] == "point mass" for row in evaluate_case(c, work, args.runs)]
-        body += ("\nThe non-uniform objects in the evaluation (cylinders:10, hydroelastic, push and ramp, "
+        rows = [row for c in cases if c["case"] == "point mass"
+                for row in evaluate_case(c, work, args.runs, spec=args.representation)]
+        body += (f"\nThe non-uniform objects in the evaluation ({args.representation}, hydroelastic, push and ramp, "
                  f"{args.runs} runs each) against a reference with the true mass properties:\n\n"
                  + markdown_table(["object", "properties", "representation", "task", "OCAE m", "ATE m"], rows) + "\n")
     print(write_section("identify", "Mass properties identified from joint torques (issue #30)", body, command))
