@@ -81,6 +81,7 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
     what was applied over the log period centred on it (what a torque reading averaged over one
     period gives), so that it goes with the motion at that instant.
     """
+    from pydrake.multibody.tree import MultibodyForces
     from pydrake.systems.analysis import Simulator
 
     from real2sim.identify.regressor import joint_torques
@@ -110,6 +111,7 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
     q_log = np.empty((samples + 1, n))
     tau_applied = np.empty((steps + 1, n))
     v_before = v_d[0]
+    forces = MultibodyForces(nominal.plant)
     for i in range(steps + 1):
         q, v = plant.GetPositions(ctx), plant.GetVelocities(ctx)
         if i % sub == 0:
@@ -118,7 +120,7 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
         nominal.plant.SetVelocities(nominal.context, v)
         command = a_d[i] + kp * (q_d[i] - q) + kd * (v_d[i] - v)
         friction = _friction(v, coulomb, viscous, measurement.stiction_band_rad_per_s)
-        tau_applied[i] = joint_torques(nominal.plant, nominal.context, command) + 0.8 * friction
+        tau_applied[i] = joint_torques(nominal.plant, nominal.context, command, forces) + 0.8 * friction
         if i == steps:
             break
         # The joints' friction acts all the time, not only at the controller's ticks: held over a control

@@ -17,24 +17,30 @@ from real2sim.identify.arm import ArmWithPayload, spatial_inertia
 _BASE_PHI = np.array([1.0, 0.0, 0.0, 0.0, 0.01, 0.01, 0.01, 0.0, 0.0, 0.0])
 
 
-def joint_torques(plant, context, vdot: np.ndarray) -> np.ndarray:
+def joint_torques(plant, context, vdot: np.ndarray, forces=None) -> np.ndarray:
     """Inverse dynamics at the context's state, gravity included: Drake's CalcInverseDynamics counts
-    only the forces it is given, so the force elements (gravity) are added first."""
-    from pydrake.multibody.tree import MultibodyForces
+    only the forces it is given, so the force elements (gravity) are added first. ``forces``: a
+    MultibodyForces of ``plant`` to reuse (overwritten) in a loop, where making one per call and the
+    import's lookup were a third of the time."""
+    if forces is None:
+        from pydrake.multibody.tree import MultibodyForces
 
-    forces = MultibodyForces(plant)
+        forces = MultibodyForces(plant)
     plant.CalcForceElementsContribution(context, forces)
     return plant.CalcInverseDynamics(context, vdot, forces)
 
 
 def _inverse_dynamics(arm: ArmWithPayload, q: np.ndarray, v: np.ndarray, a: np.ndarray, inertia) -> np.ndarray:
+    from pydrake.multibody.tree import MultibodyForces
+
     plant, ctx = arm.plant, arm.context
     arm.payload.SetSpatialInertiaInBodyFrame(ctx, inertia)
+    forces = MultibodyForces(plant)
     out = np.empty_like(q)
     for t in range(len(q)):
         plant.SetPositions(ctx, q[t])
         plant.SetVelocities(ctx, v[t])
-        out[t] = joint_torques(plant, ctx, a[t])
+        out[t] = joint_torques(plant, ctx, a[t], forces)
     return out
 
 
