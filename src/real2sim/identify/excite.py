@@ -110,7 +110,7 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
     kp, kd = 2500.0, 100.0
     q_log = np.empty((samples + 1, n))
     tau_applied = np.empty((steps + 1, n))
-    v_before = v_d[0]
+    v_before = v_d[0]  # the arm starts at the trajectory's velocity: the first period's rate is 0
     forces = MultibodyForces(nominal.plant)
     for i in range(steps + 1):
         q, v = plant.GetPositions(ctx), plant.GetVelocities(ctx)
@@ -128,7 +128,7 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
         # last period's rate). Held at the tick's velocity it lagged the motion by half a period, a torque
         # of viscous x 0.125 ms x acceleration that looks like inertia: 1e-4 kg m^2 at the shoulder,
         # the payload's whole size, and the can came out 5-8 % light in inertia from noise-free torques.
-        v_mid = v + 0.5 * (v - v_before) if i else v
+        v_mid = v + 0.5 * (v - v_before)
         port.FixValue(ctx, tau_applied[i] - _friction(v_mid, coulomb, viscous, measurement.stiction_band_rad_per_s))
         v_before = v
         simulator.AdvanceTo(times[i + 1])

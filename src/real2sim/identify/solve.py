@@ -119,8 +119,8 @@ def identify(arm: ArmWithPayload, log: JointLog, *, shape: ShapePrior | None = N
     f = friction_regressor(v)
     # the same zero-phase filter on both sides of tau - tau_arm = Y phi + F f
     both = _lowpass(np.concatenate([(tau - tau_arm)[..., None], y, f], axis=2), dt, cutoff_hz)
-    rows_kept = np.arange(int(np.ceil(trim_s / dt)), len(q) - int(np.ceil(trim_s / dt)),
-                          max(1, int(round(1.0 / (rate_hz * dt)))))
+    row_stride = max(1, int(round(1.0 / (rate_hz * dt))))
+    rows_kept = np.arange(int(np.ceil(trim_s / dt)), len(q) - int(np.ceil(trim_s / dt)), row_stride)
     b, y, f = both[rows_kept, :, 0], both[rows_kept, :, 1:11], both[rows_kept, :, 11:]
     # Near a velocity reversal the friction model (a smoothed sign) is least true and the filter
     # smears its error: those rows are left out, joint by joint.
@@ -144,7 +144,7 @@ def identify(arm: ArmWithPayload, log: JointLog, *, shape: ShapePrior | None = N
     residual = a_mat @ x - b
     dof = max(1, int(moving.sum()) - rows.shape[1])
     s2 = float(np.sum((rows @ x - rhs) ** 2) / dof)
-    row_rate_hz = 1.0 / (dt * max(1, int(round(1.0 / (rate_hz * dt)))))
+    row_rate_hz = 1.0 / (dt * row_stride)
     cov = s2 * max(1.0, row_rate_hz / (2.0 * cutoff_hz)) * np.linalg.pinv(rows.T @ rows)
     return Identification(
         phi=x[:10], standard_errors=np.sqrt(np.clip(np.diag(cov)[:10], 0, None)),
