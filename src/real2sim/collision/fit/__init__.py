@@ -33,6 +33,12 @@ Beyond the paper (each is a switch in :class:`FitConfig`, measured in
 * dead primitives (the closest primitive of no interior sample) are re-seeded at
   the worst-covered interior samples during the fit, and the ones still dead at
   the end are dropped (``effective_count``);
+* contact-aware fitting (``contact_weight``, off by default): the samples within ``contact_band``
+  of the convex hull of the samples weigh ``1 + contact_weight`` in eq. 9's minibatch mean
+  (:mod:`.contact_weights`). The dynamics depend most on the surfaces that touch, and those are
+  all on the hull: the bottom the object stands on (the support plane is a hull face), the sides
+  it rolls on, the edges it tips over; a concave pocket or waist touches no floor or wall.
+  ``final_loss`` stays the unweighted eq. 9;
 * superquadrics (``superquadrics:N``): two shape exponents per piece, fitted like
   the sizes (bounded to the convex range by a sigmoid); their distance is a
   first-order estimate, so samples they are closest to compare distances clamped at
@@ -43,7 +49,8 @@ into the unit sphere); :func:`.convert.to_collision_geometry` converts to metres
 asset frame with ``asset = centre_m + scale_m * unit``.
 
 The modules, in the order the fit uses them: :mod:`.config` (settings, result),
-:mod:`.params` (parameter layout), :mod:`.initialization` (with :mod:`.box_cover`), :mod:`.losses`, :mod:`.union`
+:mod:`.params` (parameter layout), :mod:`.initialization` (with :mod:`.box_cover`), :mod:`.contact_weights`,
+:mod:`.losses`, :mod:`.union`
 (the union's distance), :mod:`.loop` (the optimisation), :mod:`.convert` (to metres),
 :mod:`.stage` (:func:`fit_collision`, what the asset stage calls).
 """

@@ -53,6 +53,12 @@ class FitConfig:
     hidden_dim: int = 512  # ... through FC layers of this width, with a dense (concat) skip
     fill_interior: bool = True  # add labelled-inside points in the enclosed interior (beyond the paper)
     fill_resolution: int = 64  # voxels along the longest side of the interior's bounding box
+    # Contact-aware fitting (beyond the paper, fit/contact_weights.py): samples within contact_band
+    # (unit sphere) of the hull of the samples weigh 1 + contact_weight in eq. 9's mean; 0 is off.
+    # The hull holds every surface the object touches a floor or wall with: the bottom it stands
+    # on, the sides it rolls on, the edges it tips over.
+    contact_weight: float = 0.0
+    contact_band: float = 0.02
     revive_dead: bool = True  # re-seed dead primitives during the fit (beyond the paper)
     revive_every: int = 200
     remove_dead: bool = True  # drop primitives that are still dead at the end
@@ -74,6 +80,8 @@ class FitConfig:
             raise ValueError("batch_size must be >= 1 and max_iterations >= 0")
         if not self.superquadric_truncation > 0 or not self.superquadric_exponent_gain > 0:
             raise ValueError("superquadric_truncation and superquadric_exponent_gain must be positive")
+        if not self.contact_weight >= 0 or not self.contact_band > 0:
+            raise ValueError("contact_weight must be >= 0 and contact_band > 0")
         lo, hi = SUPERQUADRIC_EXPONENT_RANGE
         if not lo < self.superquadric_init_exponent < hi:
             raise ValueError(f"superquadric_init_exponent must lie in ({lo}, {hi})")

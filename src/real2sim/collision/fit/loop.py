@@ -16,6 +16,7 @@ import torch
 from real2sim.collision.primitive_sdf import HAS_ROTATION, PARAM_DIM, SIZE_DIM
 from real2sim.collision.fit.config import FitConfig, FitResult
 from real2sim.collision.fit.params import _Layout, _unconstrain, _constrain_all, _PrimitiveNet, _DirectParams
+from real2sim.collision.fit.contact_weights import contact_weights, hull_planes
 from real2sim.collision.fit.initialization import interior_fill_points, _initial_packed, _packed_from_blobs
 from real2sim.collision.fit.losses import sdf_loss, _regularizers
 from real2sim.collision.fit.union import _closest, _paired_distance, _truncate_estimates, _alive
@@ -69,12 +70,18 @@ def fit_primitives(
     if points_np.ndim != 2 or points_np.shape[1] != 3 or len(points_np) != len(target_np) or len(points_np) == 0:
         raise ValueError("samples must be (N, 3) points with N signed distances, N > 0")
     n_samples = len(points_np)
+    # The hull comes from the samples alone (not the fill points, which are deep inside anyway).
+    planes = hull_planes(points_np, target_np, config.contact_band) if config.contact_weight > 0 else None
     if config.fill_interior:
         fill = interior_fill_points(points_np, target_np, config.fill_resolution, seed)
         points_np = np.concatenate((points_np, fill))
         target_np = np.concatenate((target_np, np.full(len(fill), -1e-3, dtype=np.float32)))
     points = torch.as_tensor(points_np).to(device)
     target = torch.as_tensor(target_np).to(device)
+    weight = None  # None: eq. 9's plain mean, bit for bit as without the option
+    if planes is not None:
+        weight = torch.as_tensor(contact_weights(points_np, target_np, config.contact_band, config.contact_weight,
+                                                 planes=planes)).to(device)
 
     # Seed only the generators this fit draws from, inside a fork that restores them: a library
     # call must leave the caller's RNG streams (CPU and every CUDA device) as it found them.
@@ -91,7 +98,7 @@ def fit_primitives(
         else:
             model = _DirectParams(base.cpu()).to(device)
         optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
-        iteration, history, revived = _iterate(model, optimiser, layout, points, target, config, gen,
+        iteration, history, revived = _iterate(model, optimiser, layout, points, target, weight, config, gen,
                                                progress or null_progress)
 
         with torch.no_grad():
@@ -122,9 +129,12 @@ def fit_primitives(
 
 
 def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: _Layout, points: torch.Tensor,
-             target: torch.Tensor, config: FitConfig, gen: torch.Generator, progress: ProgressFn
-             ) -> tuple[int, list[float], int]:
-    """The Adam steps on minibatches, with revival and the early stop: (iterations, history, revived)."""
+             target: torch.Tensor, weight: torch.Tensor | None, config: FitConfig, gen: torch.Generator,
+             progress: ProgressFn) -> tuple[int, list[float], int]:
+    """The Adam steps on minibatches, with revival and the early stop: (iterations, history, revived).
+
+    ``weight`` (N,) per point (contact-aware fitting) turns eq. 9's minibatch mean into the
+    weighted mean; None keeps the plain mean."""
     device = points.device
     total_steps = max(1, config.max_iterations)
 
@@ -154,7 +164,13 @@ def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: _
         d = _paired_distance(layout, packed, x, arg)
         if "superquadric" in layout.kinds:
             d, s = _truncate_estimates(layout, arg, d, s, config.superquadric_truncation)
-        loss = sdf_loss(d, s, config.inside_loss).mean() + _regularizers(layout, raws, config)
+        per_sample = sdf_loss(d, s, config.inside_loss)
+        if weight is None:
+            data_loss = per_sample.mean()
+        else:
+            w = weight[idx]
+            data_loss = (per_sample * w).sum() / w.sum()
+        loss = data_loss + _regularizers(layout, raws, config)
         optimiser.zero_grad(set_to_none=True)
         loss.backward()
         optimiser.step()
