@@ -177,3 +177,35 @@ def test_recommend_skips_the_reference_itself():
     assert recommend(rows, "accuracy")["representation"] == "boxes_400_hydroelastic"
     assert recommend(rows, "smoothness")["representation"] == "boxes_150_hydroelastic"
     assert recommend(rows, "accuracy", exclude_reference=False)["representation"] == "mesh_hydroelastic"
+
+
+def test_recommendation_per_contact_model_picks_the_best_point_row():
+    """A point-contact user (MuJoCo, Isaac Sim, PyBullet) gets the pick among point rows: overall the
+    hydroelastic rows win, and a hydroelastic pick is no use in a simulator without that model."""
+    data = [  # (collision, contact model, OCAE m, ATE m, CPD m/s, s): Table I's shape (docs/benchmarks/table1.md)
+        ("ellipsoids_64", "hydroelastic", 0.0089, 0.0005, 0.24, 5.9),
+        ("coacd", "hydroelastic", 0.0119, 0.0009, 0.39, 0.78),
+        ("cylinders_10", "hydroelastic", 0.0168, 0.0007, 0.62, 1.2),
+        ("ellipsoids_64", "point", 0.0169, 0.0011, 0.29, 0.41),
+        ("coacd", "point", 0.0230, 0.0014, 0.17, 0.21),
+        ("boxes_10", "point", 0.0453, 0.0024, 1.68, 0.21),
+        ("boxes_1", "point", 0.1887, 0.0152, 1.16, 0.16),
+    ]
+    rows = [dict(representation=f"{c}_{m}", collision=c, contact_model=m, ocae_m=o, ate_m=a, cpd_m_per_s=p,
+                 sim_time_s=t) for c, m, o, a, p, t in data]
+    assert recommend(rows, "accuracy")["representation"] == "ellipsoids_64_hydroelastic"
+    assert recommend(rows, "accuracy", contact_model="point")["representation"] == "ellipsoids_64_point"
+    assert recommend(rows, "accuracy", contact_model="hydroelastic")["representation"] == "ellipsoids_64_hydroelastic"
+    # Within x1.25 of the fastest point row (0.16 s, so up to 0.20 s) there is only boxes_1; at x1.4 coacd joins.
+    assert recommend(rows, "speed", contact_model="point")["representation"] == "boxes_1_point"
+    assert recommend(rows, "speed", contact_model="point", speed_tolerance=1.4)["representation"] == "coacd_point"
+    assert recommend(rows, "accuracy", contact_model="none") is None
+
+
+def test_report_names_the_pick_of_each_contact_model(tmp_path):
+    write_csv_atomic(tmp_path / "runs.csv", _runs(), RUN_COLUMNS)
+    text = write_report(tmp_path).read_text()
+    # Overall the hydroelastic rows win (the point runs are 1.5x worse in _runs); the point user still gets one.
+    assert "point contact only" in text and "hydroelastic contact only" in text
+    point_item = next(line for line in text.splitlines() if "point contact only" in line)
+    assert "spheres_64_point" in point_item and "_hydroelastic" not in point_item

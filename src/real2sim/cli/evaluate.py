@@ -134,6 +134,12 @@ def _print_summary(summary, recommend_pref: str | None) -> None:
         row = recommend(summary, pref)
         name = row["representation"] if row else "(none: no complete rows)"
         console.print(f"recommended for {pref}: [bold]{name}[/bold]  ({RECOMMENDATION_RULES[pref]})")
+    models = sorted({str(r.get("contact_model")) for r in summary if r.get("contact_model")})
+    for model in models if len(models) > 1 else ():
+        for pref in [recommend_pref] if recommend_pref else ("accuracy", "speed"):
+            row = recommend(summary, pref, contact_model=model)
+            if row is not None:
+                console.print(f"recommended for {pref}, {model} contact only: [bold]{row['representation']}[/bold]")
 
 
 @contextlib.contextmanager

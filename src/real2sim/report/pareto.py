@@ -196,8 +196,13 @@ def recommend(
     speed_tolerance: float = SPEED_TOLERANCE,
     smoothness_tolerance: float = SMOOTHNESS_OCAE_TOLERANCE,
     exclude_reference: bool = True,
+    contact_model: str | None = None,
 ) -> Mapping | None:
     """The summary row to use for a preference; None when no row has the needed metrics.
+
+    ``contact_model`` ("point" or "hydroelastic"): choose among that contact model's rows only,
+    for a user whose simulator has only that model (MuJoCo, Isaac Sim and PyBullet use point
+    contact); None chooses among all rows.
 
     Rules (each picks a point on the relevant Pareto front, because it is the best
     of a set that is closed under domination, with ties broken by the other metric):
@@ -218,6 +223,8 @@ def recommend(
     """
     if exclude_reference:
         rows = [r for r in rows if not is_reference_itself(r)]
+    if contact_model is not None:
+        rows = [r for r in rows if r.get("contact_model") == contact_model]
     if preference == "accuracy":
         return _pick(rows, "ocae_m", accuracy_tolerance, "sim_time_s", "ocae_m")
     if preference == "speed":
