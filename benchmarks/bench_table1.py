@@ -4,6 +4,12 @@ hydroelastic contact, equation error, N seeded runs; our rows side by side with 
     python benchmarks/bench_table1.py            # quick: 2 runs, a few representations
     python benchmarks/bench_table1.py --full     # the paper's: 10 runs, the issue's representations
     python benchmarks/bench_table1.py --runs 3 --specs boxes:10 cylinders:10 coacd
+    python benchmarks/bench_table1.py --full --objects carton,mug_side --work W --tag shapes
+
+``--objects`` also takes two shapes made here that are neither bottles nor cans (issue #32 part 5):
+``carton``, a gable-top drinks carton standing upright, and ``mug_side``, the bundled mug lying on
+its side (its handle sticks out sideways, its rim is an edge to tip over). The paper's columns stay
+for orientation: its Table I is of other objects.
 
 Work is kept in benchmarks/out/table1 (assets and results); re-running resumes the
 evaluation sweep (rows already in runs.csv are skipped). Writes docs/benchmarks/table1.md.
@@ -24,9 +30,40 @@ FULL_SPECS = ("boxes:1", "boxes:10", "boxes:50", "boxes:150", "boxes:400", "cyli
               "ellipsoids:64", "rotated_boxes:50", "coacd")
 QUICK_SPECS = ("boxes:10", "cylinders:10", "spheres:64", "coacd")
 OBJECTS = ("bottle", "can")
+GENERATED_MASS_KG = {"carton": 0.5, "mug_side": 0.3}
 
 
-def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fit_config=None) -> list[Path]:
+def generated_shape(name: str):
+    """A shape of part 5 as a watertight trimesh in metres, resting on z = 0 as it is to be simulated."""
+    import numpy as np
+    import trimesh
+    from trimesh.transformations import rotation_matrix
+
+    from real2sim.geometry.objects import make_object
+
+    if name == "carton":
+        # 7 x 7 cm, 17 cm to the shoulders, a gable roof 2.5 cm high with a sealed fin along its ridge.
+        body = trimesh.creation.box((0.07, 0.07, 0.17))
+        body.apply_translation([0, 0, 0.085])
+        roof = trimesh.convex.convex_hull([[x, y, z] for y in (-0.035, 0.035)
+                                           for x, z in ((-0.035, 0.17), (0.035, 0.17), (0.0, 0.195))])
+        fin = trimesh.creation.box((0.006, 0.07, 0.012))
+        fin.apply_translation([0, 0, 0.19])
+        mesh = trimesh.boolean.union([body, roof, fin], engine="manifold")
+    elif name == "mug_side":
+        mesh = make_object("mug")
+        mesh.apply_transform(rotation_matrix(np.pi / 2, [1, 0, 0]))  # the handle along +x stays horizontal
+    else:
+        raise ValueError(f"unknown shape {name!r}; known: bundled objects and {', '.join(GENERATED_MASS_KG)}")
+    mesh.apply_translation([0, 0, -mesh.bounds[0, 2]])
+    mesh = trimesh.Trimesh(mesh.vertices, mesh.faces, process=True)
+    mesh.fix_normals()
+    assert mesh.is_watertight, name
+    return mesh
+
+
+def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fit_config=None,
+                 objects: tuple[str, ...] = OBJECTS) -> list[Path]:
     """One asset folder per object holding every SPEC.
 
     Each SPEC is built alone into work/build/<object>/<SPEC> (so an interrupted run
@@ -36,6 +73,7 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
     rewritten with ``contact`` (default: ``ContactProperties()``), so the gathered
     copies never keep the contact settings of an earlier run. ``fit_config``: the primitive
     fits' settings (default: ``FitConfig()``); a work folder holds builds of one setting only.
+    ``objects``: bundled objects, or the shapes of :func:`generated_shape`, built with their +z kept up.
     """
     import shutil
 
@@ -46,15 +84,22 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
     from real2sim.formats.spec import parse_spec
 
     assets = []
-    for name in OBJECTS:
-        mesh = export_object(name, work / "objects" / name / "model.obj")
+    for name in objects:
+        generated = name not in BUNDLED
+        if generated:
+            mesh = work / "objects" / name / "model.obj"
+            mesh.parent.mkdir(parents=True, exist_ok=True)
+            generated_shape(name).export(mesh)
+        else:
+            mesh = export_object(name, work / "objects" / name / "model.obj")
+        mass_kg = GENERATED_MASS_KG[name] if generated else BUNDLED[name].mass_kg
         asset = work / "assets" / name
         for spec_text in specs:
             spec = parse_spec(spec_text)
             build = work / "build" / name / spec.name
             if not (build / spec.name / "model.urdf").exists():
                 start = time.perf_counter()
-                build_asset(mesh, build, AssetConfig(mass_kg=BUNDLED[name].mass_kg, specs=(spec,), seed=seed,
+                build_asset(mesh, build, AssetConfig(mass_kg=mass_kg, specs=(spec,), seed=seed, keep_up=generated,
                                                      fit_config=fit_config), overwrite=True)
                 print(f"built {name} {spec_text} in {time.perf_counter() - start:.1f} s", flush=True)
             if not asset.exists():
@@ -66,14 +111,14 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
     return assets
 
 
-def fit_table(work: Path, specs: tuple[str, ...]) -> list[list]:
+def fit_table(work: Path, specs: tuple[str, ...], objects: tuple[str, ...] = OBJECTS) -> list[list]:
     """One row per object and SPEC from the builds' fit reports."""
     import json
 
     from real2sim.formats.spec import parse_spec
 
     rows = []
-    for name in OBJECTS:
+    for name in objects:
         for spec_text in specs:
             spec = parse_spec(spec_text)
             path = work / "build" / name / spec.name / spec.name / "fit_report.json"
@@ -109,16 +154,25 @@ def main() -> int:
     parser.add_argument("--specs", nargs="+", default=None)
     parser.add_argument("--jobs", type=int, default=None)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--objects", default=",".join(OBJECTS),
+                        help=f"comma-separated: bundled objects and/or {', '.join(GENERATED_MASS_KG)} (default "
+                        f"{','.join(OBJECTS)}); use a --work folder per set")
     parser.add_argument("--work", type=Path, default=ROOT / "benchmarks" / "out" / "table1")
     parser.add_argument("--contact", nargs="+", default=["point", "hydroelastic"], choices=["point", "hydroelastic"])
     parser.add_argument("--dissipation", type=float, default=None, metavar="S_PER_M",
                         help="Hunt-Crossley dissipation written into the candidates' URDFs (default: "
                         "ContactProperties'); the reference keeps the default")
+    parser.add_argument("--point-dissipation", type=float, default=None, metavar="S_PER_M",
+                        help="ContactProperties.point_dissipation_s_per_m of the candidates (default: its default); "
+                        "0 or less: no point-contact models, every row simulates model.urdf (before 2026-11-27)")
     parser.add_argument("--cylinder-flat-depth", type=float, default=None, metavar="M",
                         help="ContactProperties.cylinder_flat_depth_m of the candidates (default: off)")
     parser.add_argument("--box-init", choices=["cover", "kmeans"], default=None,
                         help="FitConfig.box_init of boxes:N fits (default: FitConfig's); 'kmeans' is the fit "
                         "before issue 32. Use a --work folder of its own: builds there are reused as they are")
+    parser.add_argument("--contact-weight", type=float, default=None, metavar="GAIN",
+                        help="FitConfig.contact_weight of the primitive fits (contact-aware fitting; default: "
+                        "FitConfig's). Use a --work folder of its own")
     parser.add_argument("--tag", default=None,
                         help="results in <work>/results_<tag>, section docs/benchmarks/table1_<tag>.md")
     args = parser.parse_args()
@@ -127,17 +181,22 @@ def main() -> int:
     from real2sim.report.html import paper_name, read_paper_table
 
     specs = tuple(args.specs or (FULL_SPECS if args.full else QUICK_SPECS))
+    objects = tuple(args.objects.split(","))
     runs = args.runs or (10 if args.full else 2)
     start = time.perf_counter()
     from real2sim.formats.contact import ContactProperties
 
     contact = ContactProperties(
         **({} if args.dissipation is None else {"hunt_crossley_dissipation_s_per_m": args.dissipation}),
+        **({} if args.point_dissipation is None else
+           {"point_dissipation_s_per_m": args.point_dissipation if args.point_dissipation > 0 else None}),
         cylinder_flat_depth_m=args.cylinder_flat_depth)
     from real2sim.collision.fit.config import FitConfig
 
-    fit_config = None if args.box_init is None else FitConfig(box_init=args.box_init)
-    asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config)
+    fit_settings = {**({} if args.box_init is None else {"box_init": args.box_init}),
+                    **({} if args.contact_weight is None else {"contact_weight": args.contact_weight})}
+    fit_config = FitConfig(**fit_settings) if fit_settings else None
+    asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config, objects)
     build_s = time.perf_counter() - start
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=tuple(args.contact), runs=runs,
                               seed=args.seed, **({"jobs": args.jobs} if args.jobs else {}))
@@ -191,17 +250,25 @@ def main() -> int:
                  if named[lab] in paper and ours[lab][metric] == ours[lab][metric]]
         better = sum(o < p for o, p in pairs)
         lines.append(f"- {metric}: ours lower than the paper's in {better} of {len(pairs)} rows")
-    fits = fit_table(args.work, specs)
+    fits = fit_table(args.work, specs, objects)
     per_object = per_object_table(results_dir / "runs.csv")
     body = (
-        f"Objects: bundled bottle and can. Tasks: push, ramp. Contact: {', '.join(args.contact)}. Runs: {runs} per "
+        f"Objects: {', '.join(objects)}"
+        + (" (bundled)" if objects == OBJECTS else " (carton, mug_side: shapes made by bench_table1.generated_shape(); the "
+           "paper's columns are of its own objects, for orientation only)") + f". Tasks: push, ramp. Contact: {', '.join(args.contact)}. Runs: {runs} per "
         f"object and task (seed {args.seed}). Equation error (resets every 0.1 s) against the full closed mesh "
         f"simulated with hydroelastic contact. "
         + (f"Candidates' Hunt-Crossley dissipation: {args.dissipation:g} s/m (the reference keeps "
            f"{ContactProperties().hunt_crossley_dissipation_s_per_m:g} s/m). " if args.dissipation is not None else "")
+        + (f"Point-contact rows simulate each representation's `model_point.urdf` (Hunt-Crossley dissipation "
+           f"{contact.point_dissipation_s_per_m:g} s/m, `ContactProperties.point_dissipation_s_per_m`), hydroelastic "
+           f"rows its `model.urdf` ({contact.hunt_crossley_dissipation_s_per_m:g} s/m, as the reference). "
+           if contact.point_model is not None else "Every row simulates each representation's `model.urdf`. ")
         + (f"Candidates' compliant cylinders meshed with flats at most {args.cylinder_flat_depth:g} m deep "
            "(`--cylinder-flat-depth`). " if args.cylinder_flat_depth is not None else "")
         + (f"Boxes fitted with `--box-init {args.box_init}`. " if args.box_init else "")
+        + (f"Primitives fitted with contact-aware weighting, gain {args.contact_weight:g} "
+           f"(`FitConfig.contact_weight`, band {FitConfig().contact_band:g}). " if args.contact_weight else "")
         + f"Assets built in {build_s / 60:.1f} min, sweep {eval_s / 60:.1f} min "
         f"({len(result.runs)} rows, {result.failed} failed"
         + (f"; {result.skipped} rows were already in runs.csv from an interrupted or earlier run of this sweep, "

@@ -171,11 +171,17 @@ def test_rewrite_models_changes_contact_without_refitting(tmp_path, can_obj, cap
     from real2sim.formats.contact import ContactProperties
 
     out = tmp_path / "can_asset"
-    assert run_cli(capsys, "asset", can_obj, "--mass", "0.35", "--out", out, "--collision", "mesh")[0] == 0
+    assert run_cli(capsys, "asset", can_obj, "--mass", "0.35", "--out", out, "--collision", "mesh",
+                   "--point-dissipation", "0", "--split-point-stiffness")[0] == 0
+    assert not (out / "mesh" / "model_point.urdf").exists()  # --point-dissipation 0: no point-contact model
+    recorded = json.loads((out / "asset_config.json").read_text())["contact"]
+    assert recorded["point_dissipation_s_per_m"] is None and recorded["point_stiffness_per_piece"] is True
+    assert 'point_contact_stiffness value="10000.0"' in (out / "mesh" / "model.urdf").read_text()  # one piece
     before = (out / "mesh" / "collision.json").read_text()
     [urdf] = rewrite_models(out, ContactProperties(mu_static=0.9, mu_dynamic=0.8, point_contact_stiffness_n_per_m=5e4))
     text = urdf.read_text()
     assert 'mu_static value="0.9"' in text and 'point_contact_stiffness value="50000.0"' in text
+    assert 'hunt_crossley_dissipation value="20.0"' in (out / "mesh" / "model_point.urdf").read_text()
     assert (out / "mesh" / "collision.json").read_text() == before
     _check_asset_folder(out, ["mesh"], 0.35)
     # The evaluation's reference reads the material from asset_config.json: it must follow.

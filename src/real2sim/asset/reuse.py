@@ -20,7 +20,8 @@ from real2sim.formats.errors import UserInputError
 #: under other values of these is still valid (its model files are rewritten, see rewrite_models).
 NOT_GEOMETRY = ("mass_kg", "collision", "contact", "formats", "properties")
 #: What write_representation writes into a representation folder.
-MODEL_FILES = ("model.urdf", "model.sdf", "model.xml", "model_portable.urdf", "scene.xml", "model.usda")
+MODEL_FILES = ("model.urdf", "model_point.urdf", "model.sdf", "model.xml", "model_portable.urdf", "scene.xml",
+               "model.usda")
 
 
 def reusable_representations(previous_dir: Path | str, config_path: Path) -> dict[str, Path]:

@@ -68,7 +68,7 @@ from pathlib import Path
 import numpy as np
 
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
-from real2sim.formats.contact import ContactProperties
+from real2sim.formats.contact import POINT_URDF_NAME, ContactProperties
 from real2sim.formats.rotations import quaternion_to_rpy
 from real2sim.formats.physical import PhysicalProperties
 from real2sim.geometry.tessellation import sections_for
@@ -353,7 +353,8 @@ def write_representation(
     model_name: str = "object",
     link_name: str = LINK_NAME,
 ) -> None:
-    """Write ``rep_dir/model.urdf`` for Drake and ``rep_dir/model_portable.urdf`` for every other URDF
+    """Write ``rep_dir/model.urdf`` for Drake (and ``rep_dir/model_point.urdf``, the same for Drake's point
+    contact, when ``contact.point_model`` says so) and ``rep_dir/model_portable.urdf`` for every other URDF
     consumer (always; :mod:`real2sim.asset.portable_urdf`), ``rep_dir/model.sdf`` (if "sdf" in
     formats), ``rep_dir/model.xml`` and ``scene.xml`` for MuJoCo (if "mjcf" in formats; see
     :mod:`real2sim.asset.mjcf`) and ``rep_dir/model.usda`` (if "usd"; :mod:`real2sim.asset.usd`).
@@ -373,8 +374,17 @@ def write_representation(
         if shape.mesh_file is not None and not (rep_dir / shape.mesh_file).is_file():
             raise ValueError(f"collision mesh {shape.mesh_file!r} not found in {rep_dir}")
     rep_dir.mkdir(parents=True, exist_ok=True)
+    if contact.point_stiffness_per_piece:
+        from real2sim.asset.point_contact import representation_contact
+
+        contact = representation_contact(contact, geometry, rep_dir)
     args = (geometry, props, contact, visual_mesh_relpath, model_name, link_name)
     (rep_dir / "model.urdf").write_text(write_model_urdf_string(*args))
+    point = contact.point_model
+    if point is not None:
+        (rep_dir / POINT_URDF_NAME).write_text(write_model_urdf_string(geometry, props, point, *args[3:]))
+    else:  # rewritten without a point-contact model: none may stay behind from an earlier material
+        (rep_dir / POINT_URDF_NAME).unlink(missing_ok=True)
     from real2sim.asset.portable_urdf import write_portable_urdf
 
     write_portable_urdf(rep_dir, *args)

@@ -19,9 +19,18 @@ def add_contact_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--hydroelastic-modulus", type=number(1.0e3, 1.0e12), default=1.0e7, metavar="PA",
                    help="hydroelastic modulus, Pa (default 1e7)")
     g.add_argument("--point-stiffness", type=positive(1.0e9), default=1.0e4, metavar="N_PER_M",
-                   help="point-contact stiffness, N/m (default 1e4)")
+                   help="point-contact stiffness, N/m (default 1e4), of every collision piece (see "
+                        "--split-point-stiffness)")
+    g.add_argument("--split-point-stiffness", action="store_true",
+                   help="make --point-stiffness the body's: each piece gets it divided by the mean number of "
+                        "pieces that touch a plane laid on the hull, so a union of primitives rests as stiffly "
+                        "as one piece (off by default: docs/benchmarks/point_contact.md)")
     g.add_argument("--dissipation", type=positive(100.0), default=1.0, metavar="S_PER_M",
                    help="Hunt-Crossley dissipation, s/m (default 1.0)")
+    g.add_argument("--point-dissipation", type=number(0.0, 100.0), default=20.0, metavar="S_PER_M",
+                   help="Hunt-Crossley dissipation of each representation's model_point.urdf, the model for "
+                        "Drake's point contact, s/m (default 20; 0 writes none, and point contact then uses "
+                        "model.urdf with --dissipation)")
     g.add_argument("--mu-static", type=positive(10.0), default=0.5, help="static friction coefficient (default 0.5)")
     g.add_argument("--mu-dynamic", type=positive(10.0), default=0.5,
                    help="dynamic friction coefficient, at most --mu-static (default 0.5)")
@@ -131,7 +140,9 @@ def config_from_args(args: argparse.Namespace):
         hydroelastic=args.hydroelastic,
         hydroelastic_modulus_pa=args.hydroelastic_modulus,
         point_contact_stiffness_n_per_m=args.point_stiffness,
+        point_stiffness_per_piece=args.split_point_stiffness,
         hunt_crossley_dissipation_s_per_m=args.dissipation,
+        point_dissipation_s_per_m=args.point_dissipation or None,
         mu_static=args.mu_static,
         mu_dynamic=args.mu_dynamic,
         resolution_hint_m=args.resolution_hint,

@@ -21,6 +21,8 @@ from typing import Mapping
 
 import numpy as np
 
+from real2sim.formats.contact import POINT_URDF_NAME
+
 ANIMATION_DIRNAME = "animations"
 FRAMES_PER_SECOND = 30
 SIDE_BY_SIDE_OFFSET_M = 1.0  # the candidate's scene sits this far along +x (the ramp is 0.8 m wide)
@@ -161,7 +163,10 @@ def write_animations(results_dir: Path | str, summary: list[Mapping], preference
             continue
         reference = load_trajectory(cached[0])
         run_spec = make_run_specs(task, 1, int(config.get("seed", 0)))[0]
-        candidate = simulate_candidate(rep_dir / "model.urdf", str(chosen["contact_model"]), run_spec, free,
+        model = rep_dir / POINT_URDF_NAME if chosen["contact_model"] == "point" else rep_dir / "model.urdf"
+        if not model.is_file():  # built before point-contact models, or without one
+            model = rep_dir / "model.urdf"
+        candidate = simulate_candidate(model, str(chosen["contact_model"]), run_spec, free,
                                        reference, timeout_s=timeout_s)
         title = (f"{task}: reference (grey) and {chosen['collision']} with {chosen['contact_model']} contact "
                  f"(orange, free roll-out)")

@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 
 from real2sim.formats.asset_config import read_asset_contact
-from real2sim.formats.contact import ContactProperties
+from real2sim.formats.contact import POINT_URDF_NAME, ContactProperties
 from real2sim.formats.errors import UserInputError
 
 
@@ -28,11 +28,17 @@ class Asset:
 
 @dataclass(frozen=True)
 class Representation:
-    """One collision representation of an asset: a subfolder of the asset holding ``model.urdf``."""
+    """One collision representation of an asset: a subfolder of the asset holding ``model.urdf``, and
+    ``model_point.urdf`` when it has a model of its own for point contact (None otherwise)."""
 
     object: str
     name: str
     urdf_path: Path
+    point_urdf_path: Path | None = None
+
+    def urdf_for(self, contact_model: str) -> Path:
+        """The model to simulate with ``contact_model``."""
+        return self.point_urdf_path if contact_model == "point" and self.point_urdf_path else self.urdf_path
 
 
 def _asset_reference_mesh(asset_dir: Path) -> Path:
@@ -76,7 +82,8 @@ def discover_representations(asset_dirs: Sequence[Path | str]) -> list[Represent
         found = sorted(p for p in asset.asset_dir.iterdir() if p.is_dir() and (p / "model.urdf").is_file())
         if not found:
             raise UserInputError(f"{asset.asset_dir} holds no representation (no <name>/model.urdf)")
-        reps.extend(Representation(asset.name, p.name, p / "model.urdf") for p in found)
+        reps.extend(Representation(asset.name, p.name, p / "model.urdf",
+                                   p / POINT_URDF_NAME if (p / POINT_URDF_NAME).is_file() else None) for p in found)
     return reps
 
 

@@ -83,9 +83,10 @@ def _urdf_mesh_files(urdf: Path) -> list[tuple[str, Path]]:
 def check_representations(reps: Sequence[Representation]) -> None:
     """Every mesh file a representation's URDF names exists."""
     for rep in reps:
-        for name, path in _urdf_mesh_files(rep.urdf_path):
-            if not path.is_file():
-                raise UserInputError(f"{rep.urdf_path} names the mesh {name}, which is missing")
+        for urdf in filter(None, (rep.urdf_path, rep.point_urdf_path)):
+            for name, path in _urdf_mesh_files(urdf):
+                if not path.is_file():
+                    raise UserInputError(f"{urdf} names the mesh {name}, which is missing")
 
 
 def _check_reference_vertices(vertices: np.ndarray, asset: Asset, props: PhysicalProperties, label: str) -> None:

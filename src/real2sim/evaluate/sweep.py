@@ -392,7 +392,7 @@ def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config,
                             done += 1
                             simulated += 1
                             continue
-                        cjob = CandidateJob(rep.object, rep.name, cm, key[1], key[2], rep.urdf_path, job.run_spec,
+                        cjob = CandidateJob(rep.object, rep.name, cm, key[1], key[2], rep.urdf_for(cm), job.run_spec,
                                             config.scene, config.simulation_error, payload, config.sim_timeout_s)
                         pending[executor.submit(run_candidate_job, cjob)] = ("cand", ckey, cjob)
                 else:

@@ -7,9 +7,13 @@ that rows compare geometry, not material.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
+
+#: A representation's Drake model for point contact, beside its model.urdf (ContactProperties.point_model).
+POINT_URDF_NAME = "model_point.urdf"
 
 # "hydroelastic" means Drake's hydroelastic_with_fallback (strict hydroelastic refuses rigid-rigid pairs).
 CONTACT_MODELS = ("point", "hydroelastic")
@@ -28,7 +32,21 @@ class ContactProperties:
         reference; Drake's default (from a 1 mm penetration allowance) is stiffer
         and made the bundled bottle bounce on the floor and ramp under point
         contact, tripling its OCAE (docs/benchmarks.md, "Point-contact stiffness").
+    point_stiffness_per_piece: False (default): every collision piece gets
+        ``point_contact_stiffness_n_per_m``, so a union of N pieces resting on all N is N times
+        stiffer than the object in one piece. True: each piece gets it divided by the mean number
+        of pieces that touch a plane laid on the hull (:mod:`real2sim.asset.point_contact`), so
+        every representation rests as stiffly. Not the default: on the Table I point rows it
+        helped boxes and hurt ellipsoids and spheres (docs/benchmarks/point_contact.md).
     hunt_crossley_dissipation_s_per_m: Hunt-Crossley dissipation, s/m.
+    point_dissipation_s_per_m: None, or the Hunt-Crossley dissipation of the representations'
+        point-contact models, s/m: each representation then also gets ``model_point.urdf``, the
+        same as ``model.urdf`` but for this dissipation, and the evaluation simulates its
+        point-contact rows with it. Point contact presses one point per touching piece where the
+        object presses a patch; a point that chatters on and off the floor leaves a one-point
+        model hopping unless it is damped. At 20 s/m every point-contact row of Table I moved
+        closer to the hydroelastic reference (docs/benchmarks/point_contact.md), while the
+        hydroelastic rows got worse with it, so it applies to point contact only.
     mu_static, mu_dynamic: Coulomb friction coefficients (Drake combines pairs).
     resolution_hint_m: edge length Drake aims for when it meshes curved
         primitives (spheres, cylinders, ellipsoids, capsules) for compliant contact.
@@ -43,7 +61,9 @@ class ContactProperties:
     hydroelastic: str = "compliant"
     hydroelastic_modulus_pa: float = 1.0e7
     point_contact_stiffness_n_per_m: float = 1.0e4
+    point_stiffness_per_piece: bool = False
     hunt_crossley_dissipation_s_per_m: float = 1.0
+    point_dissipation_s_per_m: float | None = 20.0
     mu_static: float = 0.5
     mu_dynamic: float = 0.5
     resolution_hint_m: float = 0.01
@@ -52,6 +72,18 @@ class ContactProperties:
     def __post_init__(self) -> None:
         if self.hydroelastic not in ("compliant", "rigid", "none"):
             raise ValueError("hydroelastic must be 'compliant', 'rigid' or 'none'")
+        point = self.point_dissipation_s_per_m
+        if point is not None and not (math.isfinite(point) and point >= 0):
+            raise ValueError("point_dissipation_s_per_m must be a number of s/m >= 0 or None")
         depth = self.cylinder_flat_depth_m
         if depth is not None and not (math.isfinite(depth) and depth > 0):
             raise ValueError("cylinder_flat_depth_m must be a positive number of metres or None")
+
+    @property
+    def point_model(self) -> "ContactProperties | None":
+        """The material of the representations' point-contact models (``model_point.urdf``); None when
+        they need none (no point dissipation of their own, or the same as the body's)."""
+        point = self.point_dissipation_s_per_m
+        if point is None or point == self.hunt_crossley_dissipation_s_per_m:
+            return None
+        return dataclasses.replace(self, hunt_crossley_dissipation_s_per_m=point, point_dissipation_s_per_m=None)
