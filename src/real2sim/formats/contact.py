@@ -36,8 +36,9 @@ class ContactProperties:
         ``point_contact_stiffness_n_per_m``, so a union of N pieces resting on all N is N times
         stiffer than the object in one piece. True: each piece gets it divided by the mean number
         of pieces that touch a plane laid on the hull (:mod:`real2sim.asset.point_contact`), so
-        every representation rests as stiffly. Not the default: on the Table I point rows it
-        helped boxes and hurt ellipsoids and spheres (docs/benchmarks/point_contact.md).
+        every representation rests as stiffly. It moved every primitive point row of Table I
+        closer to the reference and left CoACD's hulls as they were (docs/benchmarks/point_contact*.md);
+        not yet the default, as the full protocol and the generated shapes have not been run with it.
     hunt_crossley_dissipation_s_per_m: Hunt-Crossley dissipation, s/m.
     point_dissipation_s_per_m: None, or the Hunt-Crossley dissipation of the representations'
         point-contact models, s/m: each representation then also gets ``model_point.urdf``, the
