@@ -14,7 +14,7 @@ from PIL import Image
 
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.results import RUN_COLUMNS, SUMMARY_COLUMNS, read_summary_csv, summarize, write_csv_atomic
-from real2sim.report.pareto import PARETO_PLOTS, front_rows, pareto_front, recommend
+from real2sim.report.pareto import PARETO_PLOTS, front_rows, pareto_front, recommend, recommend_per_contact_model
 from real2sim.report.html import paper_name, read_paper_table, write_report
 
 
@@ -200,6 +200,10 @@ def test_recommendation_per_contact_model_picks_the_best_point_row():
     assert recommend(rows, "speed", contact_model="point")["representation"] == "boxes_1_point"
     assert recommend(rows, "speed", contact_model="point", speed_tolerance=1.4)["representation"] == "coacd_point"
     assert recommend(rows, "accuracy", contact_model="none") is None
+    by_model = recommend_per_contact_model(rows)
+    assert by_model["point"]["accuracy"]["representation"] == "ellipsoids_64_point"
+    assert by_model["point"]["speed"]["representation"] == "boxes_1_point"
+    assert recommend_per_contact_model([r for r in rows if r["contact_model"] == "point"]) == {}
 
 
 def test_report_names_the_pick_of_each_contact_model(tmp_path):

@@ -42,8 +42,8 @@ def touching_pieces(geometry: CollisionGeometry, rep_dir: Path | None = None,
 
     if not geometry.shapes:
         raise ValueError("geometry has no pieces")
-    # Tessellated pieces lie inside the round surfaces by < 0.2 % of the radius (collision_mesh): far
-    # below the tolerance.
+    # With 32 segments the tessellated round pieces lie within 0.5 % of their radius inside the true
+    # surface (0.16 mm on a 34 mm can): well below the tolerance.
     pieces = [np.asarray(shape_mesh(s, rep_dir, 32).vertices) for s in geometry.shapes]
     hull = trimesh.convex.convex_hull(np.concatenate(pieces))
     normals, areas = hull.face_normals, hull.area_faces

@@ -382,7 +382,8 @@ def write_representation(
     (rep_dir / "model.urdf").write_text(write_model_urdf_string(*args))
     point = contact.point_model
     if point is not None:
-        (rep_dir / POINT_URDF_NAME).write_text(write_model_urdf_string(geometry, props, point, *args[3:]))
+        (rep_dir / POINT_URDF_NAME).write_text(write_model_urdf_string(geometry, props, point, visual_mesh_relpath,
+                                                                        model_name, link_name))
     else:  # rewritten without a point-contact model: none may stay behind from an earlier material
         (rep_dir / POINT_URDF_NAME).unlink(missing_ok=True)
     from real2sim.asset.portable_urdf import write_portable_urdf

@@ -120,7 +120,7 @@ def _print_summary(summary, recommend_pref: str | None) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from real2sim.report.pareto import PREFERENCES, RECOMMENDATION_RULES, recommend
+    from real2sim.report.pareto import PREFERENCES, RECOMMENDATION_RULES, recommend, recommend_per_contact_model
 
     console = Console()
     table = Table(title="summary (means over objects, tasks and runs)")
@@ -134,12 +134,10 @@ def _print_summary(summary, recommend_pref: str | None) -> None:
         row = recommend(summary, pref)
         name = row["representation"] if row else "(none: no complete rows)"
         console.print(f"recommended for {pref}: [bold]{name}[/bold]  ({RECOMMENDATION_RULES[pref]})")
-    models = sorted({str(r.get("contact_model")) for r in summary if r.get("contact_model")})
-    for model in models if len(models) > 1 else ():
-        for pref in [recommend_pref] if recommend_pref else ("accuracy", "speed"):
-            row = recommend(summary, pref, contact_model=model)
-            if row is not None:
-                console.print(f"recommended for {pref}, {model} contact only: [bold]{row['representation']}[/bold]")
+    by_model = recommend_per_contact_model(summary, [recommend_pref] if recommend_pref else ("accuracy", "speed"))
+    for model, by_pref in by_model.items():
+        for pref, row in by_pref.items():
+            console.print(f"recommended for {pref}, {model} contact only: [bold]{row['representation']}[/bold]")
 
 
 @contextlib.contextmanager

@@ -21,7 +21,7 @@ from typing import Mapping
 
 import numpy as np
 
-from real2sim.formats.contact import POINT_URDF_NAME
+from real2sim.evaluate.discovery import Representation
 
 ANIMATION_DIRNAME = "animations"
 FRAMES_PER_SECOND = 30
@@ -163,9 +163,7 @@ def write_animations(results_dir: Path | str, summary: list[Mapping], preference
             continue
         reference = load_trajectory(cached[0])
         run_spec = make_run_specs(task, 1, int(config.get("seed", 0)))[0]
-        model = rep_dir / POINT_URDF_NAME if chosen["contact_model"] == "point" else rep_dir / "model.urdf"
-        if not model.is_file():  # built before point-contact models, or without one
-            model = rep_dir / "model.urdf"
+        model = Representation.at(asset_name, rep_dir).urdf_for(str(chosen["contact_model"]))
         candidate = simulate_candidate(model, str(chosen["contact_model"]), run_spec, free,
                                        reference, timeout_s=timeout_s)
         title = (f"{task}: reference (grey) and {chosen['collision']} with {chosen['contact_model']} contact "

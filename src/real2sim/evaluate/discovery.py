@@ -36,6 +36,12 @@ class Representation:
     urdf_path: Path
     point_urdf_path: Path | None = None
 
+    @classmethod
+    def at(cls, object_name: str, rep_dir: Path) -> "Representation":
+        """The representation held in ``rep_dir`` (its point-contact model if it has one)."""
+        point = rep_dir / POINT_URDF_NAME
+        return cls(object_name, rep_dir.name, rep_dir / "model.urdf", point if point.is_file() else None)
+
     def urdf_for(self, contact_model: str) -> Path:
         """The model to simulate with ``contact_model``."""
         return self.point_urdf_path if contact_model == "point" and self.point_urdf_path else self.urdf_path
@@ -82,8 +88,7 @@ def discover_representations(asset_dirs: Sequence[Path | str]) -> list[Represent
         found = sorted(p for p in asset.asset_dir.iterdir() if p.is_dir() and (p / "model.urdf").is_file())
         if not found:
             raise UserInputError(f"{asset.asset_dir} holds no representation (no <name>/model.urdf)")
-        reps.extend(Representation(asset.name, p.name, p / "model.urdf",
-                                   p / POINT_URDF_NAME if (p / POINT_URDF_NAME).is_file() else None) for p in found)
+        reps.extend(Representation.at(asset.name, p) for p in found)
     return reps
 
 

@@ -120,7 +120,8 @@ def _breakdown_table(rows: Sequence[Mapping]) -> str:
 
 
 def _recommendations(summary: Sequence[Mapping]) -> str:
-    from real2sim.report.pareto import PREFERENCES, RECOMMENDATION_RULES, is_reference_itself, recommend
+    from real2sim.report.pareto import (PREFERENCES, RECOMMENDATION_RULES, is_reference_itself, recommend,
+                                        recommend_per_contact_model)
 
     items = []
     for pref in PREFERENCES:
@@ -133,21 +134,14 @@ def _recommendations(summary: Sequence[Mapping]) -> str:
             f"(OCAE {_f(row['ocae_m'])} m, ATE {_f(row['ate_m'])} m, CPD {_f(row['cpd_m_per_s'])} m/s, "
             f"{_f(row['sim_time_s'], 3)} s per run) &mdash; rule: {html.escape(RECOMMENDATION_RULES[pref])}.</li>"
         )
-    models = sorted({str(r.get("contact_model")) for r in summary if r.get("contact_model")})
-    if len(models) > 1:
-        # A simulator with one contact model needs the best of that model's rows, which the overall
-        # pick (often a hydroelastic row) does not give: point contact is what MuJoCo, Isaac Sim
-        # and PyBullet have.
-        for model in models:
-            picks = []
-            for pref in ("accuracy", "speed"):
-                row = recommend(summary, pref, contact_model=model)
-                if row is not None:
-                    picks.append(f"{pref}: <code>{html.escape(str(row['representation']))}</code> "
-                                 f"(OCAE {_f(row['ocae_m'])} m, {_f(row['sim_time_s'], 3)} s per run)")
-            if picks:
-                who = " (MuJoCo, Isaac Sim, PyBullet)" if model == "point" else ""
-                items.append(f"<li><b>{html.escape(model)} contact only</b>{who}: " + "; ".join(picks) + ".</li>")
+    # A simulator with one contact model needs the best of that model's rows, which the overall pick
+    # (often a hydroelastic row) does not give: point contact is what MuJoCo, Isaac Sim and PyBullet have.
+    for model, by_pref in recommend_per_contact_model(summary).items():
+        picks = [f"{pref}: <code>{html.escape(str(row['representation']))}</code> "
+                 f"(OCAE {_f(row['ocae_m'])} m, {_f(row['sim_time_s'], 3)} s per run)" for pref, row in by_pref.items()]
+        if picks:
+            who = " (MuJoCo, Isaac Sim, PyBullet)" if model == "point" else ""
+            items.append(f"<li><b>{html.escape(model)} contact only</b>{who}: " + "; ".join(picks) + ".</li>")
     same = [str(r["representation"]) for r in summary if is_reference_itself(r)]
     note = (
         "<p>Not considered: " + ", ".join(f"<code>{html.escape(n)}</code>" for n in same)

@@ -234,6 +234,18 @@ def recommend(
     raise ValueError(f"unknown preference {preference!r}; expected one of {', '.join(PREFERENCES)}")
 
 
+def recommend_per_contact_model(rows: Sequence[Mapping], preferences: Sequence[str] = ("accuracy", "speed")
+                                ) -> dict[str, dict[str, Mapping]]:
+    """``{contact model: {preference: row}}``, each pick made among that contact model's rows alone
+    (:func:`recommend`); empty when the rows hold fewer than two contact models, where the overall pick
+    is already that."""
+    models = sorted({str(r["contact_model"]) for r in rows if r.get("contact_model")})
+    if len(models) < 2:
+        return {}
+    picks = {m: {p: recommend(rows, p, contact_model=m) for p in preferences} for m in models}
+    return {m: {p: row for p, row in by.items() if row is not None} for m, by in picks.items()}
+
+
 RECOMMENDATION_RULES = {
     "accuracy": f"fastest among those with OCAE within x{ACCURACY_TOLERANCE:g} of the best",
     "speed": f"lowest OCAE among those with simulation time within x{SPEED_TOLERANCE:g} of the fastest",
