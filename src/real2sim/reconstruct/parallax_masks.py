@@ -345,17 +345,19 @@ def _standing_hull(views: PosedViews, table: np.ndarray, base_table: np.ndarray,
         base_views = candidates(base_table)
         lo, hi = object_region(base_views, outlier_fraction=config.base_outlier_fraction, table_z_m=config.table_z_m)
         grid = _hull_grid(views, lo, hi, config)
-        scores = base_scores = carve(base_views, grid, config.outlier_fraction, trust_consistent=False)
+        strict = scores = base_scores = carve(base_views, grid, config.outlier_fraction, trust_consistent=False)
         if config.base_outlier_fraction != config.outlier_fraction:
             # near the table, where the views' parallax cannot tell the foot from the table, more views may
             # call a voxel table and not carve it
             low = np.arange(grid.shape[2]) <= np.ceil(low_parallax_height_m(views, config, 0.5 * (lo + hi))
                                                       / grid.voxel_m)
             lenient = carve(base_views, grid, config.base_outlier_fraction, trust_consistent=False)
-            base_scores = np.where(low[None, None], lenient, base_scores)
-        if not np.array_equal(table, base_table) or config.outlier_fraction != config.base_outlier_fraction:
-            scores = _base_added(carve(candidates(table), grid, config.outlier_fraction, trust_consistent=False),
-                                 base_scores)
+            base_scores = np.where(low[None, None], lenient, strict)
+        same_verdicts = np.array_equal(table, base_table)
+        if not same_verdicts or base_scores is not strict:
+            body = strict if same_verdicts else carve(candidates(table), grid, config.outlier_fraction,
+                                                      trust_consistent=False)
+            scores = _base_added(body, base_scores)
         filled = _without_specks(_filled_to_table(scores, config.bottom_band))
         return surface_from_grid(filled, grid, 0.5, config.table_z_m)
     except UserInputError as exc:
