@@ -55,7 +55,7 @@ from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress
 from real2sim.reconstruct.hull import (VoxelGrid, carve, object_region, surface_from_grid, voxel_footprint_px,
                                       voxel_parts)
-from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, project_torch
+from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, project, project_torch
 
 
 TABLE_VOTE_RATIO = 3.0
@@ -345,19 +345,20 @@ def _standing_hull(views: PosedViews, table: np.ndarray, base_table: np.ndarray,
         base_views = candidates(base_table)
         lo, hi = object_region(base_views, outlier_fraction=config.base_outlier_fraction, table_z_m=config.table_z_m)
         grid = _hull_grid(views, lo, hi, config)
-        strict = scores = base_scores = carve(base_views, grid, config.outlier_fraction, trust_consistent=False)
-        if config.base_outlier_fraction != config.outlier_fraction:
+        scores = base_scores = carve(base_views, grid, config.outlier_fraction, trust_consistent=False)
+        lenient_foot = config.base_outlier_fraction != config.outlier_fraction
+        if lenient_foot:
             # near the table, where the views' parallax cannot tell the foot from the table, more views may
             # call a voxel table and not carve it
             low = np.arange(grid.shape[2]) <= np.ceil(low_parallax_height_m(views, config, 0.5 * (lo + hi))
                                                       / grid.voxel_m)
             lenient = carve(base_views, grid, config.base_outlier_fraction, trust_consistent=False)
-            base_scores = np.where(low[None, None], lenient, strict)
-        same_verdicts = np.array_equal(table, base_table)
-        if not same_verdicts or base_scores is not strict:
-            body = strict if same_verdicts else carve(candidates(table), grid, config.outlier_fraction,
-                                                      trust_consistent=False)
-            scores = _base_added(body, base_scores)
+            base_scores = np.where(low[None, None], lenient, scores)
+        if not np.array_equal(table, base_table):
+            scores = _base_added(carve(candidates(table), grid, config.outlier_fraction, trust_consistent=False),
+                                 base_scores)
+        elif lenient_foot:  # one verdict: the body's hull is the strict base's
+            scores = _base_added(scores, base_scores)
         filled = _without_specks(_filled_to_table(scores, config.bottom_band))
         return surface_from_grid(filled, grid, 0.5, config.table_z_m)
     except UserInputError as exc:
@@ -402,23 +403,17 @@ def low_parallax_height_m(views: PosedViews, config: ParallaxConfig, centre_m: n
     ``config.base_parallax_px`` against the table between a view and its neighbours (median over the pairs):
     the height within which the views may take an object's foot for table. Linear in the height for the
     small heights it is used for; measured with a point 1 cm up."""
-    k = views.intrinsics
-    ground = np.array([centre_m[0], centre_m[1], config.table_z_m])
-    lifted = ground + np.array([0.0, 0.0, 0.01])
-
-    def pixel(i: int, point: np.ndarray) -> np.ndarray:
-        cam = views.c2w_cv[i, :3, :3].T @ (point - views.c2w_cv[i, :3, 3])
-        return np.array([k.fl_x * cam[0] / cam[2] + k.cx, k.fl_y * cam[1] / cam[2] + k.cy])
-
-    rates = []
-    for i, others in enumerate(neighbour_views(views, config)):
-        origin = views.c2w_cv[i, :3, 3]
-        ray = lifted - origin
-        if abs(ray[2]) < 1e-9:
-            continue
-        behind = origin + ray * (config.table_z_m - origin[2]) / ray[2]  # the table point view i sees there
-        rates += [np.linalg.norm(pixel(j, lifted) - pixel(j, behind)) / 0.01 for j in others]
-    rate = float(np.median(rates)) if rates else 0.0
+    lifted = np.array([centre_m[0], centre_m[1], config.table_z_m + 0.01])
+    origins = views.c2w_cv[:, :3, 3]
+    rays = lifted - origins
+    level = np.abs(rays[:, 2]) < 1e-9  # a camera at the point's height sees no table behind it
+    # the table point each view sees behind the lifted point
+    behind = origins + rays * ((config.table_z_m - origins[:, 2]) / np.where(level, 1.0, rays[:, 2]))[:, None]
+    uv, _ = project(views.intrinsics, views.c2w_cv, np.vstack([lifted[None], behind]))  # (views, 1 + views, 2)
+    neighbours = neighbour_views(views, config)  # (views, k)
+    seen_from = np.arange(views.count)[:, None]
+    rates = np.linalg.norm(uv[neighbours, 0] - uv[neighbours, 1 + seen_from], axis=-1)[~level] / 0.01
+    rate = float(np.median(rates)) if rates.size else 0.0
     return config.base_parallax_px / rate if rate > 0 else float("inf")
 
 
