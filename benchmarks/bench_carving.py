@@ -11,8 +11,9 @@ disagree on.
     python benchmarks/bench_carving.py                                  # mug, captured here, on the CPU
     python benchmarks/bench_carving.py --datasets DIR --device cuda     # DIR/mug ... captured earlier
     python benchmarks/bench_carving.py --datasets DIR --device cuda --reconstruct   # the whole reconstruction
+    python benchmarks/bench_carving.py --datasets DIR --objects mug,bowl --ratios 1.5,1.25,1.0:3   # the hollow prior's ratio
 
-Writes docs/benchmarks/carving_visibility[_TAG].md (machine and date included).
+Writes docs/benchmarks/carving_visibility[_TAG].md, with --ratios carving_ratio[_TAG].md (machine and date included).
 """
 
 from __future__ import annotations
@@ -92,6 +93,51 @@ def reconstruct_both(dataset: Path, device: str, methods: tuple[str, ...]) -> li
     return rows
 
 
+RATIO_HEADER = ["object", "device", "ratio", "wall voxels", "wall s", "Chamfer mm", "hull / concave mm", "IoU",
+                "F@1mm", "concave", "carved voxels", "opened voxels"]
+
+
+def parse_ratios(text: str) -> tuple[tuple[float, float], ...]:
+    """``"1.5,1.25:2,1.0:3"`` -> ((1.5, 2.0), (1.25, 2.0), (1.0, 3.0)): the hollow prior's
+    ``min_spread_to_contrast`` and, after a colon, its ``min_wall_voxels`` (default 2)."""
+    pairs = []
+    for item in text.split(","):
+        ratio, _, wall = item.partition(":")
+        pairs.append((float(ratio), float(wall) if wall else 2.0))
+    return tuple(pairs)
+
+
+def reconstruct_ratios(dataset: Path, device: str, ratios: tuple[tuple[float, float], ...],
+                       visibility: str = "mesh") -> list[list]:
+    """The rows of one dataset: the whole field reconstruction with each (ratio, wall) of the hollow
+    prior (``CarvingConfig.min_spread_to_contrast``, ``min_wall_voxels``), judged against the truth."""
+    import torch
+
+    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
+
+    if device.startswith("cuda"):
+        torch.optim.Adam([torch.zeros(1, device=device, requires_grad=True)])
+    base = ReconstructConfig()
+    rows = []
+    for ratio, wall in ratios:
+        carving = replace(base.field.carving, min_spread_to_contrast=ratio, min_wall_voxels=wall,
+                          visibility=visibility)
+        config = replace(base, field=replace(base.field, carving=carving))
+        start = time.perf_counter()
+        report = reconstruct(dataset, config, device=device, seed=0).report
+        truth = report.get("truth", {})
+        concave_mm = truth.get("chamfer_concave_mm")
+        rows.append([dataset.name, device, ratio, wall, round(time.perf_counter() - start, 1),
+                     round(truth.get("chamfer_mm", float("nan")), 3),
+                     f"{truth.get('chamfer_hull_mm', float('nan')):.3g} / "
+                     + ("-" if concave_mm is None else f"{concave_mm:.3g}"),
+                     round(truth.get("iou", float("nan")), 3), round(truth.get("fscore_1mm", float("nan")), 3),
+                     "-" if truth.get("concave_recovered") is None else round(truth["concave_recovered"], 3),
+                     report.get("photo_carved_voxels"), report.get("photo_carving_opened_voxels")])
+        print(markdown_table(RATIO_HEADER, rows[-1:]), flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", default="mug")
@@ -102,8 +148,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tag", default="")
     ap.add_argument("--reconstruct", action="store_true",
                     help="time and judge the whole field reconstruction with each test instead")
+    ap.add_argument("--ratios", default=None, metavar="R[:W],...",
+                    help="judge the whole reconstruction at each hollow-prior ratio (min_spread_to_contrast) and "
+                         "wall (min_wall_voxels, default 2), visibility by mesh; writes carving_ratio[_TAG].md")
     args = ap.parse_args(argv)
-    header, measure = (RECONSTRUCT_HEADER, reconstruct_both) if args.reconstruct else (HEADER, carve_both)
+    if args.ratios:
+        ratios = parse_ratios(args.ratios)
+        header, measure = RATIO_HEADER, lambda dataset, device, _methods: reconstruct_ratios(dataset, device, ratios)
+    elif args.reconstruct:
+        header, measure = RECONSTRUCT_HEADER, reconstruct_both
+    else:
+        header, measure = HEADER, carve_both
     rows = []
     for name in args.objects.split(","):
         with tempfile.TemporaryDirectory() as tmp:
@@ -116,6 +171,18 @@ def main(argv: list[str] | None = None) -> int:
                                                                        pose_noise_mm=0, pose_noise_deg=0))
             rows += measure(dataset, args.device, tuple(args.methods.split(",")))
         print(markdown_table(header, rows), flush=True)
+    suffix = f"_{args.tag}" if args.tag else ""
+    command = "python benchmarks/bench_carving.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    if args.ratios:
+        body = ("The hollow prior's ratio (`CarvingConfig.min_spread_to_contrast`: a concavity's voxel goes where its "
+                "views disagree at least this many times as much as the image varies there) and wall guard "
+                "(`min_wall_voxels`), the rest `reconstruct`'s defaults with photo carving's visibility by mesh (the "
+                "CPU's default), every 10th view held out, judged against the true object (`hull / concave`: the "
+                "Chamfer of the parts a silhouette can judge and of the concave parts; `concave`: the share of the "
+                "true concave space left open).\n\n" + markdown_table(header, rows))
+        path = write_section(f"carving_ratio{suffix}", "Photo carving: the hollow prior's ratio", body, command.strip())
+        print(f"wrote {path}")
+        return 0
     body = ("Photo carving's visibility test, Embree on the solid's marching-cubes surface (`mesh`, rebuilt each "
             "round) or the rays walked through the voxels with torch (`voxels`, `reconstruct.voxel_rays`); "
             "`CarvingConfig.visibility` \"auto\" takes the mesh on a CPU and the voxels on a GPU. The step timed is the "
@@ -124,8 +191,6 @@ def main(argv: list[str] | None = None) -> int:
             + (" (with --reconstruct: the whole field reconstruction, `reconstruct`'s defaults, every 10th view held "
                "out, judged against the true object)" if args.reconstruct else "") + ".\n\n"
             + markdown_table(header, rows))
-    suffix = f"_{args.tag}" if args.tag else ""
-    command = "python benchmarks/bench_carving.py " + " ".join(argv if argv is not None else sys.argv[1:])
     path = write_section(f"carving_visibility{suffix}", "Photo carving: visibility by mesh or by voxels", body,
                          command.strip())
     print(f"wrote {path}")

@@ -55,12 +55,13 @@ def bad_cases(tmp_path: Path, can_obj: Path):
         "malformed mix": [can_obj, "--mass", "0.3", "--out", tmp_path / "o13", "--collision", "boxes:3+"],
         "output exists": [can_obj, "--mass", "0.3", "--out", exists, "--collision", "mesh"],
         "zero flat depth": [can_obj, "--mass", "0.3", "--out", tmp_path / "o14", "--cylinder-flat-depth", "0"],
+        "negative contact weight": [can_obj, "--mass", "0.3", "--out", tmp_path / "o15", "--contact-weight", "-1"],
     }
 
 
 CASES = ["missing file", "not a mesh", "not a mesh suffix", "empty mesh", "zero mass", "negative mass", "nan mass",
          "inf mass", "word mass", "unknown spec", "zero count", "too many", "malformed mix", "output exists",
-         "zero flat depth"]
+         "zero flat depth", "negative contact weight"]
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -124,6 +125,9 @@ def test_asset_end_to_end_small(tmp_path, can_obj, capsys):
     assert (out / "vhacd" / "model.sdf").exists()
     fit = json.loads((out / "cylinders_2" / "fit_report.json").read_text())
     assert fit["device"] == "cpu" and fit["final_loss"] >= 0 and fit["num_primitives"] <= 2
+    # contact-aware fitting by family: cylinders weighted, a mix with boxes not (FitConfig.contact_gain)
+    assert fit["contact_weight"] == 5.0
+    assert json.loads((out / "boxes_1_spheres_2" / "fit_report.json").read_text())["contact_weight"] == 0.0
     assert fit["iou"] > 0.85  # a can is two stacked cylinders at most
     kinds = {s["type"] for s in json.loads((out / "boxes_1_spheres_2" / "collision.json").read_text())["shapes"]}
     assert kinds <= {"box", "sphere"} and "box" in kinds
@@ -268,3 +272,14 @@ def test_object_size_limits_in_metres():
         check_object_size(trimesh.creation.box(extents=(5.1, 1.0, 1.0)))
     with pytest.raises(UserInputError, match="no --mesh-units"):
         check_object_size(trimesh.creation.box(extents=(1e-7, 1e-7, 1e-7)))
+
+
+def test_contact_weight_flag_reaches_the_fit():
+    from real2sim.cli import build_parser
+    from real2sim.cli.asset import config_from_args
+
+    argv = ["asset", "m.obj", "--mass", "0.3", "--out", "o", "--collision", "cylinders:2"]
+    default = config_from_args(build_parser().parse_args(argv))
+    assert default.fit_config is None  # FitConfig's own default: the gain by family
+    off = config_from_args(build_parser().parse_args([*argv, "--contact-weight", "0"]))
+    assert off.fit_config.contact_weight == 0.0 and off.fit_config.contact_gain(("cylinder",)) == 0.0

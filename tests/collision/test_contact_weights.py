@@ -111,3 +111,32 @@ def test_contact_weighting_fits_the_support_rim_tighter():
         result = fit_primitives(samples.points, samples.sdf, (("boxes", 1),), config)
         errors[gain] = _down_support_error_mm(mesh, result, samples)
     assert errors[5.0] < 0.6 * errors[0.0], errors
+
+
+def test_the_default_gain_is_by_family_and_an_explicit_one_wins():
+    default = FitConfig()
+    assert default.contact_weight is None
+    assert default.contact_gain(("cylinder",)) == 5.0 and default.contact_gain(("ellipsoid", "cylinder")) == 5.0
+    # boxes and spheres lost in the Table I protocol: they stay unweighted, mixed with the others too
+    assert default.contact_gain(("box",)) == 0.0 and default.contact_gain(("sphere",)) == 0.0
+    assert default.contact_gain(("cylinder", "box")) == 0.0 and default.contact_gain(()) == 0.0
+    assert FitConfig(contact_weight=0.0).contact_gain(("cylinder",)) == 0.0
+    assert FitConfig(contact_weight=2.0).contact_gain(("box",)) == 2.0
+
+
+def test_a_default_fit_weights_cylinders_and_not_boxes_and_says_so():
+    mesh = _notched_cube()
+    samples = sample_sdf(mesh, SdfSamplingConfig(num_surface_samples=5_000, num_uniform_samples=500), cache_dir=None)
+    config = FitConfig(batch_size=1024, max_iterations=5, min_iterations=5, revive_dead=False)
+    cylinders = fit_primitives(samples.points, samples.sdf, (("cylinders", 2),), config)
+    boxes = fit_primitives(samples.points, samples.sdf, (("boxes", 2),), config)
+    assert cylinders.contact_weight == 5.0 and boxes.contact_weight == 0.0
+    # gain 0 is eq. 9's plain mean, bit for bit: the default box fit is the explicit unweighted one
+    plain = fit_primitives(samples.points, samples.sdf, (("boxes", 2),), dataclasses.replace(config, contact_weight=0.0))
+    assert plain.parameters == boxes.parameters
+    # ... and the cylinders' default is the explicit gain 5, not the plain mean
+    weighted = fit_primitives(samples.points, samples.sdf, (("cylinders", 2),),
+                              dataclasses.replace(config, contact_weight=5.0))
+    unweighted = fit_primitives(samples.points, samples.sdf, (("cylinders", 2),),
+                                dataclasses.replace(config, contact_weight=0.0))
+    assert weighted.parameters == cylinders.parameters != unweighted.parameters

@@ -11,8 +11,6 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from real2sim.formats.dataset import MODEL_FRAME_KEYS, Dataset, check_dataset_outputs, is_model_frame, read_dataset
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress

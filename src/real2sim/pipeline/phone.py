@@ -33,6 +33,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -42,6 +43,9 @@ from real2sim.formats.dataset import CV_FROM_GL, Dataset, Frame, read_ground_tru
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.outputs import publish_dir, write_json_atomic
 from real2sim.formats.progress import ProgressFn, null_progress
+
+if TYPE_CHECKING:
+    from real2sim.capture.board import BoardSpec
 
 SFM_DIRNAME, PHONE_DIRNAME = "sfm", "phone"
 SFM_RECORD, BOARD_RECORD = "sfm.json", "board_frame.json"
@@ -67,7 +71,7 @@ class PhoneConfig:
 
     frames: int = DEFAULT_FRAMES
     board_square_mm: float | None = None
-    board: "BoardSpec | None" = None
+    board: BoardSpec | None = None
     sfm: SfmConfig = field(default_factory=SfmConfig)
 
 

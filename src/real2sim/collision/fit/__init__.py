@@ -33,7 +33,8 @@ Beyond the paper (each is a switch in :class:`FitConfig`, measured in
 * dead primitives (the closest primitive of no interior sample) are re-seeded at
   the worst-covered interior samples during the fit, and the ones still dead at
   the end are dropped (``effective_count``);
-* contact-aware fitting (``contact_weight``, off by default): the samples within ``contact_band``
+* contact-aware fitting (``contact_weight``; by default gain 5 for cylinders and ellipsoids alone,
+  off for the other families, as measured: ``FitConfig.contact_gain``): the samples within ``contact_band``
   of the convex hull of the samples weigh ``1 + contact_weight`` in eq. 9's minibatch mean
   (:mod:`.contact_weights`). The dynamics depend most on the surfaces that touch, and those are
   all on the hull: the bottom the object stands on (the support plane is a hull face), the sides

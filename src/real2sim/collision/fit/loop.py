@@ -71,7 +71,8 @@ def fit_primitives(
         raise ValueError("samples must be (N, 3) points with N signed distances, N > 0")
     n_samples = len(points_np)
     # The hull comes from the samples alone (not the fill points, which are deep inside anyway).
-    planes = hull_planes(points_np, target_np, config.contact_band) if config.contact_weight > 0 else None
+    gain = config.contact_gain(layout.kinds)
+    planes = hull_planes(points_np, target_np, config.contact_band) if gain > 0 else None
     if config.fill_interior:
         fill = interior_fill_points(points_np, target_np, config.fill_resolution, seed)
         points_np = np.concatenate((points_np, fill))
@@ -80,7 +81,7 @@ def fit_primitives(
     target = torch.as_tensor(target_np).to(device)
     weight = None  # None: eq. 9's plain mean, bit for bit as without the option
     if planes is not None:
-        weight = torch.as_tensor(contact_weights(points_np, target_np, config.contact_band, config.contact_weight,
+        weight = torch.as_tensor(contact_weights(points_np, target_np, config.contact_band, gain,
                                                  planes=planes)).to(device)
 
     # Seed only the generators this fit draws from, inside a fork that restores them: a library
@@ -124,6 +125,7 @@ def fit_primitives(
         device=str(device),
         history=tuple(history),
         revived=revived,
+        contact_weight=gain,
     )
 
 
