@@ -160,8 +160,8 @@ def main() -> int:
     parser.add_argument("--work", type=Path, default=ROOT / "benchmarks" / "out" / "table1")
     parser.add_argument("--contact", nargs="+", default=["point", "hydroelastic"], choices=["point", "hydroelastic"])
     parser.add_argument("--dissipation", type=float, default=None, metavar="S_PER_M",
-                        help="Hunt-Crossley dissipation written into the candidates' URDFs (default: "
-                        "ContactProperties'); the reference keeps the default")
+                        help="Hunt-Crossley dissipation of the assets' material (default: ContactProperties'); "
+                        "the reference is simulated with its asset's material, so it changes too")
     parser.add_argument("--point-dissipation", type=float, default=None, metavar="S_PER_M",
                         help="ContactProperties.point_dissipation_s_per_m of the candidates (default: its default); "
                         "0 or less: no point-contact models, every row simulates model.urdf (before 2026-11-27)")
@@ -258,8 +258,9 @@ def main() -> int:
            "paper's columns are of its own objects, for orientation only)") + f". Tasks: push, ramp. Contact: {', '.join(args.contact)}. Runs: {runs} per "
         f"object and task (seed {args.seed}). Equation error (resets every 0.1 s) against the full closed mesh "
         f"simulated with hydroelastic contact. "
-        + (f"Candidates' Hunt-Crossley dissipation: {args.dissipation:g} s/m (the reference keeps "
-           f"{ContactProperties().hunt_crossley_dissipation_s_per_m:g} s/m). " if args.dissipation is not None else "")
+        + (f"Hunt-Crossley dissipation of the assets' material: {args.dissipation:g} s/m (default "
+           f"{ContactProperties().hunt_crossley_dissipation_s_per_m:g} s/m), the reference's too: it is simulated "
+           "with its asset's material. " if args.dissipation is not None else "")
         + (f"Point-contact rows simulate each representation's `model_point.urdf` (Hunt-Crossley dissipation "
            f"{contact.point_dissipation_s_per_m:g} s/m, `ContactProperties.point_dissipation_s_per_m`), hydroelastic "
            f"rows its `model.urdf` ({contact.hunt_crossley_dissipation_s_per_m:g} s/m, as the reference). "
