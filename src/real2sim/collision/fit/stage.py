@@ -26,7 +26,8 @@ def fit_collision(
 
     ``rep_dir`` receives the mesh pieces of superquadrics (see :func:`to_collision_geometry`).
     Returns the geometry and a report: final_loss, fit_seconds, effective_count,
-    requested_count, iterations, device, contact_weight (the gain of contact-aware fitting) (and the superquadrics' parameters when there are any).
+    requested_count, iterations, device, contact_weight (the gain of contact-aware fitting the fit
+    used), and the superquadrics' parameters when there are any.
     ``progress``: the SDF sampling's steps ("sdf: ..."), then the fit's iterations ("fit").
     """
     from real2sim.collision.sdf_sampling import SdfSamplingConfig, sample_sdf
