@@ -22,6 +22,7 @@ import argparse
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -65,28 +66,39 @@ RECONSTRUCT_HEADER = ["object", "device", "visibility", "wall s", "hull and carv
                       "Chamfer mm", "IoU", "concave"]
 
 
-def reconstruct_both(dataset: Path, device: str, methods: tuple[str, ...]) -> list[list]:
-    """The rows of one dataset: the whole field reconstruction (``reconstruct``'s defaults, judged
-    against the dataset's ground truth) with each visibility test, in one process."""
+def timed_reconstructions(dataset: Path, device: str, configs) -> Iterator[tuple[float, dict]]:
+    """(wall seconds, report) of ``reconstruct`` with each of ``configs`` on ``dataset``, seed 0, in one
+    process, yielded as each finishes; on a GPU the one-off imports (torch.optim pulls in dynamo) stay outside the timings and each
+    timing waits for the device."""
     import torch
 
-    from real2sim.reconstruct.photo_carving import CarvingConfig
-    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.reconstruct.stage import reconstruct
 
-    if device.startswith("cuda"):  # the one-off imports (torch.optim pulls in dynamo) outside the timings
+    cuda = device.startswith("cuda")
+    if cuda:
         torch.optim.Adam([torch.zeros(1, device=device, requires_grad=True)])
-    rows = []
-    for method in methods:
-        config = ReconstructConfig(field=FieldConfig(carving=CarvingConfig(visibility=method)))
-        if device.startswith("cuda"):
+    for config in configs:
+        if cuda:
             torch.cuda.synchronize()
         start = time.perf_counter()
         report = reconstruct(dataset, config, device=device, seed=0).report
-        if device.startswith("cuda"):
+        if cuda:
             torch.cuda.synchronize()
+        yield time.perf_counter() - start, report
+
+
+def reconstruct_both(dataset: Path, device: str, methods: tuple[str, ...]) -> list[list]:
+    """The rows of one dataset: the whole field reconstruction (``reconstruct``'s defaults, judged
+    against the dataset's ground truth) with each visibility test, in one process."""
+    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.stage import ReconstructConfig
+    from real2sim.reconstruct.train import FieldConfig
+
+    configs = [ReconstructConfig(field=FieldConfig(carving=CarvingConfig(visibility=method))) for method in methods]
+    rows = []
+    for method, (seconds, report) in zip(methods, timed_reconstructions(dataset, device, configs)):
         truth = report.get("truth", {})
-        rows.append([dataset.name, device, method, round(time.perf_counter() - start, 2),
+        rows.append([dataset.name, device, method, round(seconds, 2),
                      round(report.get("hull_and_carving_seconds", float("nan")), 2), report.get("photo_carved_voxels"),
                      round(truth.get("chamfer_mm", float("nan")), 3), round(truth.get("iou", float("nan")), 4),
                      round(truth["concave_recovered"], 3) if truth.get("concave_recovered") is not None else "-"])
@@ -111,23 +123,17 @@ def reconstruct_ratios(dataset: Path, device: str, ratios: tuple[tuple[float, fl
                        visibility: str = "mesh") -> list[list]:
     """The rows of one dataset: the whole field reconstruction with each (ratio, wall) of the hollow
     prior (``CarvingConfig.min_spread_to_contrast``, ``min_wall_voxels``), judged against the truth."""
-    import torch
+    from real2sim.reconstruct.stage import ReconstructConfig
 
-    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
-
-    if device.startswith("cuda"):
-        torch.optim.Adam([torch.zeros(1, device=device, requires_grad=True)])
     base = ReconstructConfig()
+    configs = [replace(base, field=replace(base.field, carving=replace(
+        base.field.carving, min_spread_to_contrast=ratio, min_wall_voxels=wall, visibility=visibility)))
+        for ratio, wall in ratios]
     rows = []
-    for ratio, wall in ratios:
-        carving = replace(base.field.carving, min_spread_to_contrast=ratio, min_wall_voxels=wall,
-                          visibility=visibility)
-        config = replace(base, field=replace(base.field, carving=carving))
-        start = time.perf_counter()
-        report = reconstruct(dataset, config, device=device, seed=0).report
+    for (ratio, wall), (seconds, report) in zip(ratios, timed_reconstructions(dataset, device, configs)):
         truth = report.get("truth", {})
         concave_mm = truth.get("chamfer_concave_mm")
-        rows.append([dataset.name, device, ratio, wall, round(time.perf_counter() - start, 1),
+        rows.append([dataset.name, device, ratio, wall, round(seconds, 1),
                      round(truth.get("chamfer_mm", float("nan")), 3),
                      f"{truth.get('chamfer_hull_mm', float('nan')):.3g} / "
                      + ("-" if concave_mm is None else f"{concave_mm:.3g}"),
