@@ -18,6 +18,11 @@ mean stage times (from timings.csv), which docs/scaling.md turns into the cost o
 
     python benchmarks/bench_batch.py                       # 6 captures, 1 2 4 workers, local and ray
     python benchmarks/bench_batch.py --workers 1 2 --executors local   # what a loaded machine allows
+    python benchmarks/bench_batch.py --calibrate            # what two processes get from this machine's cores
+
+``--calibrate`` measures the machine rather than real2sim: one fixed single-threaded job (numpy work of
+the sizes the pipeline's stages use, and Python loops) run alone, then two copies at once, each in its
+own process; the two copies' throughput against one is the most any two workers can get here.
 
 Writes docs/benchmarks/batch.md (machine and date included).
 """
@@ -133,8 +138,53 @@ def report(timings: dict, n: int, means: dict, args, views: str) -> None:
     print(f"wrote {path}", flush=True)
 
 
+CALIBRATION_JOB = """
+import time, numpy as np
+from threadpoolctl import threadpool_limits
+rng = np.random.default_rng(0)
+a, pts = rng.random((256, 256)), rng.random((200_000, 3))
+start = time.process_time()
+with threadpool_limits(1):
+    for _ in range(ROUNDS):
+        b = a @ a
+        d = np.sqrt(((pts[:, None, :] - pts[:64][None]) ** 2).sum(-1)).min(1)
+        total = sum(i * i for i in range(200_000))
+print(time.process_time() - start)
+"""
+
+
+def calibrate(rounds: int, repeats: int) -> None:
+    """Wall and CPU seconds of CALIBRATION_JOB alone and two copies at once; writes batch_calibration.md."""
+    job = CALIBRATION_JOB.replace("ROUNDS", str(rounds))
+    rows = []
+    for repeat in range(repeats):
+        for copies in (1, 2):
+            start = time.monotonic()
+            procs = [subprocess.Popen([sys.executable, "-c", job], stdout=subprocess.PIPE, text=True)
+                     for _ in range(copies)]
+            cpu_s = [float(p.communicate()[0]) for p in procs]
+            wall_s = time.monotonic() - start
+            rows.append([repeat + 1, copies, round(wall_s, 2), " ".join(f"{c:.2f}" for c in cpu_s)])
+            print(rows[-1], flush=True)
+    alone = statistics.median(r[2] for r in rows if r[1] == 1)
+    both = statistics.median(r[2] for r in rows if r[1] == 2)
+    body = (f"One single-threaded job (`CALIBRATION_JOB`, {rounds} rounds of a 256x256 matrix product, distances of "
+            "200,000 points to 64 and a Python loop), alone and as two processes at once; each row's wall seconds "
+            "(both copies, start to the last one's end) and each copy's CPU seconds.\n\n"
+            + markdown_table(["repeat", "copies", "wall s", "CPU s of each"], rows)
+            + f"\n\nMedians: alone {alone:.2f} s, two at once {both:.2f} s: two processes do "
+            f"{2 * alone / both:.2f}x the work of one in the same time on this machine (2.00x: two free cores).")
+    path = write_section("batch_calibration", "real2sim batch: what two processes get from this machine",
+                         body, "python benchmarks/bench_batch.py " + " ".join(sys.argv[1:]))
+    print(body)
+    print(f"wrote {path}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--calibrate", action="store_true",
+                        help="measure two single-threaded processes against one (this machine, not real2sim)")
+    parser.add_argument("--calibrate-rounds", type=int, default=20)
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--executors", nargs="+", default=["local", "ray"], choices=["local", "ray"])
     parser.add_argument("--views", type=int, default=24)
@@ -144,6 +194,9 @@ def main() -> None:
     parser.add_argument("--tag", default="batch", help="section name in docs/benchmarks/")
     parser.add_argument("--repeats", type=int, default=1, help="run every pass this many times, interleaved")
     args = parser.parse_args()
+    if args.calibrate:
+        calibrate(args.calibrate_rounds, args.repeats)
+        return
     views = (f"{', '.join(OBJECTS)} x seeds {SEEDS}; {args.views} views at {args.width}x{args.height}")
 
     with tempfile.TemporaryDirectory(prefix="bench_batch_") as tmp:

@@ -165,6 +165,9 @@ def main() -> int:
     parser.add_argument("--point-dissipation", type=float, default=None, metavar="S_PER_M",
                         help="ContactProperties.point_dissipation_s_per_m of the candidates (default: its default); "
                         "0 or less: no point-contact models, every row simulates model.urdf (before 2026-11-27)")
+    parser.add_argument("--hydroelastic", choices=["compliant", "rigid"], default=None,
+                        help="ContactProperties.hydroelastic of every representation, CoACD's hulls included (default: "
+                        "compliant, the paper's); the reference mesh is rigid either way")
     parser.add_argument("--cylinder-flat-depth", type=float, default=None, metavar="M",
                         help="ContactProperties.cylinder_flat_depth_m of the candidates (default: off)")
     parser.add_argument("--box-init", choices=["cover", "kmeans"], default=None,
@@ -190,6 +193,7 @@ def main() -> int:
         **({} if args.dissipation is None else {"hunt_crossley_dissipation_s_per_m": args.dissipation}),
         **({} if args.point_dissipation is None else
            {"point_dissipation_s_per_m": args.point_dissipation if args.point_dissipation > 0 else None}),
+        **({} if args.hydroelastic is None else {"hydroelastic": args.hydroelastic}),
         cylinder_flat_depth_m=args.cylinder_flat_depth)
     from real2sim.collision.fit.config import FitConfig
 
@@ -265,6 +269,8 @@ def main() -> int:
            f"{contact.point_dissipation_s_per_m:g} s/m, `ContactProperties.point_dissipation_s_per_m`), hydroelastic "
            f"rows its `model.urdf` ({contact.hunt_crossley_dissipation_s_per_m:g} s/m, as the reference). "
            if contact.point_model is not None else "Every row simulates each representation's `model.urdf`. ")
+        + (f"Every representation written as a {args.hydroelastic} hydroelastic body (`--hydroelastic`, CoACD's "
+           "hulls included; the reference mesh is rigid either way). " if args.hydroelastic else "")
         + (f"Candidates' compliant cylinders meshed with flats at most {args.cylinder_flat_depth:g} m deep "
            "(`--cylinder-flat-depth`). " if args.cylinder_flat_depth is not None else "")
         + (f"Boxes fitted with `--box-init {args.box_init}`. " if args.box_init else "")
