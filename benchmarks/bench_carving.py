@@ -11,7 +11,7 @@ disagree on.
     python benchmarks/bench_carving.py                                  # mug, captured here, on the CPU
     python benchmarks/bench_carving.py --datasets DIR --device cuda     # DIR/mug ... captured earlier
     python benchmarks/bench_carving.py --datasets DIR --device cuda --reconstruct   # the whole reconstruction
-    python benchmarks/bench_carving.py --datasets DIR --objects mug,bowl --ratios 1.5,1.25,1.0:3   # the hollow prior's ratio
+    python benchmarks/bench_carving.py --datasets DIR --objects mug,bowl --ratios 1.5,1.25,1.0:3,1.25:2:0   # the hollow prior
 
 Writes docs/benchmarks/carving_visibility[_TAG].md, with --ratios carving_ratio[_TAG].md (machine and date included).
 """
@@ -105,35 +105,40 @@ def reconstruct_both(dataset: Path, device: str, methods: tuple[str, ...]) -> li
     return rows
 
 
-RATIO_HEADER = ["object", "device", "ratio", "wall voxels", "wall s", "Chamfer mm", "hull / concave mm", "IoU",
+RATIO_HEADER = ["object", "device", "ratio", "wall voxels", "depth test voxels", "wall s", "Chamfer mm", "hull / concave mm", "IoU",
                 "F@1mm", "concave", "carved voxels", "opened voxels"]
 
 
-def parse_ratios(text: str) -> tuple[tuple[float, float], ...]:
-    """``"1.5,1.25:2,1.0:3"`` -> ((1.5, 2.0), (1.25, 2.0), (1.0, 3.0)): the hollow prior's
-    ``min_spread_to_contrast`` and, after a colon, its ``min_wall_voxels`` (default 2)."""
-    pairs = []
+def parse_ratios(text: str) -> tuple[tuple[float, float, float], ...]:
+    """``"1.5,1.25:2,1.0:3:0"`` -> ((1.5, 2.0, D), (1.25, 2.0, D), (1.0, 3.0, 0.0)): the hollow prior's
+    ``min_spread_to_contrast``, after a colon its ``min_wall_voxels`` (default 2) and after a second its
+    ``depth_test_voxels`` (default D, CarvingConfig's; 0 turns the depth test off)."""
+    from real2sim.reconstruct.photo_carving import CarvingConfig
+
+    settings = []
     for item in text.split(","):
-        ratio, _, wall = item.partition(":")
-        pairs.append((float(ratio), float(wall) if wall else 2.0))
-    return tuple(pairs)
+        ratio, wall, depth = (item.split(":") + ["", ""])[:3]
+        settings.append((float(ratio), float(wall) if wall else 2.0,
+                         float(depth) if depth else CarvingConfig().depth_test_voxels))
+    return tuple(settings)
 
 
-def reconstruct_ratios(dataset: Path, device: str, ratios: tuple[tuple[float, float], ...],
+def reconstruct_ratios(dataset: Path, device: str, ratios: tuple[tuple[float, float, float], ...],
                        visibility: str = "mesh") -> list[list]:
-    """The rows of one dataset: the whole field reconstruction with each (ratio, wall) of the hollow
-    prior (``CarvingConfig.min_spread_to_contrast``, ``min_wall_voxels``), judged against the truth."""
+    """The rows of one dataset: the whole field reconstruction with each (ratio, wall, depth test) of the
+    hollow prior (``CarvingConfig.min_spread_to_contrast``, ``min_wall_voxels``, ``depth_test_voxels``),
+    judged against the truth."""
     from real2sim.reconstruct.stage import ReconstructConfig
 
     base = ReconstructConfig()
     configs = [replace(base, field=replace(base.field, carving=replace(
-        base.field.carving, min_spread_to_contrast=ratio, min_wall_voxels=wall, visibility=visibility)))
-        for ratio, wall in ratios]
+        base.field.carving, min_spread_to_contrast=ratio, min_wall_voxels=wall, depth_test_voxels=depth,
+        visibility=visibility))) for ratio, wall, depth in ratios]
     rows = []
-    for (ratio, wall), (seconds, report) in zip(ratios, timed_reconstructions(dataset, device, configs)):
+    for (ratio, wall, depth), (seconds, report) in zip(ratios, timed_reconstructions(dataset, device, configs)):
         truth = report.get("truth", {})
         concave_mm = truth.get("chamfer_concave_mm")
-        rows.append([dataset.name, device, ratio, wall, round(seconds, 1),
+        rows.append([dataset.name, device, ratio, wall, depth, round(seconds, 1),
                      round(truth.get("chamfer_mm", float("nan")), 3),
                      f"{truth.get('chamfer_hull_mm', float('nan')):.3g} / "
                      + ("-" if concave_mm is None else f"{concave_mm:.3g}"),
@@ -154,9 +159,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tag", default="")
     ap.add_argument("--reconstruct", action="store_true",
                     help="time and judge the whole field reconstruction with each test instead")
-    ap.add_argument("--ratios", default=None, metavar="R[:W],...",
+    ap.add_argument("--ratios", default=None, metavar="R[:W[:D]],...",
                     help="judge the whole reconstruction at each hollow-prior ratio (min_spread_to_contrast) and "
-                         "wall (min_wall_voxels, default 2), visibility by mesh; writes carving_ratio[_TAG].md")
+                         "wall (min_wall_voxels, default 2) and depth test (depth_test_voxels, default CarvingConfig's; 0: off), "
+                         "visibility by mesh; writes carving_ratio[_TAG].md")
     args = ap.parse_args(argv)
     if args.ratios:
         ratios = parse_ratios(args.ratios)
@@ -182,7 +188,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.ratios:
         body = ("The hollow prior's ratio (`CarvingConfig.min_spread_to_contrast`: a concavity's voxel goes where its "
                 "views disagree at least this many times as much as the image varies there) and wall guard "
-                "(`min_wall_voxels`), the rest `reconstruct`'s defaults with photo carving's visibility by mesh (the "
+                "(`min_wall_voxels`) and depth test (`depth_test_voxels`: a voxel also goes where its views would agree "
+                "as well about a surface that many voxels deeper; 0: off), the rest `reconstruct`'s defaults with photo carving's visibility by mesh (the "
                 "CPU's default), every 10th view held out, judged against the true object (`hull / concave`: the "
                 "Chamfer of the parts a silhouette can judge and of the concave parts; `concave`: the share of the "
                 "true concave space left open).\n\n" + markdown_table(header, rows))

@@ -100,6 +100,24 @@ def test_the_hollow_prior_empties_the_mugs_flat_coloured_lower_cavity(mug_captur
     assert np.array_equal(skin & ~opened.solid, skin & ~first_pass.solid)
 
 
+def test_the_depth_test_opens_more_of_the_cavity_and_keeps_the_solid(mug_capture, mug_hull):
+    """Where the views would agree as well about a surface two voxels deeper, they cannot place it: the
+    hollow prior then opens what the image contrast alone calls placed (measured at 160x120, 48 voxels:
+    19.4 % of the filled cavity left solid without the depth test, 10.5 % with it; 0.05 % and 0.09 % of
+    the true solid carved)."""
+    from real2sim.reconstruct.photo_carving import CarvingConfig
+
+    inside, concave = _truth_labels(mug_capture, mug_hull[1])
+    results = {}
+    for depth in (0.0, 2.0):
+        _, hull, results[depth] = _hull_and_carving(mug_capture, CarvingConfig(depth_test_voxels=depth), mug_hull)
+    left = {d: np.count_nonzero(r.solid & concave) / np.count_nonzero(hull & concave) for d, r in results.items()}
+    lost = {d: np.count_nonzero(hull & inside & ~r.solid) / np.count_nonzero(hull & inside) for d, r in results.items()}
+    assert left[2.0] < 0.75 * left[0.0], left
+    assert lost[2.0] < 0.005, lost
+    assert results[2.0].opened_voxels > results[0.0].opened_voxels
+
+
 def test_local_contrast_is_zero_on_flat_colour_and_large_on_texture():
     from real2sim.reconstruct.photo_carving import _local_contrast
 
