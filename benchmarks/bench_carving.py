@@ -110,16 +110,17 @@ RATIO_HEADER = ["object", "device", "ratio", "wall voxels", "depth test voxels",
 
 
 def parse_ratios(text: str) -> tuple[tuple[float, float, float], ...]:
-    """``"1.5,1.25:2,1.0:3:0"`` -> ((1.5, 2.0, D), (1.25, 2.0, D), (1.0, 3.0, 0.0)): the hollow prior's
-    ``min_spread_to_contrast``, after a colon its ``min_wall_voxels`` (default 2) and after a second its
-    ``depth_test_voxels`` (default D, CarvingConfig's; 0 turns the depth test off)."""
+    """``"1.5,1.25:2,1.0:3:0"`` -> ((1.5, W, D), (1.25, 2.0, D), (1.0, 3.0, 0.0)): the hollow prior's
+    ``min_spread_to_contrast``, after a colon its ``min_wall_voxels`` and after a second its
+    ``depth_test_voxels`` (each by default CarvingConfig's: W 2, D 2; a D of 0 turns the depth test off)."""
     from real2sim.reconstruct.photo_carving import CarvingConfig
 
+    default = CarvingConfig()
     settings = []
     for item in text.split(","):
         ratio, wall, depth = (item.split(":") + ["", ""])[:3]
-        settings.append((float(ratio), float(wall) if wall else 2.0,
-                         float(depth) if depth else CarvingConfig().depth_test_voxels))
+        settings.append((float(ratio), float(wall) if wall else default.min_wall_voxels,
+                         float(depth) if depth else default.depth_test_voxels))
     return tuple(settings)
 
 

@@ -46,16 +46,20 @@ def occluder(grid: VoxelGrid, solid: np.ndarray, method: str, device: str) -> Oc
                      grid, device)
 
 
+def in_image(views: PosedViews, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Where projections (``uv`` (..., 2) px, ``depth`` (...) m) lie in front of the camera and inside its
+    image with room for a bilinear sample (its right and bottom neighbours too)."""
+    height, width = views.mask.shape[1:]
+    return (depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < width - 1) & (uv[..., 1] >= 0) & (uv[..., 1] < height - 1)
+
+
 def observations(views: PosedViews, grid: VoxelGrid, points: np.ndarray, occluder: Occluder,
                  tolerance_voxels: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Which views see which of ``points`` (P, 3, metres): nothing of the solid (``occluder``) lies on
     the ray from the camera nearer than the point (less ``tolerance_voxels``). Per
     observation: its view and point indices, the pixel position (N, 2) and the ray's unit direction (N, 3)."""
     uv, depth = project(views.intrinsics, views.c2w_cv, points)  # (V, P, 2), (V, P)
-    height, width = views.mask.shape[1:]
-    in_image = (depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < width - 1) & (uv[..., 1] >= 0) & \
-               (uv[..., 1] < height - 1)
-    view_of, point_of = np.nonzero(in_image)
+    view_of, point_of = np.nonzero(in_image(views, uv, depth))
     origins = views.c2w_cv[view_of, :3, 3]
     offsets = points[point_of] - origins
     distance = np.linalg.norm(offsets, axis=1)

@@ -76,7 +76,7 @@ import numpy as np
 from scipy.ndimage import binary_dilation, binary_erosion, convolve, distance_transform_edt, gaussian_filter
 
 from real2sim.formats.progress import ProgressFn
-from real2sim.reconstruct.carving_views import Occluder, observations, occluder
+from real2sim.reconstruct.carving_views import Occluder, in_image, observations, occluder
 from real2sim.reconstruct.hull import VoxelGrid, voxel_footprint_px, voxel_parts
 from real2sim.reconstruct.mask_recheck import put_back_for_masks
 from real2sim.reconstruct.views import PosedViews, project
@@ -366,14 +366,13 @@ def _spread_behind(views: PosedViews, images: np.ndarray, points: np.ndarray, vi
     mean line of sight (the same views, the same quantile as :func:`_spread`; NaN where fewer than two of
     them see that point inside their image). Where it is no larger than the spread at the point itself,
     the views cannot tell this depth from a deeper one."""
-    height, width = views.mask.shape[1:]
     mean_dir = np.zeros_like(points)
     np.add.at(mean_dir, point_of, directions)
     mean_dir /= np.maximum(np.linalg.norm(mean_dir, axis=1, keepdims=True), 1e-12)
     deeper = points + behind_m * mean_dir
     uv_all, depth_all = project(views.intrinsics, views.c2w_cv, deeper)  # (V, P, 2), (V, P)
-    uv, depth = uv_all[view_of, point_of], depth_all[view_of, point_of]
-    inside = (depth > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < width - 1) & (uv[:, 1] >= 0) & (uv[:, 1] < height - 1)
+    uv = uv_all[view_of, point_of]
+    inside = in_image(views, uv, depth_all[view_of, point_of])
     return _colour_spread(_bilinear(images, view_of[inside], uv[inside]), view_of[inside], point_of[inside],
                           len(points), views.count, config.spread_quantile, min_views=2)
 
