@@ -127,8 +127,23 @@ HEADER = ["object", "SfM cameras", "board found", "not found", "median corners",
 
 
 RUN_HEADER = ["object", "input", "backend", "registered", "board found", "focal error (%)", "scale error (%)", "plane tilt (deg)",
-              "plane height (mm)", "origin error (mm)", "Chamfer (mm)", "IoU", "cavity", "sfm (s)", "run (s)",
-              "capture (s)"]
+              "plane height (mm)", "origin error (mm)", "masks IoU", "masks missed (%)", "Chamfer (mm)", "IoU", "cavity",
+              "sfm (s)", "run (s)", "capture (s)"]
+
+
+def masks_against_truth(dataset: Path) -> tuple[float, float]:
+    """The median over views of the IoU of ``dataset``'s masks with the true object's silhouettes (its
+    ``ground_truth/`` mesh ray cast into the same cameras), and the share (%) of the true silhouettes'
+    pixels, over all views, that the masks miss."""
+    from real2sim.reconstruct.parallax_masks import render_silhouettes
+    from real2sim.reconstruct.truth import load_truth
+    from real2sim.reconstruct.views import load_views
+
+    views = load_views(dataset)
+    masks = views.mask > 0.5
+    true = render_silhouettes(load_truth(dataset), views.intrinsics, views.c2w_cv)
+    iou = (masks & true).sum(axis=(1, 2)) / np.maximum((masks | true).sum(axis=(1, 2)), 1)
+    return float(np.median(iou)), float(100 * (true & ~masks).sum() / max(true.sum(), 1))
 
 
 def _run_row(name: str, variant: str, inp: Path, asset: Path, args, capture_s: float) -> list:
@@ -163,9 +178,11 @@ def _run_row(name: str, variant: str, inp: Path, asset: Path, args, capture_s: f
     cavity = round(truth["concave_recovered"], 2) if truth.get("concave_recovered") is not None else ""
     if variant == "height":  # the robot frame's origin is the object's footprint centre and its yaw free
         e["origin_mm"] = float("nan")
+    masked = run_dir / "masked"
+    mask_iou, mask_missed = masks_against_truth(masked) if (masked / "ground_truth").is_dir() else (float("nan"),) * 2
     return [name, variant, args.backend, f"{sfm['registered']}/{sfm['registered'] + len(sfm['left_out'])}", found,
             round(focal_pct, 3), round(e["scale_pct"], 3), round(e["tilt_deg"], 3), round(e["height_mm"], 2), round(e["origin_mm"], 2),
-            round(truth.get("chamfer_mm", float("nan")), 2), round(truth.get("iou", float("nan")), 3), cavity,
+            round(mask_iou, 3), round(mask_missed, 1), round(truth.get("chamfer_mm", float("nan")), 2), round(truth.get("iou", float("nan")), 3), cavity,
             round(stages["sfm"]["wall_seconds"], 1), round(wall, 1), capture_s]
 
 

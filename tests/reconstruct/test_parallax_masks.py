@@ -542,3 +542,56 @@ def test_parallax_masks_that_cannot_work_warn(tmp_path, capsys):
     assert code == 0, err
     told = [line for line in err.splitlines() if line.startswith("WARNING: parallax masks cannot be trusted")]
     assert len(told) == 1 and re.search(r"image border in 1[0-6] of 16 views", told[0]), err
+
+
+def test_parallax_along_an_edge_is_no_evidence():
+    """A camera that moves sideways past a horizontal edge (an orbit past the band round a mug) moves
+    every point of it along the edge: none of the gradient lies along its parallax. The same camera sees
+    all of a vertical edge's gradient along it, and a corner half; a camera moving up the reverse."""
+    import torch
+
+    from real2sim.formats.dataset import CameraIntrinsics
+    from real2sim.reconstruct.parallax_masks import _parallax_across_edges
+
+    k = CameraIntrinsics(width=40, height=40, fl_x=50.0, fl_y=50.0, cx=20.0, cy=20.0)
+    c2w = np.eye(4)
+    sideways, upwards = np.eye(4), np.eye(4)
+    sideways[0, 3] = 0.05  # OpenCV camera frame: x right, y down
+    upwards[1, 3] = -0.05
+    neighbours = np.stack([sideways, upwards])
+    rows = np.arange(40)[:, None] * np.ones((1, 40))
+    horizontal = torch.from_numpy(np.repeat((rows >= 20)[None], 3, 0).astype(np.float32))
+    share = _parallax_across_edges(horizontal, c2w, neighbours, k, radius=2)
+    on_edge = (slice(18, 22), slice(5, 35))
+    assert share[0][on_edge].max() < 0.05 and share[1][on_edge].min() > 0.95
+    vertical = horizontal.transpose(1, 2)
+    share = _parallax_across_edges(vertical, c2w, neighbours, k, radius=2)
+    on_edge = (slice(5, 35), slice(18, 22))
+    assert share[0][on_edge].min() > 0.95 and share[1][on_edge].max() < 0.05
+    corner = torch.from_numpy(np.repeat(((rows >= 20) & (rows.T >= 20))[None], 3, 0).astype(np.float32))
+    assert 0.3 < _parallax_across_edges(corner, c2w, neighbours, k, radius=2)[0][20, 20] < 0.7
+
+
+def test_a_barrier_keeps_a_plain_base_apart_from_the_plain_table():
+    """The plain base of an object (a dark band) and the plain squares of the board beside it meet along
+    a blurred edge that no neighbour can judge: without the barrier they are one patch and the table's
+    many votes make the base table; with it, the base keeps the verdict of its own ring (its sides)."""
+    from real2sim.reconstruct.parallax_masks import _plain_patches_decided
+
+    shape = (40, 60)
+    rows = np.arange(shape[0])[:, None] * np.ones(shape[1], int)
+    cols = np.arange(shape[1])[None, :] * np.ones((shape[0], 1), int)
+    band = (rows >= 10) & (rows < 20) & (cols >= 20) & (cols < 40)
+    sides = (rows >= 10) & (rows < 20) & ((cols == 19) | (cols == 40))
+    lower_edge = (rows == 20) & (cols >= 19) & (cols <= 40)
+    squares = rows > 20  # plain board below
+    table = (rows < 9) | ((rows >= 9) & (rows < 21) & ((cols < 19) | (cols > 40))) | ((rows == 9) & ~(cols >= 19))
+    table &= ~(band | sides | lower_edge | squares)
+    table |= (rows == 39)  # the squares' own edges, far from the band
+    other = sides
+    beyond = np.zeros(shape, bool)
+    joined = _plain_patches_decided(table, other, beyond)
+    assert joined[band].all()  # the band is table: the failure the barrier mends
+    kept = _plain_patches_decided(table, other, beyond, barrier=lower_edge)
+    assert not kept[band].any()
+    assert kept[squares & (rows < 39)].all()  # the squares, ringed by table, are still table
