@@ -343,6 +343,9 @@ def test_match_reach_must_be_ordered_and_at_most_a_pixel():
     for bad in (dict(outlier_fraction=0.2), dict(base_outlier_fraction=1.0), dict(base_parallax_px=-1.0)):
         with pytest.raises(UserInputError, match="outlier_fraction"):  # the base is the lenient one
             ParallaxConfig(**bad).validate()
+    for bad in (dict(min_parallax_share=1.5), dict(min_parallax_share=-0.1), dict(min_table_speck_share=1.0)):
+        with pytest.raises(UserInputError, match="share"):
+            ParallaxConfig(**bad).validate()
 
 
 # ----------------------------------------------------------------------------- step 2: half-pixel range
@@ -595,3 +598,19 @@ def test_a_barrier_keeps_a_plain_base_apart_from_the_plain_table():
     kept = _plain_patches_decided(table, other, beyond, barrier=lower_edge)
     assert not kept[band].any()
     assert kept[squares & (rows < 39)].all()  # the squares, ringed by table, are still table
+
+
+def test_table_specks_inside_the_object_are_dropped_and_a_hole_is_kept():
+    """Chance matches on a patterned object leave table specks of a few pixels; a table seen through a
+    handle is a part of some size: the specks go, the hole and the table around stay."""
+    from real2sim.reconstruct.parallax_masks import _without_table_specks
+
+    shape = (120, 160)
+    table = ~_disc(shape, (60, 80), 45)
+    hole = _disc(shape, (60, 80), 8)  # 197 px: the table through a handle
+    specks = np.zeros(shape, bool)
+    specks[40, 60] = specks[41, 61] = specks[80, 90] = specks[70, 50:53] = True  # 1-3 px, 8-connected
+    out = _without_table_specks(table | hole | specks, min_share=0.005)  # 96 px at this size
+    assert not out[specks].any()
+    assert out[hole].all() and out[table].all()
+    assert np.array_equal(_without_table_specks(table | specks, 0.0), table | specks)
