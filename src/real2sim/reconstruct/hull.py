@@ -381,11 +381,11 @@ def surface_from_grid(values: np.ndarray, grid: VoxelGrid, level: float, table_z
 
 
 def voxel_parts(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(labels, voxels per label) of the connected parts (26-neighbours) of the bool grid ``mask``; label 0
-    is the outside, its count set to 0."""
+    """(labels, voxels per label) of the connected parts (26-neighbours; 8 in an image) of the bool grid
+    ``mask``; label 0 is the outside, its count set to 0."""
     from scipy.ndimage import label
 
-    labels, count = label(mask, np.ones((3, 3, 3), bool))
+    labels, count = label(mask, np.ones((3,) * mask.ndim, bool))
     sizes = np.bincount(labels.ravel(), minlength=count + 1)
     sizes[0] = 0
     return labels, sizes

@@ -213,7 +213,7 @@ def _reached(image: torch.Tensor, extremes: tuple[torch.Tensor, torch.Tensor],
 def _channel_std(image: torch.Tensor, radius: int) -> torch.Tensor:
     """(H, W) the largest over the channels of ``image`` (C, H, W) of :func:`_local_std`: a dark blue band
     beside black squares differs in one channel, hardly in grey."""
-    return torch.stack([_local_std(channel, radius) for channel in image]).amax(dim=0)
+    return _local_std(image, radius).amax(dim=0)
 
 
 def _parallax_across_edges(image: torch.Tensor, c2w: np.ndarray, neighbour_c2w: np.ndarray,
@@ -236,24 +236,27 @@ def _parallax_across_edges(image: torch.Tensor, c2w: np.ndarray, neighbour_c2w: 
     padded = torch.nn.functional.pad(image[None], (1, 1, 1, 1), mode="replicate")[0]
     gx = 0.5 * (padded[:, 1:-1, 2:] - padded[:, 1:-1, :-2])
     gy = 0.5 * (padded[:, 2:, 1:-1] - padded[:, :-2, 1:-1])
-    size = 2 * radius + 1
 
-    def window_sum(a: torch.Tensor) -> np.ndarray:
-        return torch.nn.functional.avg_pool2d(torch.nn.functional.pad(a.sum(dim=0)[None, None], (radius,) * 4,
-                                                                      mode="replicate"), size, stride=1)[0, 0].numpy()
+    def window(a: torch.Tensor) -> np.ndarray:  # summed over the channels, averaged over the window
+        return _window_mean(a.sum(dim=0), radius).numpy()
 
-    jxx, jxy, jyy = window_sum(gx * gx), window_sum(gx * gy), window_sum(gy * gy)
+    jxx, jxy, jyy = window(gx * gx), window(gx * gy), window(gy * gy)
     along = mx * mx * jxx + 2 * mx * my * jxy + my * my * jyy
     return along / np.maximum(jxx + jyy, 1e-12)
 
 
+def _window_mean(image: torch.Tensor, radius: int) -> torch.Tensor:
+    """(..., H, W): the mean of ``image`` (..., H, W) over a (2r+1)^2 window around each pixel (edges
+    replicated)."""
+    flat = image.reshape(-1, 1, *image.shape[-2:])
+    padded = torch.nn.functional.pad(flat, (radius,) * 4, mode="replicate")
+    return torch.nn.functional.avg_pool2d(padded, 2 * radius + 1, stride=1).reshape(image.shape)
+
+
 def _local_std(gray: torch.Tensor, radius: int) -> torch.Tensor:
-    """(H, W) standard deviation over a (2r+1)^2 window (edges replicated)."""
-    size = 2 * radius + 1
-    padded = torch.nn.functional.pad(gray[None, None], (radius,) * 4, mode="replicate")
-    mean = torch.nn.functional.avg_pool2d(padded, size, stride=1)
-    mean_sq = torch.nn.functional.avg_pool2d(padded * padded, size, stride=1)
-    return (mean_sq - mean * mean).clamp_min(0.0).sqrt()[0, 0]
+    """(..., H, W) standard deviation over a (2r+1)^2 window (edges replicated)."""
+    mean = _window_mean(gray, radius)
+    return (_window_mean(gray * gray, radius) - mean * mean).clamp_min(0.0).sqrt()
 
 
 def table_evidence(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[float, ...],
@@ -297,30 +300,25 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[
                     warped[j] *= gain.clamp(0.5, 2.0)[:, None, None]
             textured = (_channel_std(own * 255.0, config.texture_px) >= config.min_texture).numpy()
             beyond = (valid.sum(dim=0) < 2).numpy()
+            # the neighbours that vote: those that can show the table point behind the pixel, where at least
+            # two can (all that see it otherwise)
+            voters = valid if hidden is None else \
+                torch.where((valid & ~hidden).sum(dim=0) >= 2, valid & ~hidden, valid)
             barrier = np.zeros_like(textured)
             if config.min_parallax_share > 0:
                 # a neighbour whose parallax runs along the local edge cannot tell the edge's height
-                informative = _parallax_across_edges(own, views.c2w_cv[i], views.c2w_cv[near[i]], k,
-                                                     config.texture_px) >= config.min_parallax_share
-                informative = torch.from_numpy(informative)
-                counted = torch.where((valid & ~hidden).sum(dim=0) >= 2, valid & ~hidden, valid) \
-                    if hidden is not None else valid
+                informative = torch.from_numpy(_parallax_across_edges(
+                    own, views.c2w_cv[i], views.c2w_cv[near[i]], k, config.texture_px) >= config.min_parallax_share)
                 # only where enough neighbours see the table point at all: with fewer, the pixel cannot be
                 # confirmed as table whatever its edges, and stays "not table" as before
-                barrier = textured & ((counted.sum(dim=0) >= 2) & ((counted & informative).sum(dim=0) < 2)).numpy()
-                valid = valid & informative
-                if hidden is not None:
-                    hidden = hidden | ~informative
+                barrier = textured & ((voters.sum(dim=0) >= 2) & ((voters & informative).sum(dim=0) < 2)).numpy()
+                voters = voters & informative
             extremes = _cross_extremes(warped)
             for r, reach in enumerate(reaches_px):
                 # per neighbour, against the range of its warped image around (Birchfield-Tomasi)
                 low, high = _reached(warped, extremes, reach)
                 close = torch.maximum(own - high, low - own).clamp_min(0.0).amax(dim=1) * 255.0 <= config.threshold
-                matches = _agreed(valid, close, config.agreement)
-                if hidden is not None:
-                    open_view = valid & ~hidden
-                    matches = torch.where(open_view.sum(dim=0) >= 2, _agreed(open_view, close, config.agreement),
-                                          matches)
+                matches = _agreed(voters, close, config.agreement)
                 matches = matches.numpy()
                 decided = textured & ~barrier
                 table = _plain_patches_decided(matches & decided, ~matches & decided, beyond, barrier)
@@ -334,12 +332,9 @@ def _without_table_specks(table: np.ndarray, min_share: float) -> np.ndarray:
     image: a neighbour's warped texture matches a patterned object by chance here and there (a black dot
     landing on another), and where a few views' specks line up the hull loses a tunnel through the object.
     Table seen through a real hole (a mug's handle) is a part of some size."""
-    from scipy import ndimage
-
     if min_share <= 0 or not table.any():
         return table
-    labels, count = ndimage.label(table, structure=np.ones((3, 3), bool))
-    sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    labels, sizes = voxel_parts(table)
     small = sizes < min_share * table.size
     small[0] = False
     return table & ~small[labels]
