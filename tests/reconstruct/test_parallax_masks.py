@@ -124,7 +124,7 @@ def _disc(shape: tuple[int, int], centre: tuple[int, int], radius: float) -> np.
 def test_plain_disc_ringed_by_table_becomes_table():
     """A plain disc printed on the table has only table pixels around it: it is table. If the patches
     did not take their ring's verdict, a white table would stay a candidate and never be carved."""
-    from real2sim.reconstruct.parallax_masks import _plain_patches_decided
+    from real2sim.reconstruct.parallax_table import _plain_patches_decided
 
     disc = _disc((40, 40), (20, 20), 8)
     table, other, beyond = ~disc, np.zeros_like(disc), np.zeros_like(disc)
@@ -138,7 +138,7 @@ def test_plain_patch_ringed_by_parallax_stays_not_table():
     its lower edge, standing on the table, matches it (here the whole lower half of the ring: about as
     many table votes as other ones; a simple majority would make the can table). A patch ringed almost
     all by table, but for a short arc, is table."""
-    from real2sim.reconstruct.parallax_masks import _plain_patches_decided
+    from real2sim.reconstruct.parallax_table import _plain_patches_decided
 
     shape = (40, 40)
     patch = _disc(shape, (20, 20), 8)
@@ -160,7 +160,7 @@ def test_plain_border_patch_beyond_the_table_is_background():
     """A plain wall behind the object reaches the image's border and lies beyond the table (rays miss
     its plane or no neighbour sees where they land): it is background even though the object's parallax
     rings it. The same patch mostly on the table, or not touching the border, keeps its ring's verdict."""
-    from real2sim.reconstruct.parallax_masks import _plain_patches_decided
+    from real2sim.reconstruct.parallax_table import _plain_patches_decided
 
     shape = (40, 40)
     rows = np.arange(shape[0])[:, None] * np.ones(shape[1], int)
@@ -180,7 +180,7 @@ def test_plain_border_patch_beyond_the_table_is_background():
 
 def test_no_undecided_pixels_returns_table_unchanged():
     """With every pixel decided there is nothing to grow into."""
-    from real2sim.reconstruct.parallax_masks import _plain_patches_decided
+    from real2sim.reconstruct.parallax_table import _plain_patches_decided
 
     rng = np.random.default_rng(0)
     table = rng.random((20, 30)) < 0.5
@@ -361,7 +361,7 @@ def test_half_pixel_range_holds_a_step_edge_shifted_half_a_pixel():
     """A sharp edge printed on the table, resampled half a pixel off in the neighbour's warp, lies within
     the range (no false parallax); shifted a whole pixel it does not (the range is not a 3x3 window,
     which would let any black-and-white pattern on the object match)."""
-    from real2sim.reconstruct.parallax_masks import _half_pixel_range
+    from real2sim.reconstruct.parallax_table import _half_pixel_range
 
     image = torch.zeros(3, 8, 12)
     image[:, :, 6:] = 1.0
@@ -386,7 +386,7 @@ def test_half_pixel_range_holds_a_step_edge_shifted_half_a_pixel():
 def test_one_pass_of_extremes_gives_the_range_of_every_reach():
     """The range over a pixel and the four points ``r`` towards its neighbours, computed point by point, is the
     blend of the pixel and its neighbours' extremes (what table_evidence computes once for both reaches)."""
-    from real2sim.reconstruct.parallax_masks import _cross_extremes, _reached
+    from real2sim.reconstruct.parallax_table import _cross_extremes, _reached
 
     image = torch.rand(2, 3, 9, 11, generator=torch.Generator().manual_seed(0))
     padded = torch.nn.functional.pad(image, (1, 1, 1, 1), mode="replicate")
@@ -421,7 +421,7 @@ def test_specks_go_on_the_grid_and_parts_of_the_object_stay():
 def test_half_pixel_range_of_a_batch_is_per_image():
     """(K, C, H, W) in, (K, C, H, W) out, each image's range its own (padding per image: no bleeding
     between neighbours in the batch); a flat image's range is itself, edges included."""
-    from real2sim.reconstruct.parallax_masks import _half_pixel_range
+    from real2sim.reconstruct.parallax_table import _half_pixel_range
 
     gen = torch.Generator().manual_seed(0)
     batch = torch.rand(4, 3, 9, 7, generator=gen)
@@ -444,7 +444,8 @@ def test_neighbours_are_other_views_in_the_angle_range(can_capture):
     seen from the common point (views out of range only where too few are in it); too few views is a
     one-line error, and so is a config that cannot choose any."""
     from real2sim.formats.errors import UserInputError
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig, neighbour_views
+    from real2sim.reconstruct.parallax_masks import ParallaxConfig
+    from real2sim.reconstruct.parallax_table import neighbour_views
     from real2sim.reconstruct.views import PosedViews, common_look_at_point, load_views
 
     views = load_views(can_capture, need_masks=False)
@@ -554,7 +555,7 @@ def test_parallax_along_an_edge_is_no_evidence():
     import torch
 
     from real2sim.formats.dataset import CameraIntrinsics
-    from real2sim.reconstruct.parallax_masks import _parallax_across_edges
+    from real2sim.reconstruct.parallax_table import _parallax_across_edges
 
     k = CameraIntrinsics(width=40, height=40, fl_x=50.0, fl_y=50.0, cx=20.0, cy=20.0)
     c2w = np.eye(4)
@@ -579,7 +580,7 @@ def test_a_barrier_keeps_a_plain_base_apart_from_the_plain_table():
     """The plain base of an object (a dark band) and the plain squares of the board beside it meet along
     a blurred edge that no neighbour can judge: without the barrier they are one patch and the table's
     many votes make the base table; with it, the base keeps the verdict of its own ring (its sides)."""
-    from real2sim.reconstruct.parallax_masks import _plain_patches_decided
+    from real2sim.reconstruct.parallax_table import _plain_patches_decided
 
     shape = (40, 60)
     rows = np.arange(shape[0])[:, None] * np.ones(shape[1], int)
@@ -603,7 +604,7 @@ def test_a_barrier_keeps_a_plain_base_apart_from_the_plain_table():
 def test_table_specks_inside_the_object_are_dropped_and_a_hole_is_kept():
     """Chance matches on a patterned object leave table specks of a few pixels; a table seen through a
     handle is a part of some size: the specks go, the hole and the table around stay."""
-    from real2sim.reconstruct.parallax_masks import _without_table_specks
+    from real2sim.reconstruct.parallax_table import _without_table_specks
 
     shape = (120, 160)
     table = ~_disc(shape, (60, 80), 45)
