@@ -29,6 +29,10 @@ from real2sim.reconstruct.ray_pool import occupancy_ranges
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
 SURFACE_DENSITY_PER_VOXEL = float(np.log(2.0))
+#: Unseen voids (:func:`unseen_voids`): openings at most twice this many voxels wide are shut, and voids of
+#: at least this share of the solid's volume are filled.
+UNSEEN_VOID_GAP_VOXELS = 1
+MIN_UNSEEN_VOID_FRACTION = 0.001
 MIN_EDGE_PIXELS = 100  # fewer mask-edge pixels than this: the surface is cut at ln 2 per voxel
 
 
@@ -44,16 +48,51 @@ def _sampled_density(field: VoxelRadianceField, upsample: int = 1) -> tuple[np.n
 
 
 def density_mesh(field: VoxelRadianceField, *, upsample: int = 1, table_z_m: float = 0.0,
-                 level_per_voxel: float = SURFACE_DENSITY_PER_VOXEL) -> trimesh.Trimesh:
-    """Marching cubes on the field's density at ``level_per_voxel``, closed underneath; see the
-    module docstring and :func:`silhouette_surface_level` for a level chosen by the masks."""
+                 level_per_voxel: float = SURFACE_DENSITY_PER_VOXEL, void_gap_voxels: int = UNSEEN_VOID_GAP_VOXELS,
+                 report: dict | None = None) -> trimesh.Trimesh:
+    """Marching cubes on the field's density at ``level_per_voxel``, closed underneath and with its unseen
+    voids filled (:func:`unseen_voids`, ``void_gap_voxels``; 0 fills only the sealed ones); see the module
+    docstring and :func:`silhouette_surface_level` for a level chosen by the masks. ``report``, when given,
+    gets the voxels and volume (ml) of the unseen voids filled."""
     density, grid = _sampled_density(field, upsample)
     solid = density >= level_per_voxel
     # the table closes the solid from below: fill with a solid layer under the grid, then drop it
     filled = binary_fill_holes(np.concatenate([np.ones_like(solid[:, :, :1]), solid], axis=2))[:, :, 1:]
-    density = np.where(filled & ~solid, 10.0 * level_per_voxel, density)
+    voids = unseen_voids(filled, void_gap_voxels) if void_gap_voxels > 0 else np.zeros_like(filled)
+    if report is not None:
+        report.update(unseen_voids_filled_voxels=int(voids.sum()),
+                      unseen_voids_filled_ml=round(float(voids.sum()) * grid.voxel_m ** 3 * 1e6, 3))
+    density = np.where((filled | voids) & ~solid, 10.0 * level_per_voxel, density)
     mesh = surface_from_grid(density, grid, level_per_voxel, table_z_m)
     return largest_parts(mesh)
+
+
+def unseen_voids(solid: np.ndarray, gap_voxels: int = UNSEEN_VOID_GAP_VOXELS,
+                 min_fraction: float = MIN_UNSEEN_VOID_FRACTION) -> np.ndarray:
+    """The empty voxels of ``solid`` (bool, a grid whose last axis is up and whose lowest layer stands on
+    the table) that no view can see into: enclosed but for openings at most ``2 * gap_voxels`` wide
+    (:func:`~real2sim.reconstruct.hull.closed_off`), in connected parts of at least ``min_fraction`` of
+    the solid's volume.
+
+    Rays stop at the first opaque surface, so the field's inside is never trained: where its surface
+    lets a few rays through (a blurred video frame, a pose a little off), training empties the space
+    behind and the mesh gets a cave through a pinhole, with walls inside the object. On the bottle
+    from a 20 s video (80 frames, 1.19 mm voxels) such a cave held 3957 voxels, most of the object's
+    depth: filled, the mesh went 1.63 -> 0.83 mm Chamfer (the mesh voxelised, by script); the mug from
+    60 photos, whose cavity and handle are open wide, had none of this size (crevices of at most 150
+    voxels, 0.04 % of it, left as trained)."""
+    from scipy.ndimage import label
+
+    from real2sim.reconstruct.hull import closed_off
+
+    voids = closed_off(~solid, gap_voxels)
+    if not voids.any():
+        return voids
+    labels, count = label(voids, np.ones((3, 3, 3), bool))
+    sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    big = sizes >= max(min_fraction * float(solid.sum()), 1.0)
+    big[0] = False
+    return big[labels]
 
 
 def silhouette_surface_level(field: VoxelRadianceField, views: PosedViews, *, band_px: int = 2,

@@ -432,3 +432,20 @@ def visual_hull_mesh(views: PosedViews, *, longest_side_voxels: int = 192, outli
     scores = carve(views, grid, outlier_fraction, trust_consistent=trust_consistent)
     mesh = largest_parts(surface_from_grid(scores, grid, 0.5, table_z_m))
     return mesh, grid, scores
+
+
+def closed_off(empty: np.ndarray, gap_voxels: int) -> np.ndarray:
+    """The ``empty`` voxels with no way out (through faces) to the grid's sides or top once openings at
+    most ``2 * gap_voxels`` wide are shut; the table below is no way out."""
+    from scipy.ndimage import binary_dilation, label
+
+    cube = np.ones((3, 3, 3), bool)
+    shut = ~binary_dilation(~empty, cube, iterations=gap_voxels) if gap_voxels else empty
+    padded = np.pad(shut, 1, constant_values=True)
+    padded[:, :, 0] = False
+    labels, _ = label(padded)
+    border = np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(), labels[:, :, -1].ravel()])
+    outside = np.isin(labels, np.unique(border[border > 0]))[1:-1, 1:-1, 1:-1]
+    if gap_voxels:
+        outside = binary_dilation(outside, cube, iterations=gap_voxels)
+    return empty & ~outside

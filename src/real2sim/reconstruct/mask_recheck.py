@@ -18,10 +18,10 @@ from typing import NamedTuple
 
 import numpy as np
 import torch
-from scipy.ndimage import binary_dilation, binary_erosion, label
+from scipy.ndimage import binary_dilation, binary_erosion
 
 from real2sim.reconstruct.field import ray_box
-from real2sim.reconstruct.hull import VoxelGrid, voxel_footprint_px
+from real2sim.reconstruct.hull import VoxelGrid, closed_off, voxel_footprint_px
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 from real2sim.reconstruct.voxel_rays import VoxelIndex, flat_samples
 
@@ -65,7 +65,7 @@ def put_back_for_masks(views: PosedViews, grid: VoxelGrid, original: np.ndarray,
     if deep:
         now |= _mask_ray_check(views, grid, original, now, device, only=emptied, rays=rays).voxels
     if (now != solid).any():
-        now |= _closed_off(~now, void_gap_voxels) & original & ~_closed_off(~solid, void_gap_voxels)
+        now |= closed_off(~now, void_gap_voxels) & original & ~closed_off(~solid, void_gap_voxels)
     return now & ~solid
 
 
@@ -162,18 +162,3 @@ def _mask_ray_check(views: PosedViews, grid: VoxelGrid, original: np.ndarray, so
             if within is not None:
                 unmet += int((emptied & ~meets(carved_f)).sum())
     return _RayCheck(restore_f.cpu().numpy().reshape(original.shape), unmet, emptied_by_view)
-
-
-def _closed_off(empty: np.ndarray, gap_voxels: int) -> np.ndarray:
-    """The ``empty`` voxels with no way out (through faces) to the grid's sides or top once openings at
-    most ``2 * gap_voxels`` wide are shut; the table below is no way out."""
-    cube = np.ones((3, 3, 3), bool)
-    shut = ~binary_dilation(~empty, cube, iterations=gap_voxels) if gap_voxels else empty
-    padded = np.pad(shut, 1, constant_values=True)
-    padded[:, :, 0] = False
-    labels, _ = label(padded)
-    border = np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(), labels[:, :, -1].ravel()])
-    outside = np.isin(labels, np.unique(border[border > 0]))[1:-1, 1:-1, 1:-1]
-    if gap_voxels:
-        outside = binary_dilation(outside, cube, iterations=gap_voxels)
-    return empty & ~outside

@@ -274,7 +274,8 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
                 if config.surface_level == "silhouettes":
                     report["surface_level"] = silhouette_surface_level(trained.field, train, seed=seed)
                     level = report["surface_level"]["level_per_voxel"]
-                mesh = density_mesh(trained.field, table_z_m=config.table_z_m, level_per_voxel=level)
+                mesh = density_mesh(trained.field, table_z_m=config.table_z_m, level_per_voxel=level,
+                                    report=report.setdefault("extraction", {}))
             mesh = simplified(largest_parts(mesh, config.min_part_volume_fraction), config.max_faces)
         with clock.stage("texture"):
             if progress:
