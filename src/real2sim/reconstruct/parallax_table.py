@@ -180,13 +180,12 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[
                 barrier = textured & ((voters.sum(dim=0) >= 2) & ((voters & informative).sum(dim=0) < 2)).numpy()
                 voters = voters & informative
             extremes = _cross_extremes(warped)
+            decided = textured & ~barrier
             for r, reach in enumerate(reaches_px):
                 # per neighbour, against the range of its warped image around (Birchfield-Tomasi)
                 low, high = _reached(warped, extremes, reach)
                 close = torch.maximum(own - high, low - own).clamp_min(0.0).amax(dim=1) * 255.0 <= config.threshold
-                matches = _agreed(voters, close, config.agreement)
-                matches = matches.numpy()
-                decided = textured & ~barrier
+                matches = _agreed(voters, close, config.agreement).numpy()
                 table = _plain_patches_decided(matches & decided, ~matches & decided, beyond, barrier)
                 out[r, i] = _without_table_specks(table, config.min_table_speck_share)
             progress("parallax masks: table", i + 1, views.count)
