@@ -24,6 +24,8 @@ World frame, metres; cameras are camera-to-world with OpenCV axes, as in :mod:`v
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from real2sim.formats.dataset import pose_errors
@@ -406,8 +408,12 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
                               "median_move_mm": round(float(np.median(shifted)), 3)})
         c2w = moved
     placement = {}
-    if not along_axis and rounds_report:
-        c2w, placement["by_size"] = placed_by_size(replace(views, c2w_cv=c2w), progress=progress)
+    if not along_axis and rounds_report and "median_miss_px" in centring:
+        c2w, placement["by_size"] = placed_by_size(replace(views, c2w_cv=c2w), progress=progress,
+                                                   max_move_m=size_move_bound_m(views, centring))
+        if not placement["by_size"]["moved"]:
+            warnings.warn(f"the object is placed among the cameras by the given poses' mean alone: "
+                          f"{placement['by_size']['reason']}", RuntimeWarning, stacklevel=2)
     if table_z_m is None and support_z_m is not None and rounds_report:
         c2w, placement["on_support"] = stood_on_support(replace(views, c2w_cv=c2w), support_z_m)
     turned_deg, moved_mm = pose_errors(c2w, views.c2w_cv)
@@ -428,31 +434,38 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
 # give the same image 1.3 m away, so the common point the views are turned onto is only as sure as the mean of
 # their given orientations (2.7 mm median at 5 mm / 1 deg on the long-lens ring; `bench_hard_captures`'
 # `frame_bound`), and the rounds do not move it (cameras that far are not moved along their axes).
-# What the turns do not hide is the distance: the object looks larger from a camera it is nearer to. The
-# camera centres are known to millimetres (a tenth of the object's offset's effect over a ring), so where the
-# object stands among them follows from how large it looks in each view against how large the current
-# placement makes it look there: with the placed object off by d, log(mask size / model size) in view i is
-# -d . u_i / r_i (u_i the unit vector from the object to camera i, r_i its distance), and a constant. Parts of that ratio
-# that come from the shape (the hull spills over the object more from some sides) are alike from opposite
-# sides through a long lens (an orthographic silhouette and its mirror image have one size), so they are
-# fitted as even functions of u_i (a constant and the quadratic forms) and the offset, odd, is what is left.
-# Directions the cameras do not spread over (the vertical of a single ring, whatever its elevation: u_i . z is
-# the same for every view) cannot be told from the constant and are not moved.
-# On the can seen level through a 1650 px lens from 1.3 m at 5 mm / 1 deg: the object stood 4.4 mm off after
-# the rounds, 0.3 mm along that direction after this (test: a known offset is found back).
+# What the turns do not hide is the distance: the object looks larger from a camera it is nearer to, and the
+# camera centres are known to millimetres. With the placed object at truth + d, log(mask size / size of the
+# placed hull's projection) in view i is -d . u_i / r_i (u_i the unit vector from the object to camera i, r_i
+# its distance) and a constant. Parts of that ratio that come from the shape (the hull spills over the object
+# more from some sides) are alike from opposite sides through a long lens (an orthographic silhouette and its
+# mirror image have one size), so they are fitted as even functions of u_i and the offset, odd, is what is
+# left. Directions the cameras do not spread over (the vertical of a single ring, whatever its elevation:
+# u_i . z is the same for every view) cannot be told from the constant and are not searched.
+# The hull is carved from the views as they stand, so it follows a move in part: moving the object takes
+# out only a share of the offset the sizes saw (0.2 on a 32-view ring at 160x120, 0.9 on 100 views at
+# 320x240). That share is measured, not assumed: the object is moved by a probe along each searched direction
+# and the change of the offset read (a Jacobian by finite differences); the move is the Newton step through
+# it. Sizes that do not follow the moves (masks larger from one side whatever the placement) are not
+# believed, and the cameras are left as they came.
 
-SIZE_ROUNDS = 3
 SIZE_VOXELS = 160
 #: The hull the sizes are compared with is carved with this tolerance: with the 0.15 of the rounds it spills
 #: further from some sides than others, and the long-lens can ended 0.9 mm off instead of 0.2 along x.
 SIZE_OUTLIER_FRACTION = 0.03
 #: Fewer views with the whole object in frame than this: the sizes are not used.
 SIZE_MIN_VIEWS = 12
-#: A direction of the offset whose singular value in the fit is below this share of the largest is one the
-#: cameras do not spread over; it is left as it is.
-SIZE_MIN_SINGULAR_SHARE = 0.1
-#: The rounds stop when the object moves less than this (metres).
-SIZE_STOP_M = 5e-5
+#: A direction along which the cameras' directions from the object spread less than this share of the most
+#: (variance) is one they do not spread over: the object is not moved along it.
+SIZE_MIN_SPREAD_SHARE = 0.05
+#: The probe move, as a share of the hull's longest side (2.4 mm on a 12 cm can).
+PROBE_SHARE = 0.02
+#: A probe must take out between these shares of itself from the offset the sizes see (see above).
+MIN_RESPONSE, MAX_RESPONSE = 0.1, 2.0
+#: Newton steps through the measured Jacobian.
+SIZE_STEPS = 2
+#: The sizes may move the object this many times as far as the given poses leave it uncertain.
+SIZE_MAX_SIGMAS = 3.0
 
 
 def silhouette_size_px(views: PosedViews, c2w_cv: np.ndarray, points_m: np.ndarray) -> float:
@@ -464,10 +477,20 @@ def silhouette_size_px(views: PosedViews, c2w_cv: np.ndarray, points_m: np.ndarr
     return float(np.sqrt(covered.sum()))
 
 
-def size_offset(views: PosedViews, points_m: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, dict]:
-    """(3,) metres: how far the object stands from where ``points_m`` (its hull as the views place it now)
-    is, from the sizes of the views ``use`` (bool (N,): those with the whole object in frame); see the
-    comment above. Unobservable directions get 0. And the fit's figures for the report."""
+def searched_directions(views: PosedViews, centre_m: np.ndarray) -> np.ndarray:
+    """(3, k) orthonormal world directions the cameras' directions from ``centre_m`` spread over (see the
+    comment above): k = 2 for a single ring, 3 for a hemisphere."""
+    arm = views.c2w_cv[:, :3, 3] - centre_m
+    distance = np.linalg.norm(arm, axis=1)
+    directions = arm / distance[:, None] * (np.median(distance) / distance)[:, None]
+    spread, axes = np.linalg.eigh(np.cov(directions.T))
+    return axes[:, spread > SIZE_MIN_SPREAD_SHARE * spread.max()]
+
+
+def size_offset(views: PosedViews, points_m: np.ndarray, use: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, float]:
+    """(k,) metres along ``axes`` ((3, k), :func:`searched_directions`): how far the object stands from
+    where ``points_m`` (its hull as the views place it now) is, as the sizes of the views ``use`` (bool (N,):
+    those with the whole object in frame) see it at first order; and the fit's residual RMS (log size)."""
     ref = points_m.mean(axis=0)
     index = np.nonzero(use)[0]
     mask_size = np.sqrt((views.mask[index] >= 0.5).reshape(len(index), -1).sum(axis=1))
@@ -475,22 +498,16 @@ def size_offset(views: PosedViews, points_m: np.ndarray, use: np.ndarray) -> tup
     ok = (mask_size > 0) & (model_size > 0)
     arm = views.c2w_cv[index[ok], :3, 3] - ref
     distance = np.linalg.norm(arm, axis=1)
-    u = arm / distance[:, None]
     typical = float(np.median(distance))
-    even = np.stack([np.ones(len(u)), u[:, 0] ** 2 - u[:, 1] ** 2, 2 * u[:, 0] * u[:, 1], u[:, 2] ** 2,
-                     u[:, 0] * u[:, 2], u[:, 1] * u[:, 2]], axis=1)
-    design = np.concatenate([u * (typical / distance)[:, None], even], axis=1)
+    along = (arm / distance[:, None] * (typical / distance)[:, None]) @ axes  # u_i . axis, scaled by r / r_i
+    pairs = [along[:, j] * along[:, k] for j in range(along.shape[1]) for k in range(j, along.shape[1])]
+    design = np.column_stack([along, np.ones(len(along)), *pairs])  # the offset; even terms of the shape
     y = np.log(mask_size[ok] / model_size[ok])
-    left, singular, right = np.linalg.svd(design, full_matrices=False)
-    keep = singular > SIZE_MIN_SINGULAR_SHARE * singular.max()
-    solution = right[keep].T @ ((left[:, keep].T @ y) / singular[keep])
-    # with the model's object at truth + d, log(mask / model) = log(r_model / r) = -d . u / r: where the
-    # object looks larger than the model makes it, it is nearer that camera; the offset asked for is -d
-    offset = typical * solution[:3]
+    solution = np.linalg.lstsq(design, y, rcond=1e-8)[0]
     residual = y - design @ solution
-    observable = np.linalg.norm(right[keep][:, :3], axis=0) > 0.9  # the axis lies in the directions fitted
-    return offset, {"views": int(ok.sum()), "size_residual_rms": round(float(np.sqrt(np.mean(residual ** 2))), 5),
-                    "observable_axes": [axis for axis, seen in zip("xyz", observable) if seen]}
+    # log(mask / model) = -d . u / r: where the object looks larger than the placed hull, it is nearer that
+    # camera than placed; the offset asked for is -d
+    return typical * solution[:axes.shape[1]], float(np.sqrt(np.mean(residual ** 2)))
 
 
 def object_moved(views: PosedViews, from_m: np.ndarray, to_m: np.ndarray) -> np.ndarray:
@@ -500,10 +517,14 @@ def object_moved(views: PosedViews, from_m: np.ndarray, to_m: np.ndarray) -> np.
     return turned_onto(views, to_m, uv[:, 0], np.ones((views.count, 2), dtype=bool))
 
 
-def placed_by_size(views: PosedViews, *, rounds: int = SIZE_ROUNDS, voxels: int = SIZE_VOXELS,
-                   outlier_fraction: float = SIZE_OUTLIER_FRACTION, progress=None) -> tuple[np.ndarray, dict]:
+def placed_by_size(views: PosedViews, *, max_move_m: float, voxels: int = SIZE_VOXELS,
+                   outlier_fraction: float = SIZE_OUTLIER_FRACTION, steps: int = SIZE_STEPS,
+                   progress=None) -> tuple[np.ndarray, dict]:
     """(N, 4, 4) the cameras of ``views`` turned so the object stands among them where its sizes in the
-    views say (see the comment above), and a report; as they are when too few views hold the whole object."""
+    views say (see the comment above), and a report; as they are when too few views hold the whole object,
+    the sizes do not follow the object's moves, or they ask for a move longer than ``max_move_m`` (metres:
+    what the given poses leave uncertain, :func:`size_move_bound_m`; a size a mask recipe biases on one
+    side of the rig by a per cent reads as a centimetre at a metre)."""
     from dataclasses import replace
 
     _, whole, _ = mask_centres(views)
@@ -511,21 +532,70 @@ def placed_by_size(views: PosedViews, *, rounds: int = SIZE_ROUNDS, voxels: int 
     if use.sum() < SIZE_MIN_VIEWS:
         return views.c2w_cv.copy(), {"moved": False, "reason": f"{int(use.sum())} views hold the whole object "
                                                                f"(at least {SIZE_MIN_VIEWS} needed)"}
-    c2w, total, steps, fit = views.c2w_cv.copy(), np.zeros(3), [], {}
-    for r in range(rounds):
+    probes = 3 + steps + 1  # hulls carved: the start, a probe per direction (at most 3), a step each
+    done = 0
+
+    def hull(c2w: np.ndarray) -> np.ndarray:
+        nonlocal done
         if progress:
-            progress("where the object stands, from its sizes", r, rounds)
-        current = replace(views, c2w_cv=c2w)
-        points = hull_surface_points(current, outlier_fraction=outlier_fraction, table_z_m=None,
-                                     longest_side_voxels=voxels)
-        offset, fit = size_offset(current, points, use)
-        centre = points.mean(axis=0)
-        c2w = object_moved(current, centre, centre + offset)
-        total += offset
-        steps.append(round(1000.0 * float(np.linalg.norm(offset)), 3))
-        if np.linalg.norm(offset) < SIZE_STOP_M:
-            break
-    return c2w, {"moved": True, "moved_mm": [round(1000.0 * float(x), 3) for x in total], "steps_mm": steps, **fit}
+            progress("where the object stands, from its sizes", done, probes)
+        done += 1
+        return hull_surface_points(replace(views, c2w_cv=c2w), outlier_fraction=outlier_fraction, table_z_m=None,
+                                   longest_side_voxels=voxels)
+
+    def seen(c2w: np.ndarray, points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+        """(the object's centre, its offset along the axes, the fit's residual) with the cameras ``c2w``."""
+        points = hull(c2w) if points is None else points
+        offset, residual = size_offset(replace(views, c2w_cv=c2w), points, use, axes)
+        return points.mean(axis=0), offset, residual
+
+    points = hull(views.c2w_cv)
+    axes = searched_directions(views, points.mean(axis=0))
+    probe_m = PROBE_SHARE * float(np.ptp(points, axis=0).max())
+    centre, offset, residual = seen(views.c2w_cv, points)
+    jacobian = np.zeros((axes.shape[1], axes.shape[1]))
+    for j in range(axes.shape[1]):
+        _, probed, _ = seen(object_moved(views, centre, centre + probe_m * axes[:, j]))
+        jacobian[:, j] = (probed - offset) / probe_m
+    # a probe moves the object; the offset the sizes see should drop by a share of it: -J, near g * I
+    response = np.linalg.eigvals(-0.5 * (jacobian + jacobian.T)).real
+    report = {"searched_axes": [[round(float(x), 4) for x in axis] for axis in axes.T],
+              "probe_mm": round(1000.0 * probe_m, 3), "response": [round(float(x), 3) for x in sorted(response)],
+              "offset_seen_mm": [round(1000.0 * float(x), 3) for x in axes @ offset],
+              "size_residual_rms": round(residual, 5), "views": int(use.sum())}
+    if response.min() < MIN_RESPONSE or response.max() > MAX_RESPONSE:
+        return views.c2w_cv.copy(), {**report, "moved": False, "reason": (
+            f"the sizes did not follow the object's moves (a probe took out {100 * response.min():.0f}-"
+            f"{100 * response.max():.0f} % of itself, {100 * MIN_RESPONSE:.0f}-{100 * MAX_RESPONSE:.0f} % expected): "
+            "left as aligned")}
+    first = axes @ np.linalg.solve(-jacobian, offset)
+    if np.linalg.norm(first) > max_move_m:
+        return views.c2w_cv.copy(), {**report, "moved": False, "reason": (
+            f"the sizes ask to move the object {1000 * np.linalg.norm(first):.1f} mm, more than the given poses "
+            f"leave uncertain ({1000 * max_move_m:.1f} mm): the masks' sizes differ from one side to another; "
+            "left as aligned")}
+    c2w, total, taken = views.c2w_cv.copy(), np.zeros(3), []
+    for _ in range(steps):
+        move = axes @ np.linalg.solve(-jacobian, offset)
+        c2w = object_moved(replace(views, c2w_cv=c2w), centre, centre + move)
+        total += move
+        taken.append(round(1000.0 * float(np.linalg.norm(move)), 3))
+        centre, offset, residual = seen(c2w)
+    return c2w, {**report, "moved": True, "moved_mm": [round(1000.0 * float(x), 3) for x in total],
+                 "steps_mm": taken, "offset_left_mm": [round(1000.0 * float(x), 3) for x in axes @ offset],
+                 "size_residual_rms_after": round(residual, 5)}
+
+
+def size_move_bound_m(views: PosedViews, centring: dict) -> float:
+    """Metres: how far :func:`placed_by_size` may move the object, :data:`SIZE_MAX_SIGMAS` times how
+    sure the given poses are of where it stands. Each view's mask centre misses the views' common point
+    by about its orientation error times the focal length (``centring``'s median miss, before any turn),
+    that is by that error times its distance at the object; the common point averages those over the
+    views, two directions each."""
+    point = np.asarray(centring["point_m"], dtype=float)
+    distance = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - point, axis=1)))
+    per_view_m = float(centring["median_miss_px"]) / views.intrinsics.fl_x * distance
+    return SIZE_MAX_SIGMAS * per_view_m * float(np.sqrt(2.0 / max(int(centring["views_with_whole_mask"]), 1)))
 
 
 def stood_on_support(views: PosedViews, support_z_m: float, *, voxels: int = SIZE_VOXELS,
