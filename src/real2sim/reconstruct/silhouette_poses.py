@@ -500,10 +500,14 @@ def size_offset(views: PosedViews, points_m: np.ndarray, use: np.ndarray, axes: 
     distance = np.linalg.norm(arm, axis=1)
     typical = float(np.median(distance))
     along = (arm / distance[:, None] * (typical / distance)[:, None]) @ axes  # u_i . axis, scaled by r / r_i
-    pairs = [along[:, j] * along[:, k] for j in range(along.shape[1]) for k in range(j, along.shape[1])]
-    design = np.column_stack([along, np.ones(len(along)), *pairs])  # the offset; even terms of the shape
+    k = along.shape[1]
+    # even terms of the shape: a constant and the traceless quadratic forms (the trace is the constant again,
+    # up to the small spread the cameras have along the directions not searched, which it must not fit)
+    even = [along[:, i] * along[:, j] * 2.0 for i in range(k) for j in range(i + 1, k)]
+    even += [along[:, i] ** 2 - along[:, i + 1] ** 2 for i in range(k - 1)]
+    design = np.column_stack([along, np.ones(len(along)), *even])
     y = np.log(mask_size[ok] / model_size[ok])
-    solution = np.linalg.lstsq(design, y, rcond=1e-8)[0]
+    solution = np.linalg.lstsq(design, y, rcond=1e-6)[0]
     residual = y - design @ solution
     # log(mask / model) = -d . u / r: where the object looks larger than the placed hull, it is nearer that
     # camera than placed; the offset asked for is -d
