@@ -361,14 +361,13 @@ def centre_views(views: PosedViews) -> tuple[np.ndarray, dict]:
 
 def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_ROUNDS,
               outlier_fraction: float = ALL_OUTLIER_FRACTION, max_evaluations: int = 300,
-              support_z_m: float | None = None, progress=None) -> tuple[PosedViews, dict]:
+              progress=None) -> tuple[PosedViews, dict]:
     """``views`` with every camera moved so the views' silhouettes agree (see the comment above), and a
     report: per round the rig motion taken out and the median move; per view its coverage and move.
     Views whose masks the others' hull still leaves more than 5 % uncovered keep their move but are
     listed (``poorly_covered``): a mask that is wrong, or a pose a small motion does not explain.
     Cameras too far to be moved along their axes are then turned so the object stands among them where its
-    sizes say (:func:`placed_by_size`); with no table (``table_z_m`` None) and ``support_z_m`` (the height
-    of the stand the dataset states), so it stands on that (:func:`stood_on_support`)."""
+    sizes say (:func:`placed_by_size`)."""
     from dataclasses import replace
 
     if views.count < ALL_MIN_VIEWS:
@@ -414,8 +413,6 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
         if not placement["by_size"]["moved"]:
             warnings.warn(f"the object is placed among the cameras by the given poses' mean alone: "
                           f"{placement['by_size']['reason']}", RuntimeWarning, stacklevel=2)
-    if table_z_m is None and support_z_m is not None and rounds_report:
-        c2w, placement["on_support"] = stood_on_support(replace(views, c2w_cv=c2w), support_z_m)
     turned_deg, moved_mm = pose_errors(c2w, views.c2w_cv)
     report = {"method": "silhouette coherence of all views", "centring": centring,
               "moved_along_optical_axes": along_axis, "rounds": rounds_report, "object_placed": placement,
@@ -600,26 +597,3 @@ def size_move_bound_m(views: PosedViews, centring: dict) -> float:
     distance = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - point, axis=1)))
     per_view_m = float(centring["median_miss_px"]) / views.intrinsics.fl_x * distance
     return SIZE_MAX_SIGMAS * per_view_m * float(np.sqrt(2.0 / max(int(centring["views_with_whole_mask"]), 1)))
-
-
-def stood_on_support(views: PosedViews, support_z_m: float, *, voxels: int = SIZE_VOXELS,
-                     outlier_fraction: float = SIZE_OUTLIER_FRACTION) -> tuple[np.ndarray, dict]:
-    """(N, 4, 4) the cameras of ``views`` turned so the lowest part of the object they see stands at
-    ``support_z_m`` (world z, metres: the stand's top a dataset with no table states), and a report.
-
-    Every view aligned by its silhouettes keeps the given poses' height of the object only as well as
-    their tilts average out (1.5 mm RMS on the long-lens ring at 5 mm / 1 deg), and no size tells it
-    from a single ring; the dataset's statement that the object rests on the stand's top does."""
-    from real2sim.geometry.support_height import lowest_seen_height_m
-    from real2sim.reconstruct.hull import VoxelGrid, carve, largest_parts, object_region, surface_from_grid
-
-    lo, hi = object_region(views, outlier_fraction=outlier_fraction, table_z_m=None)
-    pad = 0.05 * (hi - lo)  # the bottom inside the grid, not on its edge
-    grid = VoxelGrid.covering(lo - pad, hi + pad, voxels, None)
-    mesh = largest_parts(surface_from_grid(carve(views, grid, outlier_fraction), grid, 0.5, -np.inf))
-    lowest = lowest_seen_height_m(mesh, views.c2w_cv[:, :3, 3])
-    rise = float(support_z_m) - lowest
-    centre = np.asarray(mesh.centroid, dtype=float)
-    c2w = object_moved(views, centre, centre + np.array([0.0, 0.0, rise]))
-    return c2w, {"support_z_m": float(support_z_m), "lowest_seen_z_m": round(lowest, 6),
-                 "raised_mm": round(1000.0 * rise, 3)}

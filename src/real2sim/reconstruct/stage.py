@@ -190,8 +190,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         with clock.stage("all_poses"):
             from real2sim.reconstruct.silhouette_poses import align_all
 
-            views, report["silhouette_poses"] = align_all(views, table_z_m=table_z_m, support_z_m=support_z_m,
-                                                          progress=progress)
+            views, report["silhouette_poses"] = align_all(views, table_z_m=table_z_m, progress=progress)
             if report["silhouette_poses"]["method"] == "none":
                 warnings.warn(f"poses not aligned: {report['silhouette_poses']['reason']}", RuntimeWarning,
                               stacklevel=2)
