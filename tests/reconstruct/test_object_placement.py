@@ -114,3 +114,16 @@ def test_align_all_tries_far_views_by_size_and_says_so_when_it_cannot(ring):
     assert report["moved_along_optical_axes"] is False
     placed = report["object_placed"]
     assert placed["by_size"]["moved"] is False and "leave uncertain" in placed["by_size"]["reason"]
+
+
+def test_the_others_hull_is_finer_where_a_voxel_would_span_pixels(ring):
+    """Through the long lens (0.79 mm a pixel at the can) the others' hull gets voxels of about 1.5 px; a box
+    small in the image keeps the default 96, and a huge one stops at the cap."""
+    from real2sim.reconstruct.silhouette_poses import ALL_MAX_VOXELS, ALL_VOXELS, others_hull_voxels
+
+    views, centre = ring
+    pixel_m = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - centre, axis=1))) / views.intrinsics.fl_x
+    half = np.full(3, 90 * pixel_m)  # a box 180 px across: 120 voxels of 1.5 px
+    assert others_hull_voxels(views, centre - half, centre + half) == 120
+    assert others_hull_voxels(views, centre - half / 4, centre + half / 4) == ALL_VOXELS
+    assert others_hull_voxels(views, centre - 4 * half, centre + 4 * half) == ALL_MAX_VOXELS
