@@ -461,8 +461,8 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
 # The hull is carved from the views as they stand, so it follows a move in part: moving the object takes
 # out only a share of the offset the sizes saw (0.2 on a 32-view ring at 160x120, 0.9 on 100 views at
 # 320x240). That share is measured, not assumed: the object is moved by a probe along each searched direction
-# and the change of the offset read (a Jacobian by finite differences); the move is the Newton step through
-# it. Sizes that do not follow the moves (masks larger from one side whatever the placement) are not
+# and the change of the offset read (a Jacobian by finite differences); the move is the offset over the
+# mean share. Sizes that do not follow the moves (masks larger from one side whatever the placement) are not
 # believed, and the cameras are left as they came.
 
 SIZE_VOXELS = 160
@@ -478,7 +478,7 @@ SIZE_MIN_SPREAD_SHARE = 0.05
 PROBE_SHARE = 0.02
 #: A probe must take out between these shares of itself from the offset the sizes see (see above).
 MIN_RESPONSE, MAX_RESPONSE = 0.1, 2.0
-#: Newton steps through the measured Jacobian.
+#: Steps (each re-measures the offset and moves by it over the share).
 SIZE_STEPS = 2
 #: The sizes may move the object this many times as far as the given poses leave it uncertain.
 SIZE_MAX_SIGMAS = 3.0
@@ -588,7 +588,11 @@ def placed_by_size(views: PosedViews, *, max_move_m: float, voxels: int = SIZE_V
             f"the sizes did not follow the object's moves (a probe took out {100 * response.min():.0f}-"
             f"{100 * response.max():.0f} % of itself, {100 * MIN_RESPONSE:.0f}-{100 * MAX_RESPONSE:.0f} % expected): "
             "left as aligned")}
-    first = axes @ np.linalg.solve(-jacobian, offset)
+    # the share is the mean over the probes: by a ring's symmetry it is one number across it, and the
+    # probes' own scatter (0.65-1.12 on the long-lens can at 2 % of its size) made the full Jacobian's
+    # step 8 mm where the sizes saw 5.2 (and it was then refused)
+    share = float(np.mean(response))
+    first = axes @ (offset / share)
     if np.linalg.norm(first) > max_move_m:
         return views.c2w_cv.copy(), {**report, "moved": False, "reason": (
             f"the sizes ask to move the object {1000 * np.linalg.norm(first):.1f} mm, more than the given poses "
@@ -596,7 +600,7 @@ def placed_by_size(views: PosedViews, *, max_move_m: float, voxels: int = SIZE_V
             "left as aligned")}
     c2w, total, taken = views.c2w_cv.copy(), np.zeros(3), []
     for _ in range(steps):
-        move = axes @ np.linalg.solve(-jacobian, offset)
+        move = axes @ (offset / share)
         c2w = object_moved(replace(views, c2w_cv=c2w), centre, centre + move)
         total += move
         taken.append(round(1000.0 * float(np.linalg.norm(move)), 3))
