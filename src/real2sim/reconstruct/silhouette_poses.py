@@ -578,7 +578,7 @@ def placed_by_size(views: PosedViews, *, max_move_m: float, voxels: int = SIZE_V
         _, probed, _ = seen(object_moved(views, centre, centre + probe_m * axes[:, j]))
         jacobian[:, j] = (probed - offset) / probe_m
     # a probe moves the object; the offset the sizes see should drop by a share of it: -J, near g * I
-    response = np.linalg.eigvals(-0.5 * (jacobian + jacobian.T)).real
+    response = np.linalg.eigvalsh(-0.5 * (jacobian + jacobian.T))
     report = {"searched_axes": [[round(float(x), 4) for x in axis] for axis in axes.T],
               "probe_mm": round(1000.0 * probe_m, 3), "response": [round(float(x), 3) for x in sorted(response)],
               "offset_seen_mm": [round(1000.0 * float(x), 3) for x in axes @ offset],
