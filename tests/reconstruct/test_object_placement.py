@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from real2sim.reconstruct.silhouette_poses import object_moved, placed_by_size
+from real2sim.reconstruct.size_placement import object_moved, placed_by_size
 from real2sim.reconstruct.views import load_views
 
 VOXELS = 96  # the stage's 160 takes three times as long for the same answer within 0.1 mm here
@@ -91,7 +91,7 @@ def test_too_few_whole_views_leave_the_cameras_as_they_are(ring):
 
 def test_the_move_bound_follows_the_given_poses_disagreement(ring):
     """3 x (median miss / focal length x distance) x sqrt(2 / views): 1 deg through 825 px at 0.65 m, 32 views."""
-    from real2sim.reconstruct.silhouette_poses import size_move_bound_m
+    from real2sim.reconstruct.size_placement import size_move_bound_m
 
     views, centre = ring
     distance = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - centre, axis=1)))
