@@ -91,10 +91,12 @@ def mark_all_unrefined(dataset: Path) -> None:
 
 
 def _capture(name: str, condition: str, dataset: Path, views: int, width: int, height: int,
-             noise: tuple[float, float]) -> str:
-    """`capture` of ``name`` under ``condition`` into ``dataset``; "" or the failure's one line."""
+             noise: tuple[float, float], seed: int = 0) -> str:
+    """`capture` of ``name`` under ``condition`` into ``dataset`` (``seed``: the capture's pose noise, cut-off
+    views and colour jitter); "" or the failure's one line."""
     cap = subprocess.run(_cli("capture", name, "--out", str(dataset), "--views", str(views), "--pose-noise-mm",
-                              f"{noise[0]:g}", "--pose-noise-deg", f"{noise[1]:g}", *_flags(condition, width, height)),
+                              f"{noise[0]:g}", "--pose-noise-deg", f"{noise[1]:g}", "--seed", str(seed),
+                              *_flags(condition, width, height)),
                          capture_output=True, text=True)
     return "" if cap.returncode == 0 else f"capture failed: {_last_error(cap.stderr)}"
 
@@ -187,14 +189,17 @@ def frame_bound(dataset: Path, noise: tuple[float, float], trials: int = 200) ->
 
 
 def run_condition(name: str, condition: str, work: Path, views: int, width: int, height: int,
-                  run_args: list[str], noise: tuple[float, float] = (5.0, 1.0), all_unrefined: bool = False) -> list:
-    """One table row: object, condition, Chamfer mm, IoU, target met, WARNING lines, run seconds."""
+                  run_args: list[str], noise: tuple[float, float] = (5.0, 1.0), all_unrefined: bool = False,
+                  seed: int = 0) -> list:
+    """One table row: object, condition, capture seed, Chamfer mm, IoU, target met, shape, frame, WARNING
+    lines, run seconds."""
     from real2sim.geometry.objects import OBJECTS
 
-    dataset, asset = work / f"{name}_{condition}", work / f"{name}_{condition}_asset"
-    failed = _capture(name, condition, dataset, views, width, height, noise)
+    stem = f"{name}_{condition}" + (f"_seed{seed}" if seed else "")
+    dataset, asset = work / stem, work / f"{stem}_asset"
+    failed = _capture(name, condition, dataset, views, width, height, noise, seed)
     if failed:
-        return [name, condition, "-", "-", failed, "-", "-", "-", "-", "-", "-"]
+        return [name, condition, seed, "-", "-", failed, "-", "-", "-", "-", "-", "-"]
     if all_unrefined:
         mark_all_unrefined(dataset)
         run_args = [*run_args, "--no-refine-poses"]
@@ -207,13 +212,13 @@ def run_condition(name: str, condition: str, work: Path, views: int, width: int,
                        if ln.strip().startswith("WARNING")})
     warned = "; ".join(w.replace("|", "/") for w in warnings) or "-"
     if run.returncode != 0:
-        return [name, condition, "-", "-", f"run failed (exit {run.returncode}): {_last_error(run.stderr)}",
+        return [name, condition, seed, "-", "-", f"run failed (exit {run.returncode}): {_last_error(run.stderr)}",
                 "-", "-", "-", "-", warned, round(wall_s)]
     rec = json.loads((asset / "truth.json").read_text())["reconstruction"]
     met = rec["chamfer_mm"] <= TARGET_CHAMFER_MM and rec["iou"] >= TARGET_IOU
     shape = shape_error(asset / ".run" / "reconstruct" / "mesh.obj", dataset)
     bound = frame_bound(dataset, noise)
-    return [name, condition, rec["chamfer_mm"], rec["iou"], "yes" if met else "no", *shape,
+    return [name, condition, seed, rec["chamfer_mm"], rec["iou"], "yes" if met else "no", *shape,
             f"{bound['median_mm']} ({bound['p90_mm']})", warned, round(wall_s)]
 
 
@@ -222,6 +227,8 @@ def main() -> int:
     parser.add_argument("--objects", default="bottle,can")
     parser.add_argument("--conditions", default=",".join(CONDITIONS), help=f"among {', '.join(CONDITIONS)}")
     parser.add_argument("--views", type=int, default=100)
+    parser.add_argument("--seeds", default="0", help="capture seeds, comma-separated: each row is captured and run "
+                                                     "once per seed (pose noise, cut-off views, jitter; default 0)")
     parser.add_argument("--pose-noise-mm", type=float, default=5.0, help="capture's RMS pose noise, mm (default 5)")
     parser.add_argument("--pose-noise-deg", type=float, default=1.0, help="capture's RMS pose noise, deg (default 1)")
     parser.add_argument("--quick", action="store_true", help="the can, all conditions together, tiny (smoke test)")
@@ -240,6 +247,10 @@ def main() -> int:
                         help="every frame as refine-poses leaves it when COLMAP refines none (see above)")
     args = parser.parse_args()
     objects, conditions = args.objects.split(","), args.conditions.split(",")
+    try:
+        seeds = [int(s) for s in args.seeds.split(",")]
+    except ValueError:
+        parser.error(f"--seeds: comma-separated integers, got {args.seeds!r}")
     unknown = [c for c in conditions if c not in CONDITIONS]
     if unknown:
         parser.error(f"unknown condition(s): {', '.join(unknown)}")
@@ -275,14 +286,17 @@ def main() -> int:
                 if not dataset.is_dir():
                     continue
                 rows.append(reconstruct_condition(name, condition, dataset, args.device))
+                print(rows[-1], flush=True)
             else:
-                rows.append(run_condition(name, condition, work, views, width, height, run_args, noise,
-                                          args.all_unrefined))
-            print(rows[-1], flush=True)
+                for seed in seeds:
+                    rows.append(run_condition(name, condition, work, views, width, height, run_args, noise,
+                                              args.all_unrefined, seed))
+                    print(rows[-1], flush=True)
             flags = "\n".join(f"- `{c}`: `capture {' '.join(_flags(c, width, height))}`" for c in conditions)
             body = ((args.note + "\n\n" if args.note else "") + setting + f". Target: Chamfer <= {TARGET_CHAMFER_MM} "
                     f"mm and IoU >= {TARGET_IOU} against the true object (truth.json).\n\n"
-                    + markdown_table(["object", "condition", "Chamfer mm", "IoU", "target met"]
+                    + markdown_table(["object", "condition"] + (["capture seed"] if verb == "run" else [])
+                                     + ["Chamfer mm", "IoU", "target met"]
                                      + (["shape Chamfer mm", "shape IoU", "frame offset mm",
                                          "frame bound mm, median (p90)"] if verb == "run" else [])
                                      + [f"{verb} WARNING lines", f"{verb} wall s"], rows)

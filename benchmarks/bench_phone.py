@@ -126,7 +126,7 @@ HEADER = ["object", "SfM cameras", "board found", "not found", "median corners",
           "detect (s)", "frame fit (s)"]
 
 
-RUN_HEADER = ["object", "input", "backend", "registered", "board found", "focal error (%)", "scale error (%)", "plane tilt (deg)",
+RUN_HEADER = ["object", "input", "capture seed", "backend", "registered", "board found", "focal error (%)", "scale error (%)", "plane tilt (deg)",
               "plane height (mm)", "origin error (mm)", "masks IoU", "masks missed (%)", "Chamfer (mm)", "IoU", "cavity",
               "sfm (s)", "run (s)", "capture (s)"]
 
@@ -146,8 +146,8 @@ def masks_against_truth(dataset: Path) -> tuple[float, float]:
     return float(np.median(iou)), float(100 * (true & ~masks).sum() / max(true.sum(), 1))
 
 
-def _run_row(name: str, variant: str, inp: Path, asset: Path, args, capture_s: float) -> list:
-    """``real2sim run`` on ``inp`` into ``asset``; its table row."""
+def _run_row(name: str, variant: str, inp: Path, asset: Path, args, capture_s: float, seed: int = 0) -> list:
+    """``real2sim run`` on ``inp`` (captured with ``seed``) into ``asset``; its table row."""
     import json
 
     from real2sim.cli import main as cli
@@ -159,7 +159,7 @@ def _run_row(name: str, variant: str, inp: Path, asset: Path, args, capture_s: f
     code = cli(command)
     wall = time.perf_counter() - start
     if code != 0:
-        return [name, variant, args.backend, f"exit {code}"] + [""] * (len(RUN_HEADER) - 5) + [round(wall, 1), capture_s]
+        return [name, variant, seed, args.backend, f"exit {code}"] + [""] * (len(RUN_HEADER) - 6) + [round(wall, 1), capture_s]
     run_dir = asset / ".run"
     sfm = json.loads((run_dir / "sfm" / "sfm.json").read_text())
     stages = json.loads((run_dir / "run.json").read_text())["stages"]
@@ -180,7 +180,7 @@ def _run_row(name: str, variant: str, inp: Path, asset: Path, args, capture_s: f
         e["origin_mm"] = float("nan")
     masked = run_dir / "masked"
     mask_iou, mask_missed = masks_against_truth(masked) if (masked / "ground_truth").is_dir() else (float("nan"),) * 2
-    return [name, variant, args.backend, f"{sfm['registered']}/{sfm['registered'] + len(sfm['left_out'])}", found,
+    return [name, variant, seed, args.backend, f"{sfm['registered']}/{sfm['registered'] + len(sfm['left_out'])}", found,
             round(focal_pct, 3), round(e["scale_pct"], 3), round(e["tilt_deg"], 3), round(e["height_mm"], 2), round(e["origin_mm"], 2),
             round(mask_iou, 3), round(mask_missed, 1), round(truth.get("chamfer_mm", float("nan")), 2), round(truth.get("iou", float("nan")), 3), cavity,
             round(stages["sfm"]["wall_seconds"], 1), round(wall, 1), capture_s]
@@ -202,17 +202,19 @@ def run_main(args, argv) -> int:
     rows = []
     for name in args.objects.split(","):
         for variant in args.variants.split(","):
-            with tempfile.TemporaryDirectory() as tmp:
-                root = Path(tmp) / "capture"
-                start = time.perf_counter()
-                video = variant == "video"
-                capture_handheld(make_textured_object(name), root, HandheldConfig(
-                    views=args.video_frames if video else args.views, width=args.width, height=args.height,
-                    board=None if variant == "height" else DEFAULT_BOARD, video=video))
-                capture_s = round(time.perf_counter() - start, 1)
-                inp = root / "clip.mp4" if video else root
-                rows.append(_run_row(name, variant, inp, Path(tmp) / "asset", args, capture_s))
-            print(markdown_table(RUN_HEADER, rows[-1:]), flush=True)
+            for seed in args.seeds:
+                with tempfile.TemporaryDirectory() as tmp:
+                    work = (args.keep / f"{name}_{variant}_seed{seed}") if args.keep else Path(tmp)
+                    root = work / "capture"
+                    start = time.perf_counter()
+                    video = variant == "video"
+                    capture_handheld(make_textured_object(name), root, HandheldConfig(
+                        views=args.video_frames if video else args.views, width=args.width, height=args.height,
+                        board=None if variant == "height" else DEFAULT_BOARD, video=video, seed=seed))
+                    capture_s = round(time.perf_counter() - start, 1)
+                    inp = root / "clip.mp4" if video else root
+                    rows.append(_run_row(name, variant, inp, work / "asset", args, capture_s, seed))
+                print(markdown_table(RUN_HEADER, rows[-1:]), flush=True)
     body = (f"The whole `real2sim run` on simulated handheld captures (`capture NAME --handheld [--board] [--video]`, "
             f"{args.width}x{args.height}): `board` = {args.views} photos with the board; `video` = a clip of "
             f"{args.video_frames} frames at 30 fps with the board, `--frames {args.frames}`; `height` = {args.views} photos "
@@ -242,7 +244,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--height", type=int, default=480)
     ap.add_argument("--noise-mm", type=float, default=2.0, help="SfM camera noise of the second row, mm")
     ap.add_argument("--noise-deg", type=float, default=0.2, help="... and degrees")
+    ap.add_argument("--seeds", default="0", help="--run: capture seeds, comma-separated (the handheld path, its "
+                                                 "blur and exposure): each row once per seed (default 0)")
+    ap.add_argument("--keep", type=Path, default=None, help="--run: keep each capture and asset under this folder")
     args = ap.parse_args(argv)
+    try:
+        args.seeds = [int(x) for x in args.seeds.split(",")]
+    except ValueError:
+        ap.error(f"--seeds: comma-separated integers, got {args.seeds!r}")
     if args.run:
         return run_main(args, argv)
     rows, renders = [], []

@@ -86,7 +86,7 @@ def moved_camera(c2w_cv: np.ndarray, step: np.ndarray) -> np.ndarray:
 
 
 def align_view(views: PosedViews, index: int, points_m: np.ndarray, *, max_evaluations: int = 300,
-               along_axis: bool = True) -> tuple[np.ndarray, float]:
+               along_axis: bool = True, spill_weight: float = SPILL_WEIGHT) -> tuple[np.ndarray, float]:
     """View ``index``'s camera moved so ``points_m`` (the refined views' hull) cover its mask, and the
     share of its mask the moved hull covers. ``along_axis`` False: the camera is not moved along its
     optical axis (see :data:`FAR_RATIO`)."""
@@ -108,7 +108,7 @@ def align_view(views: PosedViews, index: int, points_m: np.ndarray, *, max_evalu
     def loss(step: np.ndarray) -> float:
         diff = gaussian_filter(splatted_silhouette(views, moved_camera(start, full(step)), points_m, window),
                                BLUR_PX) - target
-        return scale * float(np.mean(np.minimum(diff, 0.0) ** 2) + SPILL_WEIGHT * np.mean(np.maximum(diff, 0.0) ** 2))
+        return scale * float(np.mean(np.minimum(diff, 0.0) ** 2) + spill_weight * np.mean(np.maximum(diff, 0.0) ** 2))
 
     result = minimize(loss, np.zeros(free), method="Powell",
                       options={"xtol": 1e-2, "ftol": 1e-7, "maxfev": max_evaluations})
@@ -177,13 +177,23 @@ def align_unrefined(views: PosedViews, *, outlier_fraction: float, table_z_m: fl
 # each round, so the world frame stays the robot's, with its table at z = 0.
 
 ALL_OUTLIER_FRACTION = 0.15
+#: The spill's weight when every view is aligned to the others (``SPILL_WEIGHT`` is for views aligned to a hull
+#: of refined views, which contains the object). A view the image border cuts may show one side edge of the
+#: object only, and its roll then shows only in how that edge leans: at 0.03 the fit rolled such views until
+#: the hull covered a few more mask pixels for hundreds spilled (a second capture of the long-lens bottle: one
+#: view 5.5 degrees rolled, 11 px off, the bottle's lower body carved 1-1.5 mm thin, Chamfer 1.52 mm; at 0.1,
+#: 0.73 mm). Cut views moved by the robot's noise onto a true hull: worst pixel p90 12.6 -> 3.5 px
+#: (tests/reconstruct/test_cut_off_alignment.py).
+ALL_SPILL_WEIGHT = 0.1
 ALL_ROUNDS = 3
 ALL_VOXELS = 96
-#: ... and finer where a voxel would span more than this many pixels in a typical view, up to ALL_MAX_VOXELS:
-#: the rounds cannot align a view closer than the others' hull is fine. The bottle through the 1650 px lens
-#: (230 mm tall with the pad, 1.3 m away: 2.8 px a voxel at 96) came out of the rounds with its hull 6 mm short
-#: at 96 voxels and 0.8 mm at 160 (world Chamfer of the hull 1.38 -> 1.02 mm), for no more time measured;
-#: the robot's near cameras (under 1.5 px a voxel) keep 96.
+#: ... and, for cameras too far to be moved along their axes (``FAR_RATIO``), finer where a voxel would span
+#: more than this many pixels in a typical view, up to ALL_MAX_VOXELS: the rounds cannot align a view closer
+#: than the others' hull is fine. The bottle through the 1650 px lens (230 mm tall with the pad, 1.3 m away:
+#: 2.8 px a voxel at 96) came out of the rounds with its hull 6 mm short at 96 voxels and 0.8 mm at 160 (world
+#: Chamfer of the hull 1.38 -> 1.02 mm), for no more time measured. Near cameras keep 96: on a stand seen by
+#: the robot at 320x240 (123-135 voxels by the pixel rule) the bottle gave 1.22 mm through `run` with them,
+#: 0.69 mm with 96 (the world frame 2.4 mm off against 1.0), the can 0.39 and 0.46 mm.
 ALL_VOXEL_PX = 1.5
 ALL_MAX_VOXELS = 160
 #: Fewer views than this are left as given: the others' hull is then too loose to align a view to
@@ -201,6 +211,22 @@ def others_hull_box(region: tuple[np.ndarray, np.ndarray], table_z_m: float | No
     return lo, hi
 
 
+def cameras_far(c2w_cv: np.ndarray, region: tuple[np.ndarray, np.ndarray]) -> bool:
+    """Whether the cameras (N, 4, 4) stand farther from the box ``region`` (lo, hi, metres) than ``FAR_RATIO``
+    times its longest side (median camera)."""
+    lo, hi = (np.asarray(a, dtype=float) for a in region)
+    distance = float(np.median(np.linalg.norm(c2w_cv[:, :3, 3] - 0.5 * (lo + hi), axis=1)))
+    return distance >= FAR_RATIO * max(float(np.max(hi - lo)), 1e-9)
+
+
+def rounds_hull_voxels(views: PosedViews, region: tuple[np.ndarray, np.ndarray], table_z_m: float | None) -> int:
+    """Voxels along the longest side of the others' hull the rounds align to, ``region`` being the box all
+    views agree on: ``ALL_VOXELS`` for near cameras, :func:`others_hull_voxels` of its box for far ones."""
+    if not cameras_far(views.c2w_cv, region):
+        return ALL_VOXELS
+    return others_hull_voxels(views, *others_hull_box(region, table_z_m))
+
+
 def others_hull_voxels(views: PosedViews, lo_m: np.ndarray, hi_m: np.ndarray) -> int:
     """Voxels along the longest side of the box [lo, hi] (metres) for the others' hull: ``ALL_VOXELS``, or as
     many as keep a voxel within ``ALL_VOXEL_PX`` pixels in a typical view (at the median camera distance from
@@ -212,7 +238,8 @@ def others_hull_voxels(views: PosedViews, lo_m: np.ndarray, hi_m: np.ndarray) ->
 
 
 def leave_one_out_surfaces(views: PosedViews, *, outlier_fraction: float, table_z_m: float | None,
-                           voxels: int | None = None) -> tuple[list[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+                           voxels: int | None = None, region: tuple[np.ndarray, np.ndarray] | None = None
+                           ) -> tuple[list[np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """Per view, (P_i, 3) centres (metres, world) of the boundary voxels of the visual hull carved by the
     other views: a point is inside when at most ``outlier_fraction`` of the others that see it (at
     least 3) put it outside their masks; and the region all views agree on (:func:`hull.object_region`
@@ -222,9 +249,10 @@ def leave_one_out_surfaces(views: PosedViews, *, outlier_fraction: float, table_
 
     from real2sim.reconstruct.hull import VoxelGrid, _mask_votes, object_region
 
-    region = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+    if region is None:
+        region = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
     lo, hi = others_hull_box(region, table_z_m)
-    grid = VoxelGrid.covering(lo, hi, voxels or others_hull_voxels(views, lo, hi), table_z_m)
+    grid = VoxelGrid.covering(lo, hi, voxels or rounds_hull_voxels(views, region, table_z_m), table_z_m)
     centres = grid.centres()
     outside, seen = [], []
     with torch.no_grad():
@@ -394,6 +422,8 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
     sizes say (:func:`real2sim.reconstruct.size_placement.placed_by_size`)."""
     from dataclasses import replace
 
+    from real2sim.reconstruct.hull import object_region
+
     if views.count < ALL_MIN_VIEWS:
         return views, {"method": "none", "reason": f"{views.count} views: too few to align to each other "
                                                    f"(at least {ALL_MIN_VIEWS}); the given poses are used"}
@@ -407,29 +437,30 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
     for r in range(rounds):
         current = replace(views, c2w_cv=c2w)
         try:
-            surfaces, (lo, hi) = leave_one_out_surfaces(current, outlier_fraction=outlier_fraction,
-                                                        table_z_m=table_z_m)
+            region = object_region(current, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
         except UserInputError as e:  # the views agree on no closed region even with the tolerance
             if r == 0:
                 return views, {"method": "none", "reason": f"the views' silhouettes do not bound a region ({e}); "
                                                            "the given poses are used"}
             break  # the rounds done so far stand
         if r == 0:
-            distance_ratio = float(np.median(np.linalg.norm(c2w[:, :3, 3] - 0.5 * (lo + hi), axis=1))
-                                   / max(float(np.max(hi - lo)), 1e-9))
-            along_axis = distance_ratio < FAR_RATIO
+            along_axis = not cameras_far(c2w, region)
+        # the round-0 verdict stands for all rounds, as for the moves along the axes
+        voxels = ALL_VOXELS if along_axis else others_hull_voxels(current, *others_hull_box(region, table_z_m))
+        surfaces, (lo, hi) = leave_one_out_surfaces(current, outlier_fraction=outlier_fraction,
+                                                    table_z_m=table_z_m, voxels=voxels, region=region)
         moved = c2w.copy()
         for i in range(views.count):
             if progress:
                 progress(f"poses of all views, round {r + 1}/{rounds}", i, views.count)
             if len(surfaces[i]):
                 moved[i], coverage[i] = align_view(current, i, surfaces[i], max_evaluations=max_evaluations,
-                                                   along_axis=along_axis)
+                                                   along_axis=along_axis, spill_weight=ALL_SPILL_WEIGHT)
         moved, rig = remove_rig_motion(views.c2w_cv, moved, 0.5 * (lo + hi))
         turned, shifted = pose_errors(moved, c2w)
         rounds_report.append({"rig_motion_removed": rig, "median_turn_deg": round(float(np.median(turned)), 4),
                               "median_move_mm": round(float(np.median(shifted)), 3),
-                              "others_hull_voxels": others_hull_voxels(current, *others_hull_box((lo, hi), table_z_m))})
+                              "others_hull_voxels": voxels})
         c2w = moved
     placement = {}
     if not along_axis and rounds_report and "median_miss_px" in centring:
