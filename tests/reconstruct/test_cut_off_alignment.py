@@ -20,7 +20,7 @@ from real2sim.reconstruct.views import load_views, project
 
 @pytest.fixture(scope="module")
 def cut_ring(tmp_path_factory):
-    """(true-posed views, indices of the views whose mask touches the image border, points on the true
+    """(true-posed views, indices of the views whose mask reaches the image border, points on the true
     bottle, metres) of a 48-view level ring of the bottle at 320x240 through a 1650 px lens, no table, a
     quarter of the views turned so the bottle runs off the image."""
     import trimesh
@@ -28,6 +28,7 @@ def cut_ring(tmp_path_factory):
     from real2sim.capture.wrist_camera import CaptureConfig, capture
     from real2sim.formats.dataset import read_ground_truth
     from real2sim.geometry.objects import make_textured_object
+    from real2sim.reconstruct.silhouette_poses import mask_centres
     from real2sim.reconstruct.truth import load_truth
 
     out = tmp_path_factory.mktemp("cut_ring") / "bottle"
@@ -39,8 +40,8 @@ def cut_ring(tmp_path_factory):
     truth = read_ground_truth(out)
     true = dict(zip((f.file_path for f in truth.frames), truth.poses_c2w_cv()))
     views = replace(views, c2w_cv=np.stack([true[n] for n in views.names]))
-    m = views.mask >= 0.5
-    cut = np.nonzero(m[:, :, 0].any(1) | m[:, :, -1].any(1) | m[:, 0, :].any(1) | m[:, -1, :].any(1))[0]
+    _, whole, _ = mask_centres(views)
+    cut = np.nonzero(~whole.all(axis=1))[0]
     points = trimesh.sample.sample_surface(load_truth(out), 300, seed=0)[0]
     return views, cut, points
 

@@ -219,10 +219,12 @@ def cameras_far(c2w_cv: np.ndarray, region: tuple[np.ndarray, np.ndarray]) -> bo
     return distance >= FAR_RATIO * max(float(np.max(hi - lo)), 1e-9)
 
 
-def rounds_hull_voxels(views: PosedViews, region: tuple[np.ndarray, np.ndarray], table_z_m: float | None) -> int:
+def rounds_hull_voxels(views: PosedViews, region: tuple[np.ndarray, np.ndarray], table_z_m: float | None,
+                       far: bool | None = None) -> int:
     """Voxels along the longest side of the others' hull the rounds align to, ``region`` being the box all
-    views agree on: ``ALL_VOXELS`` for near cameras, :func:`others_hull_voxels` of its box for far ones."""
-    if not cameras_far(views.c2w_cv, region):
+    views agree on: ``ALL_VOXELS`` for near cameras, :func:`others_hull_voxels` of its box for far ones
+    (``far``: that verdict when the caller holds it; None: :func:`cameras_far` of ``region``)."""
+    if not (cameras_far(views.c2w_cv, region) if far is None else far):
         return ALL_VOXELS
     return others_hull_voxels(views, *others_hull_box(region, table_z_m))
 
@@ -446,7 +448,7 @@ def align_all(views: PosedViews, *, table_z_m: float | None, rounds: int = ALL_R
         if r == 0:
             along_axis = not cameras_far(c2w, region)
         # the round-0 verdict stands for all rounds, as for the moves along the axes
-        voxels = ALL_VOXELS if along_axis else others_hull_voxels(current, *others_hull_box(region, table_z_m))
+        voxels = rounds_hull_voxels(current, region, table_z_m, far=not along_axis)
         surfaces, (lo, hi) = leave_one_out_surfaces(current, outlier_fraction=outlier_fraction,
                                                     table_z_m=table_z_m, voxels=voxels, region=region)
         moved = c2w.copy()
