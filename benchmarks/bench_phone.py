@@ -21,6 +21,11 @@ through the SfM model's similarity to the true camera centres), the reconstructi
 against the true object, and wall times per stage. Writes docs/benchmarks/phone_run.md.
 
     python benchmarks/bench_phone.py --run --objects mug --variants board --backend hull
+
+``--true-masks KEPT...``: kept runs (``--run --keep DIR``) reconstructed again, same poses, with the true
+silhouettes as masks: how much of each run's error its masks make (``--section`` names the file).
+
+    python benchmarks/bench_phone.py --true-masks DIR/mug_board_seed2 --section phone_true_masks
 """
 
 from __future__ import annotations
@@ -229,6 +234,53 @@ def run_main(args, argv) -> int:
     return 0
 
 
+def true_masks_main(args, argv) -> int:
+    """Each kept run's own masked dataset (``--keep`` of an earlier ``--run``) reconstructed again on the same
+    poses with the true silhouettes as masks: how much of the run's error its masks make."""
+    import json
+    import shutil
+
+    from PIL import Image
+
+    from real2sim.reconstruct.parallax_masks import render_silhouettes
+    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
+    from real2sim.reconstruct.truth import load_truth
+    from real2sim.reconstruct.views import load_views
+
+    rows = []
+    for kept in args.true_masks:
+        masked = kept / "asset" / ".run" / "masked"
+        if not (masked / "ground_truth").is_dir():
+            print(f"{kept}: no .run/masked with ground_truth/ (keep a --run with --keep)", file=sys.stderr)
+            return 2
+        with tempfile.TemporaryDirectory() as tmp:
+            dataset = Path(tmp) / "masked"
+            shutil.copytree(masked, dataset)
+            views = load_views(dataset)
+            true = render_silhouettes(load_truth(dataset), views.intrinsics, views.c2w_cv)
+            frames = json.loads((dataset / "transforms.json").read_text())["frames"]
+            for frame, silhouette in zip(frames, true):
+                Image.fromarray((silhouette * 255).astype(np.uint8)).save(dataset / frame["mask_path"])
+            start = time.perf_counter()
+            found = reconstruct(dataset, ReconstructConfig(mask_edges="as-given")).report["truth"]
+            seconds = time.perf_counter() - start
+        run = json.loads((kept / "asset" / "truth.json").read_text())["reconstruction"]
+        rows.append([kept.name, round(run["chamfer_mm"], 2), round(found["chamfer_mm"], 2), round(found["iou"], 3),
+                     round(found["concave_recovered"], 2), round(seconds, 1)])
+        print(markdown_table(TRUE_MASKS_HEADER, rows[-1:]), flush=True)
+    body = ("Kept phone runs (`--run --keep DIR`), their masked dataset (SfM poses in the board's frame) reconstructed "
+            "again by `reconstruct`'s defaults with the true silhouettes (the true mesh ray cast into the same "
+            "cameras) in place of the parallax masks: the run's Chamfer against the one its masks allow.\n\n"
+            + markdown_table(TRUE_MASKS_HEADER, rows))
+    write_section(args.section, "Phone captures: the run's masks against the true ones", body,
+                  "python benchmarks/bench_phone.py " + " ".join(argv if argv is not None else sys.argv[1:]))
+    return 0
+
+
+TRUE_MASKS_HEADER = ["run", "run Chamfer (mm)", "true masks Chamfer (mm)", "true masks IoU", "true masks cavity",
+                     "reconstruct (s)"]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--run", action="store_true", help="the whole `real2sim run` (docs/benchmarks/phone_run.md)")
@@ -247,11 +299,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="0", help="--run: capture seeds, comma-separated (the handheld path, its "
                                                  "blur and exposure): each row once per seed (default 0)")
     ap.add_argument("--keep", type=Path, default=None, help="--run: keep each capture and asset under this folder")
+    ap.add_argument("--true-masks", type=Path, nargs="+", default=None, metavar="KEPT",
+                    help="kept runs (--run --keep DIR: DIR/NAME_VARIANT_seedN) reconstructed with their true masks")
     args = ap.parse_args(argv)
     try:
         args.seeds = [int(x) for x in args.seeds.split(",")]
     except ValueError:
         ap.error(f"--seeds: comma-separated integers, got {args.seeds!r}")
+    if args.true_masks:
+        return true_masks_main(args, argv)
     if args.run:
         return run_main(args, argv)
     rows, renders = [], []

@@ -1,0 +1,113 @@
+"""The table plate: the empty table's image gathered from every view, and the mask pixels it explains.
+
+On a small simulated phone capture of the mug standing on the printed board (its true poses, 40 views at
+320x240, about 10 s to render): the plate renders each view's table where the object does not hide it; it
+explains the table seen through the mug's handle, which the parallax test leaves in the masks, and little of
+the mug; and the parallax masks with the plate round cover less of the handle's hole than without it, at the
+price of some more of the mug missed. The figures these tests hold are in each docstring; the 60-photo
+640x480 mug through the whole `run` is in docs/benchmarks/phone_run_mug_plate_seed*.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+import numpy as np
+import pytest
+from scipy.ndimage import binary_dilation
+
+from real2sim.formats.errors import UserInputError
+
+VIEWS, W, H = 40, 320, 240
+
+
+@pytest.fixture(scope="module")
+def mug_on_board(tmp_path_factory):
+    """(views with the true poses and true masks, the true convex hull's silhouettes) of a handheld capture
+    of the mug on the board."""
+    from real2sim.capture.board import DEFAULT_BOARD
+    from real2sim.capture.handheld import HandheldConfig, capture_handheld
+    from real2sim.formats.dataset import read_ground_truth
+    from real2sim.geometry.objects import make_textured_object
+    from real2sim.reconstruct.parallax_masks import render_silhouettes
+    from real2sim.reconstruct.truth import load_truth
+    from real2sim.reconstruct.views import load_views
+
+    root = tmp_path_factory.mktemp("plate") / "mug"
+    capture_handheld(make_textured_object("mug"), root,
+                     HandheldConfig(views=VIEWS, width=W, height=H, board=DEFAULT_BOARD, seed=0))
+    views = load_views(read_ground_truth(root))
+    hull = render_silhouettes(load_truth(root).convex_hull, views.intrinsics, views.c2w_cv)
+    return views, hull
+
+
+def test_the_plate_is_the_empty_table(mug_on_board):
+    """Rendered into each view, the plate matches the image wherever the table is in sight (beyond the
+    true mask grown by 4 px, within 40 px of it), at the view's exposure: measured 96 % of those pixels
+    within 0.06 (largest channel, the best of the plate shifted by up to a pixel), and it covers 94 % of
+    them."""
+    from real2sim.reconstruct.table_plate import plate_in_view, table_plate
+
+    views, _ = mug_on_board
+    masks = views.mask > 0.5
+    plate = table_plate(views, masks, 0.0)
+    assert plate.colour.shape[:2] == plate.seen_by.shape and plate.texel_m > 0
+    close, covered = [], []
+    for i in range(views.count):
+        background, valid = plate_in_view(plate, views, i, masks[i])
+        near = binary_dilation(masks[i], iterations=40) & ~binary_dilation(masks[i], iterations=4)
+        best = np.full(masks[i].shape, np.inf)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                best = np.minimum(best, np.abs(views.rgb[i] - np.roll(background, (dy, dx), (0, 1))).max(-1))
+        close.append(best[near & valid] < 0.06)
+        covered.append(valid[near])
+    assert np.mean(np.concatenate(covered)) > 0.85
+    assert np.mean(np.concatenate(close)) > 0.9
+
+
+def test_the_plate_explains_the_handles_hole_and_little_of_the_mug(mug_on_board):
+    """Masks that fill the hole of the handle (the truth's convex hull's silhouettes, as the parallax masks
+    leave it): the plate explains a share of the hole's pixels (measured 0.35) and few of the mug's
+    (measured 0.020, most of them its black dots over the board's black squares); without its texture floor
+    the test explains more of the mug (measured 0.023)."""
+    from real2sim.reconstruct.table_plate import explained_by_plate, table_plate
+
+    views, hull = mug_on_board
+    mug = views.mask > 0.5
+    plate = table_plate(views, hull, 0.0)
+    explained = explained_by_plate(views, hull, plate)
+    hole = hull & ~mug
+    assert not (explained & ~hull).any()  # only mask pixels are judged
+    assert explained[hole].mean() > 0.25
+    assert explained[mug].mean() < 0.03
+    plain_too = explained_by_plate(views, hull, plate, min_texture=0.0)
+    assert plain_too[mug].mean() > explained[mug].mean()
+
+
+def test_parallax_masks_with_the_plate_cover_less_of_the_hole(mug_on_board):
+    """The parallax masks of the capture (their own table test, then the plate round) against the truth
+    (about 60 s): the plate round takes almost half of what they wrongly cover inside the true hull's
+    silhouettes (the handle's hole; measured 1.83 -> 0.99 % of the mug's pixels) and some of what they
+    cover beside it (24.7 -> 20.7 %: 40 views at 320x240 are few for the parallax test), and misses more of
+    the mug (7.6 -> 10.3 %; 60 views: 4.0 -> 6.7 %, and at 640x480 0.7 -> 1.6 %)."""
+    from real2sim.reconstruct.parallax_masks import ParallaxConfig, parallax_masks, render_silhouettes
+
+    views, hull = mug_on_board
+    mug = views.mask > 0.5
+
+    def shares(config):
+        masks = render_silhouettes(parallax_masks(views, config), views.intrinsics, views.c2w_cv)
+        return (masks & ~mug & hull).sum() / mug.sum(), (mug & ~masks).sum() / mug.sum()
+
+    hole_with, missed_with = shares(ParallaxConfig())
+    hole_without, missed_without = shares(ParallaxConfig(plate_threshold=0.0))
+    assert hole_with < 0.7 * hole_without
+    assert missed_with < missed_without + 0.04
+
+
+@pytest.mark.parametrize("field", ["plate_threshold", "plate_window_px", "plate_min_texture"])
+def test_plate_settings_must_not_be_negative(field):
+    from real2sim.reconstruct.parallax_masks import ParallaxConfig
+
+    with pytest.raises(UserInputError, match="plate"):
+        replace(ParallaxConfig(), **{field: -1}).validate()
