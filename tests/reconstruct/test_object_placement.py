@@ -119,7 +119,7 @@ def test_align_all_tries_far_views_by_size_and_says_so_when_it_cannot(ring):
 def test_the_others_hull_is_finer_where_a_voxel_would_span_pixels(ring):
     """Through the long lens (0.79 mm a pixel at the can) the others' hull gets voxels of about 1.5 px; a box
     small in the image keeps the default 96, and a huge one stops at the cap."""
-    from real2sim.reconstruct.silhouette_poses import ALL_MAX_VOXELS, ALL_VOXELS, others_hull_voxels
+    from real2sim.reconstruct.others_hull import ALL_MAX_VOXELS, ALL_VOXELS, others_hull_voxels
 
     views, centre = ring
     pixel_m = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - centre, axis=1))) / views.intrinsics.fl_x
@@ -134,7 +134,7 @@ def test_near_cameras_keep_the_default_others_hull(ring):
     ring (about 11 can sizes away) gets it; the same lens 3 times nearer (under ``FAR_RATIO``) keeps 96,
     though its voxels would span more pixels (the robot's bottle on a stand: 1.22 mm with the finer hull,
     0.69 mm with 96; the can 0.39 and 0.46 mm)."""
-    from real2sim.reconstruct.silhouette_poses import ALL_VOXELS, FAR_RATIO, others_hull_voxels, rounds_hull_voxels
+    from real2sim.reconstruct.others_hull import ALL_VOXELS, FAR_RATIO, others_hull_voxels, rounds_hull_voxels
 
     views, centre = ring
     long_lens = replace(views, intrinsics=replace(views.intrinsics, fl_x=4 * views.intrinsics.fl_x,

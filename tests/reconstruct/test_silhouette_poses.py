@@ -363,7 +363,8 @@ def test_a_far_camera_is_not_moved_along_its_optical_axis(can_capture):
     """``along_axis=False`` (cameras farther than FAR_RATIO object sizes: a long lens barely sees depth, and the
     one-sided fit walked them toward the object): the camera's move lies across its axis only, and it still
     brings the view back onto the others' hull."""
-    from real2sim.reconstruct.silhouette_poses import align_view, leave_one_out_surfaces
+    from real2sim.reconstruct.others_hull import leave_one_out_surfaces
+    from real2sim.reconstruct.silhouette_poses import align_view
 
     views = load_views(can_capture)
     noisy = _all_moved(views, seed=4)
