@@ -140,15 +140,21 @@ def masks_against_truth(dataset: Path) -> tuple[float, float]:
     """The median over views of the IoU of ``dataset``'s masks with the true object's silhouettes (its
     ``ground_truth/`` mesh ray cast into the same cameras), and the share (%) of the true silhouettes'
     pixels, over all views, that the masks miss."""
-    from real2sim.reconstruct.parallax_masks import render_silhouettes
-    from real2sim.reconstruct.truth import load_truth
     from real2sim.reconstruct.views import load_views
 
     views = load_views(dataset)
     masks = views.mask > 0.5
-    true = render_silhouettes(load_truth(dataset), views.intrinsics, views.c2w_cv)
+    true = true_silhouettes(dataset, views)
     iou = (masks & true).sum(axis=(1, 2)) / np.maximum((masks | true).sum(axis=(1, 2)), 1)
     return float(np.median(iou)), float(100 * (true & ~masks).sum() / max(true.sum(), 1))
+
+
+def true_silhouettes(dataset: Path, views) -> np.ndarray:
+    """(N, H, W) bool: ``dataset``'s true object (its ``ground_truth/`` mesh) ray cast into ``views``' cameras."""
+    from real2sim.reconstruct.parallax_masks import render_silhouettes
+    from real2sim.reconstruct.truth import load_truth
+
+    return render_silhouettes(load_truth(dataset), views.intrinsics, views.c2w_cv)
 
 
 def _run_row(name: str, variant: str, inp: Path, asset: Path, args, capture_s: float, seed: int = 0) -> list:
@@ -242,9 +248,7 @@ def true_masks_main(args, argv) -> int:
 
     from PIL import Image
 
-    from real2sim.reconstruct.parallax_masks import render_silhouettes
     from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
-    from real2sim.reconstruct.truth import load_truth
     from real2sim.reconstruct.views import load_views
 
     rows = []
@@ -257,7 +261,7 @@ def true_masks_main(args, argv) -> int:
             dataset = Path(tmp) / "masked"
             shutil.copytree(masked, dataset)
             views = load_views(dataset)
-            true = render_silhouettes(load_truth(dataset), views.intrinsics, views.c2w_cv)
+            true = true_silhouettes(dataset, views)
             frames = json.loads((dataset / "transforms.json").read_text())["frames"]
             for frame, silhouette in zip(frames, true):
                 Image.fromarray((silhouette * 255).astype(np.uint8)).save(dataset / frame["mask_path"])

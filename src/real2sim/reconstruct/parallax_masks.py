@@ -140,10 +140,11 @@ class ParallaxConfig:
     On the phone capture of the mug (60 photos at 640x480, capture seed 2, its SfM poses) the masks of steps
     1-5 covered 4.98 % more than the truth, 2.70 % in the handle's hole and 2.29 % beside the silhouettes
     (0.71 % missed), and the reconstruction from them was 1.67 mm from the true mug; from the same masks with
-    the truth's in the hole alone 1.00 mm, beside the silhouettes alone 1.25 mm, the true masks 0.62 mm (by
-    script, the same poses). With step 6: 3.24 % more (1.59 in the hole, 1.65 beside), 1.57 % missed, and
-    1.30 mm (through `run`: 1.67 -> 1.37 mm; seed 1 2.10 -> 1.95, seed 0 1.51-1.73 -> 1.35). Without the texture floor (0) 2.57 % more but 2.13 % missed (the mug's black dots over the
-    board's black squares explained), 1.27 mm; at 0.01 the same as 0.02 within 0.15 %."""
+    the truth's in the hole alone 1.00 mm, beside the silhouettes alone 1.25 mm (by script, the same poses),
+    the true masks 0.61 mm (`bench_phone.py --true-masks`). With step 6: 3.24 % more (1.59 in the hole, 1.65
+    beside), 1.57 % missed, and 1.30 mm by script (through `run`: 1.67 -> 1.37 mm; seed 1 2.10 -> 1.95, seed 0
+    1.51-1.73 -> 1.35). Without the texture floor (0) 2.57 % more but 2.13 % missed (the mug's black dots over
+    the board's black squares explained), 1.27 mm; at 0.01 the same as 0.02 within 0.15 %."""
 
     neighbours: int = 8
     min_angle_deg: float = 8.0
@@ -219,7 +220,7 @@ def parallax_masks(views: PosedViews, config: ParallaxConfig = ParallaxConfig(),
                                            occluders, progress)
         solid = _standing_hull(views, table, base_table, config)
         masks = render_silhouettes(solid, views.intrinsics, views.c2w_cv, progress)
-    if config.plate_threshold > 0:  # step 6: the table's plate, seen by every view, judges what the neighbours could not
+    if config.plate_threshold > 0:  # step 6: the table's plate, seen by every view, judges what neighbours could not
         from real2sim.reconstruct.table_plate import explained_by_plate, table_plate
 
         progress("parallax masks: table plate", 0, 0)

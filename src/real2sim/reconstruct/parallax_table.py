@@ -18,7 +18,7 @@ from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress
 from real2sim.reconstruct.hull import voxel_parts
-from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, project_torch
+from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, plane_hits, project_torch
 
 if TYPE_CHECKING:
     from real2sim.reconstruct.parallax_masks import ParallaxConfig
@@ -143,11 +143,8 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[
     occ = None if occluders is None else torch.from_numpy(occluders[:, None].astype(np.float32))
     with torch.no_grad():
         for i in range(views.count):
-            origin, direction = pixel_rays(k, views.c2w_cv[i], u_px.ravel() + 0.5, v_px.ravel() + 0.5)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t = (config.table_z_m - origin[:, 2]) / direction[:, 2]
-            hits = np.isfinite(t) & (t > 0)
-            on_plane = origin + np.where(hits, t, 0.0)[:, None] * direction
+            on_plane, hits = plane_hits(*pixel_rays(k, views.c2w_cv[i], u_px.ravel() + 0.5, v_px.ravel() + 0.5),
+                                        config.table_z_m)
             u, v, z = project_torch(k, w2c[near[i]], torch.from_numpy(on_plane.astype(np.float32)))
             grid = torch.stack([u * (2.0 / w) - 1.0, v * (2.0 / h) - 1.0], dim=-1).reshape(len(near[i]), h, w, 2)
             warped = torch.nn.functional.grid_sample(images[near[i]], grid, mode="bilinear", align_corners=False)

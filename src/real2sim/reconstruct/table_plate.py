@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from scipy.ndimage import binary_dilation, uniform_filter
 
-from real2sim.reconstruct.views import PosedViews, pixel_rays, project_torch
+from real2sim.reconstruct.views import PosedViews, pixel_rays, plane_hits, project_torch
 
 #: the plate has at most this many texels along a side (its texel grows for a very wide table)
 MAX_TEXELS = 2048
@@ -112,11 +112,10 @@ def _plate_extent(views: PosedViews, masks: np.ndarray, table_z_m: float) -> tup
         u = np.clip([cols[0] - w_pad, cols[-1] + w_pad], 0, k.width)
         uu, vv = np.meshgrid(np.linspace(u[0], u[1], 9), np.linspace(v[0], v[1], 9))
         origin, direction = pixel_rays(k, views.c2w_cv[i], uu.ravel(), vv.ravel())
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (table_z_m - origin[:, 2]) / direction[:, 2]
-        down = np.isfinite(t) & (t > 0)
-        hits.append((origin + t[:, None] * direction)[down, :2])
-        distances.append(float(np.median(t[down])) if down.any() else np.nan)
+        on_plane, down = plane_hits(origin, direction, table_z_m)
+        hits.append(on_plane[down, :2])
+        distances.append(float(np.median(np.linalg.norm(on_plane[down] - origin[down], axis=-1)))
+                         if down.any() else np.nan)
     points = np.concatenate(hits) if hits else np.zeros((0, 2))
     if len(points) == 0:
         return np.zeros(2), 0.0, 1.0
@@ -154,19 +153,16 @@ def plate_in_view(plate: TablePlate, views: PosedViews, i: int,
     its image to the plate over its table beyond the mask (grown by 4 px)."""
     k = views.intrinsics
     v_px, u_px = np.mgrid[0:k.height, 0:k.width]
-    origin, direction = pixel_rays(k, views.c2w_cv[i], u_px.ravel() + 0.5, v_px.ravel() + 0.5)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (plate.table_z_m - origin[:, 2]) / direction[:, 2]
-    down = np.isfinite(t) & (t > 0)
-    on_plane = origin + np.where(down, t, 0.0)[:, None] * direction
+    on_plane, down = plane_hits(*pixel_rays(k, views.c2w_cv[i], u_px.ravel() + 0.5, v_px.ravel() + 0.5),
+                                plate.table_z_m)
     n = plate.colour.shape[0]
     gx = (on_plane[:, 0] - plate.origin_xy_m[0]) / (plate.texel_m * n) * 2.0 - 1.0
     gy = (on_plane[:, 1] - plate.origin_xy_m[1]) / (plate.texel_m * n) * 2.0 - 1.0
     grid = torch.from_numpy(np.stack([gx, gy], -1).astype(np.float32))[None, None]
     seen = np.isfinite(plate.colour[..., 0])
-    table = torch.from_numpy(np.concatenate([np.nan_to_num(plate.colour), seen[..., None]], -1).transpose(2, 0, 1)
-                             [None].astype(np.float32).copy())
-    sampled = torch.nn.functional.grid_sample(table, grid, mode="bilinear", align_corners=False)[0, :, 0].T.numpy()
+    texels = torch.from_numpy(np.concatenate([np.nan_to_num(plate.colour), seen[..., None]], -1).transpose(2, 0, 1)
+                              [None].astype(np.float32).copy())
+    sampled = torch.nn.functional.grid_sample(texels, grid, mode="bilinear", align_corners=False)[0, :, 0].T.numpy()
     # a pixel whose bilinear sample touches an unseen texel has no plate
     valid = (down & (np.abs(gx) <= 1) & (np.abs(gy) <= 1) & (sampled[:, 3] > 0.999)).reshape(k.height, k.width)
     background = sampled[:, :3].reshape(k.height, k.width, 3)

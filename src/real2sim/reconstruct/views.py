@@ -256,6 +256,16 @@ def pixel_rays(k: CameraIntrinsics, c2w_cv: np.ndarray, u_px: np.ndarray, v_px: 
     return np.broadcast_to(c2w_cv[:3, 3], d.shape).copy(), d
 
 
+def plane_hits(origin_m: np.ndarray, direction: np.ndarray, plane_z_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where rays (P, 3 origins, metres; P, 3 unit directions, world) meet the plane z = ``plane_z_m`` in front
+    of their origins: the points (P, 3; a ray that does not meet it keeps its origin) and (P,) bool whether it
+    does. Their distance along the ray is ``np.linalg.norm(points - origin_m, axis=-1)``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (plane_z_m - origin_m[:, 2]) / direction[:, 2]
+    hit = np.isfinite(t) & (t > 0)
+    return origin_m + np.where(hit, t, 0.0)[:, None] * direction, hit
+
+
 def common_look_at_point(views: PosedViews, min_fraction: float = 0.8) -> np.ndarray:
     """The world point (3,) closest, in least squares, to every camera's optical axis.
 
