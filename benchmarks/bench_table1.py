@@ -63,7 +63,7 @@ def generated_shape(name: str):
 
 
 def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fit_config=None,
-                 objects: tuple[str, ...] = OBJECTS) -> list[Path]:
+                 objects: tuple[str, ...] = OBJECTS, extra_hints: tuple[float, ...] = ()) -> list[Path]:
     """One asset folder per object holding every SPEC.
 
     Each SPEC is built alone into work/build/<object>/<SPEC> (so an interrupted run
@@ -74,7 +74,11 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
     copies never keep the contact settings of an earlier run. ``fit_config``: the primitive
     fits' settings (default: ``FitConfig()``); a work folder holds builds of one setting only.
     ``objects``: bundled objects, or the shapes of :func:`generated_shape`, built with their +z kept up.
+    ``extra_hints``: each representation with compliant round shapes (spheres, cylinders, ellipsoids) also
+    as ``<representation>_hint<M>``, the same fit written with Drake's resolution hint M (m), so that one
+    sweep, on one set of references, compares the hints.
     """
+    import dataclasses
     import shutil
 
     from real2sim.asset.build import AssetConfig, build_asset, rewrite_models
@@ -106,9 +110,34 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
                 shutil.copytree(build, asset, ignore=shutil.ignore_patterns(spec.name))
             if not (asset / spec.name).exists():
                 shutil.copytree(build / spec.name, asset / spec.name)
+        for stale in asset.glob("*_hint*"):
+            shutil.rmtree(stale)
         rewrite_models(asset, contact or ContactProperties())  # no refit: contact settings only
+        for hint in extra_hints:
+            hinted_copies(asset, dataclasses.replace(contact or ContactProperties(), resolution_hint_m=hint))
         assets.append(asset)
     return assets
+
+
+def hinted_copies(asset: Path, contact) -> None:
+    """Copy each representation of ``asset`` holding compliant round shapes to ``<name>_hint<M>``, written with
+    ``contact`` (whose ``resolution_hint_m`` is M)."""
+    import shutil
+
+    from real2sim.asset.writers import write_representation
+    from real2sim.formats.collision import read_collision_json
+    from real2sim.formats.physical import read_physical_properties
+
+    props = read_physical_properties(asset / "physical_properties.json")
+    for collision_json in sorted(asset.glob("*/collision.json")):
+        rep_dir = collision_json.parent
+        geometry = read_collision_json(collision_json)
+        if "_hint" in rep_dir.name or not any(s.kind in ("sphere", "cylinder", "ellipsoid") for s in geometry.shapes):
+            continue
+        copy = asset / f"{rep_dir.name}_hint{contact.resolution_hint_m:g}"
+        shutil.copytree(rep_dir, copy)
+        write_representation(copy, geometry, props, contact, visual_mesh_relpath="../visual/model.obj",
+                             model_name=copy.name)
 
 
 def fit_table(work: Path, specs: tuple[str, ...], objects: tuple[str, ...] = OBJECTS) -> list[list]:
@@ -170,6 +199,13 @@ def main() -> int:
                         "compliant, the paper's); the reference mesh is rigid either way")
     parser.add_argument("--cylinder-flat-depth", type=float, default=None, metavar="M",
                         help="ContactProperties.cylinder_flat_depth_m of the candidates (default: off)")
+    parser.add_argument("--resolution-hint", type=float, default=None, metavar="M",
+                        help="ContactProperties.resolution_hint_m of the candidates (default: its default): the edge "
+                        "length Drake meshes compliant spheres, cylinders and ellipsoids at (docs/benchmarks/"
+                        "contact_cost.md: the hydroelastic rows' time goes with it)")
+    parser.add_argument("--extra-hint", type=float, nargs="*", default=[], metavar="M",
+                        help="each representation with compliant spheres, cylinders or ellipsoids also as "
+                        "<name>_hint<M>, meshed at resolution hint M (m): rows of both hints in one sweep")
     parser.add_argument("--box-init", choices=["cover", "kmeans"], default=None,
                         help="FitConfig.box_init of boxes:N fits (default: FitConfig's); 'kmeans' is the fit "
                         "before issue 32. Use a --work folder of its own: builds there are reused as they are")
@@ -194,13 +230,14 @@ def main() -> int:
         **({} if args.point_dissipation is None else
            {"point_dissipation_s_per_m": args.point_dissipation if args.point_dissipation > 0 else None}),
         **({} if args.hydroelastic is None else {"hydroelastic": args.hydroelastic}),
+        **({} if args.resolution_hint is None else {"resolution_hint_m": args.resolution_hint}),
         cylinder_flat_depth_m=args.cylinder_flat_depth)
     from real2sim.collision.fit.config import FitConfig
 
     fit_settings = {**({} if args.box_init is None else {"box_init": args.box_init}),
                     **({} if args.contact_weight is None else {"contact_weight": args.contact_weight})}
     fit_config = FitConfig(**fit_settings) if fit_settings else None
-    asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config, objects)
+    asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config, objects, tuple(args.extra_hint))
     build_s = time.perf_counter() - start
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=tuple(args.contact), runs=runs,
                               seed=args.seed, **({"jobs": args.jobs} if args.jobs else {}))
@@ -273,6 +310,11 @@ def main() -> int:
            "hulls included; the reference mesh is rigid either way). " if args.hydroelastic else "")
         + (f"Candidates' compliant cylinders meshed with flats at most {args.cylinder_flat_depth:g} m deep "
            "(`--cylinder-flat-depth`). " if args.cylinder_flat_depth is not None else "")
+        + (f"Candidates' compliant spheres, cylinders and ellipsoids meshed at a resolution hint of "
+           f"{args.resolution_hint:g} m (`--resolution-hint`; default {ContactProperties().resolution_hint_m:g}). "
+           if args.resolution_hint is not None else "")
+        + ("Rows named `_hint<M>`: the same fits meshed at resolution hint M m (`--extra-hint`). "
+           if args.extra_hint else "")
         + (f"Boxes fitted with `--box-init {args.box_init}`. " if args.box_init else "")
         + (f"Primitives fitted with contact-aware weighting, gain {args.contact_weight:g} "
            f"(`FitConfig.contact_weight`, band {FitConfig().contact_band:g}). " if args.contact_weight else "")

@@ -21,7 +21,8 @@ PARALLAX = "parallax"
 def make_masks(dataset_dir: Path | str, method: str, cfg=None, *, table_z_m: float = 0.0, seed: int = 0,
                progress: ProgressFn = null_progress, may_replace: str = "unchanged"):
     """:func:`real2sim.capture.compute_masks` for its methods (``cfg``: its MaskConfig), or parallax masks;
-    a :class:`~real2sim.capture.masking.MaskResult` either way. ``masks_<method>/`` is replaced only
+    a :class:`~real2sim.capture.masking.MaskResult` either way; for parallax ``cfg`` may be a
+    :class:`~real2sim.reconstruct.parallax_masks.ParallaxConfig` (its table height is ``table_z_m``'s). ``masks_<method>/`` is replaced only
     when `mask` made it and holds nothing else (:mod:`real2sim.capture.mask_folder`; ``may_replace``: its
     policy, "edited" for ``mask --overwrite``, "any" for `run`'s private copy of a dataset)."""
     from real2sim.capture.mask_folder import check_mask_folder
@@ -38,7 +39,7 @@ def make_masks(dataset_dir: Path | str, method: str, cfg=None, *, table_z_m: flo
         raise UserInputError(f"{root} has no transforms.json; masks need one to point to them")
     check_dataset_outputs(root, files=("transforms.json",), folders=(f"masks_{PARALLAX}",), what="mask output")
     check_mask_folder(root, ds, PARALLAX, may_replace)
-    config = ParallaxConfig(table_z_m=table_z_m)
+    config = replace(cfg if isinstance(cfg, ParallaxConfig) else ParallaxConfig(), table_z_m=table_z_m)
     table_frame = _table_frame(ds, seed) if is_model_frame(ds) else ds
     views = load_views(table_frame, need_masks=False, max_side_px=config.max_image_px)
     solid = parallax_masks(views, config, progress)

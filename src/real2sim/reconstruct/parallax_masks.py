@@ -144,7 +144,16 @@ class ParallaxConfig:
     the true masks 0.61 mm (`bench_phone.py --true-masks`). With step 6: 3.24 % more (1.59 in the hole, 1.65
     beside), 1.57 % missed, and 1.30 mm by script (through `run`: 1.67 -> 1.37 mm; seed 1 2.10 -> 1.95, seed 0
     1.51-1.73 -> 1.35). Without the texture floor (0) 2.57 % more but 2.13 % missed (the mug's black dots over
-    the board's black squares explained), 1.27 mm; at 0.01 the same as 0.02 within 0.15 %."""
+    the board's black squares explained), 1.27 mm; at 0.01 the same as 0.02 within 0.15 %.
+
+    ``plate_pixel_threshold`` (0: off): step 6 with sliding windows (any window holding the pixel, and the
+    pixel's own difference below this; :mod:`real2sim.reconstruct.table_plate`). At 0.06, on the mug's three
+    60-photo captures (seeds 0, 1, 2; their kept runs masked again, `bench_phone.py --remask`,
+    `phone_remask_sliding_*.md`) the masks' excess fell 2.83 / 2.95 / 3.22 -> 1.84 / 1.98 / 2.20 % and what they
+    miss rose 1.60 / 1.65 / 1.55 -> 3.42 / 2.90 / 2.92 %; the reconstructions went 1.25 / 1.55 / 1.42 ->
+    0.98 / 1.70 / 1.29 mm. Better on two captures of three and worse on the third, on a pipeline whose
+    result moves by up to 0.4 mm between two runs on the same photos: not the default until more captures
+    say so."""
 
     neighbours: int = 8
     min_angle_deg: float = 8.0
@@ -167,6 +176,7 @@ class ParallaxConfig:
     plate_threshold: float = 0.06
     plate_window_px: int = 2
     plate_min_texture: float = 0.02
+    plate_pixel_threshold: float = 0.0
 
     def validate(self) -> None:
         if self.neighbours < 2:
@@ -178,8 +188,9 @@ class ParallaxConfig:
         if not 0 <= self.outlier_fraction <= self.base_outlier_fraction < 1 or self.base_parallax_px < 0:
             raise UserInputError("parallax masks: need 0 <= outlier_fraction <= base_outlier_fraction < 1 and "
                                  "base_parallax_px >= 0")
-        if self.plate_threshold < 0 or self.plate_window_px < 0 or self.plate_min_texture < 0:
-            raise UserInputError("parallax masks: need plate_threshold, plate_window_px and plate_min_texture >= 0")
+        if min(self.plate_threshold, self.plate_window_px, self.plate_min_texture, self.plate_pixel_threshold) < 0:
+            raise UserInputError("parallax masks: need plate_threshold, plate_window_px, plate_min_texture and "
+                                 "plate_pixel_threshold >= 0")
         if not 0 <= self.min_parallax_share <= 1 or not 0 <= self.min_table_speck_share < 1:
             raise UserInputError("parallax masks: need 0 <= min_parallax_share <= 1 and "
                                  "0 <= min_table_speck_share < 1 (shares)")
@@ -226,7 +237,8 @@ def parallax_masks(views: PosedViews, config: ParallaxConfig = ParallaxConfig(),
         progress("parallax masks: table plate", 0, 0)
         plate = table_plate(views, masks, config.table_z_m)
         explained = explained_by_plate(views, masks, plate, threshold=config.plate_threshold,
-                                       window_px=config.plate_window_px, min_texture=config.plate_min_texture)
+                                       window_px=config.plate_window_px, min_texture=config.plate_min_texture,
+                                       pixel_threshold=config.plate_pixel_threshold or None)
         solid = _standing_hull(views, table | explained, base_table | explained, config)
         masks = render_silhouettes(solid, views.intrinsics, views.c2w_cv, progress)
     doubt = mask_doubts(masks)
