@@ -66,20 +66,16 @@ def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
 
 def step_cost(asset: Path, rep: str, contact: str, task: str) -> list:
     """(ms per step, mean pieces touching, mean polygons, max polygons) of run 0 of ``task``."""
-    from real2sim.evaluate.placement import initial_object_pose
     from real2sim.evaluate.scene_config import SceneConfig
-    from real2sim.evaluate.simulate import _advance, _initial_state, _mesh_vertices, _started
+    from real2sim.evaluate.simulate import _advance, _started, candidate_initial_state
     from real2sim.evaluate.tasks import make_run_specs
     from real2sim.evaluate.world import build_scene, urdf_object_adder
-    from real2sim.formats.physical import read_physical_properties
 
     cfg = SceneConfig()
     spec = make_run_specs(task, 1, 0)[0]
     urdf = asset / rep / ("model.urdf" if contact == "hydroelastic" else "model_point.urdf")
     scene = build_scene(task, contact, urdf_object_adder(urdf), spec, cfg)
-    props = read_physical_properties(asset / "physical_properties.json")
-    initial = _initial_state(scene, initial_object_pose(_mesh_vertices(asset / "visual" / "model.obj"), spec, cfg,
-                                                        com_m=props.com_m))
+    initial = candidate_initial_state(scene, urdf, spec, cfg)
     steps = cfg.num_steps(task)
     simulator, _ = _started(scene, initial, rep)
     start = time.perf_counter()

@@ -143,6 +143,19 @@ RUN_HEADER = ["object", "input", "capture seed", "backend", "registered", "board
               "sfm (s)", "run (s)", "capture (s)"]
 
 
+def command_line(argv: list[str] | None) -> str:
+    """The command a section records: this script with ``argv`` (default: the process's own arguments)."""
+    return "python benchmarks/bench_phone.py " + " ".join(argv if argv is not None else sys.argv[1:])
+
+
+def mask_errors(masks: np.ndarray, true: np.ndarray) -> tuple[float, float, float]:
+    """Masks (N, H, W) bool against the true silhouettes: the median over views of their IoU, and the shares (%)
+    of the true silhouettes' pixels, over all views, that the masks miss and that they cover beyond them."""
+    iou = (masks & true).sum(axis=(1, 2)) / np.maximum((masks | true).sum(axis=(1, 2)), 1)
+    pixels = max(true.sum(), 1)
+    return float(np.median(iou)), float(100 * (true & ~masks).sum() / pixels), float(100 * (masks & ~true).sum() / pixels)
+
+
 def masks_against_truth(dataset: Path) -> tuple[float, float]:
     """The median over views of the IoU of ``dataset``'s masks with the true object's silhouettes (its
     ``ground_truth/`` mesh ray cast into the same cameras), and the share (%) of the true silhouettes'
@@ -150,10 +163,8 @@ def masks_against_truth(dataset: Path) -> tuple[float, float]:
     from real2sim.reconstruct.views import load_views
 
     views = load_views(dataset)
-    masks = views.mask > 0.5
-    true = true_silhouettes(dataset, views)
-    iou = (masks & true).sum(axis=(1, 2)) / np.maximum((masks | true).sum(axis=(1, 2)), 1)
-    return float(np.median(iou)), float(100 * (true & ~masks).sum() / max(true.sum(), 1))
+    iou, missed, _ = mask_errors(views.mask > 0.5, true_silhouettes(dataset, views))
+    return iou, missed
 
 
 def true_silhouettes(dataset: Path, views) -> np.ndarray:
@@ -243,7 +254,7 @@ def run_main(args, argv) -> int:
             "the SfM camera's focal length against the true lens's (with the board, the board measures it). Issue #29's targets: scale 0.5 % (1 % by height), plane 0.5 deg and 1 mm, origin 2 mm, Chamfer 1.5 mm, "
             "run 15 min.\n\n" + markdown_table(RUN_HEADER, rows))
     write_section(args.section, "Phone captures: the whole run", body,
-                  "python benchmarks/bench_phone.py " + " ".join(argv if argv is not None else sys.argv[1:]))
+                  command_line(argv))
     return 0
 
 
@@ -254,6 +265,16 @@ def kept_runs_ok(kept_runs: list[Path]) -> bool:
     for kept in missing:
         print(f"{kept}: no .run/masked with ground_truth/ (keep a --run with --keep)", file=sys.stderr)
     return not missing
+
+
+def reconstruct_as_run(dataset: Path) -> tuple[dict, float]:
+    """``dataset`` reconstructed as `run` reconstructs from parallax masks (their edges as given): the report's
+    truth section and the wall seconds."""
+    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
+
+    start = time.perf_counter()
+    found = reconstruct(dataset, ReconstructConfig(mask_edges="as-given")).report["truth"]
+    return found, time.perf_counter() - start
 
 
 @contextlib.contextmanager
@@ -274,7 +295,6 @@ def true_masks_main(args, argv) -> int:
 
     from PIL import Image
 
-    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
     from real2sim.reconstruct.views import load_views
 
     if not kept_runs_ok(args.true_masks):
@@ -287,9 +307,7 @@ def true_masks_main(args, argv) -> int:
             frames = json.loads((dataset / "transforms.json").read_text())["frames"]
             for frame, silhouette in zip(frames, true):
                 Image.fromarray((silhouette * 255).astype(np.uint8)).save(dataset / frame["mask_path"])
-            start = time.perf_counter()
-            found = reconstruct(dataset, ReconstructConfig(mask_edges="as-given")).report["truth"]
-            seconds = time.perf_counter() - start
+            found, seconds = reconstruct_as_run(dataset)
         run = json.loads((kept / "asset" / "truth.json").read_text())["reconstruction"]
         rows.append([kept.name, round(run["chamfer_mm"], 2), round(found["chamfer_mm"], 2), round(found["iou"], 3),
                      round(found["concave_recovered"], 2), round(seconds, 1)])
@@ -299,7 +317,7 @@ def true_masks_main(args, argv) -> int:
             "cameras) in place of the parallax masks: the run's Chamfer against the one its masks allow.\n\n"
             + markdown_table(TRUE_MASKS_HEADER, rows))
     write_section(args.section, "Phone captures: the run's masks against the true ones", body,
-                  "python benchmarks/bench_phone.py " + " ".join(argv if argv is not None else sys.argv[1:]))
+                  command_line(argv))
     return 0
 
 
@@ -311,7 +329,6 @@ def remask_main(args, argv) -> int:
 
     from real2sim.pipeline.masks import PARALLAX, make_masks
     from real2sim.reconstruct.parallax_masks import ParallaxConfig
-    from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
     from real2sim.reconstruct.views import load_views
 
     fields = {f.name: f.type for f in dataclasses.fields(ParallaxConfig)}
@@ -333,13 +350,10 @@ def remask_main(args, argv) -> int:
             make_masks(dataset, PARALLAX, config, may_replace="any")
             mask_s = time.perf_counter() - start
             views = load_views(dataset)
-            masks, true = views.mask > 0.5, true_silhouettes(dataset, views)
-            extra, missed = (100 * (a & ~b).sum() / true.sum() for a, b in ((masks, true), (true, masks)))
-            start = time.perf_counter()
-            found = reconstruct(dataset, ReconstructConfig(mask_edges="as-given")).report["truth"]
-            seconds = time.perf_counter() - start
+            _, missed, extra = mask_errors(views.mask > 0.5, true_silhouettes(dataset, views))
+            found, seconds = reconstruct_as_run(dataset)
         run = json.loads((kept / "asset" / "truth.json").read_text())["reconstruction"]
-        rows.append([kept.name, label, round(float(extra), 2), round(float(missed), 2), round(run["chamfer_mm"], 2),
+        rows.append([kept.name, label, round(extra, 2), round(missed, 2), round(run["chamfer_mm"], 2),
                      round(found["chamfer_mm"], 2), round(found["iou"], 3), round(found["concave_recovered"], 2),
                      round(mask_s, 1), round(seconds, 1)])
         print(markdown_table(REMASK_HEADER, rows[-1:]), flush=True)
@@ -350,7 +364,7 @@ def remask_main(args, argv) -> int:
             "the run's own (its masks of the defaults of its day) beside it.\n\n"
             + markdown_table(REMASK_HEADER, rows))
     write_section(args.section, "Phone captures: kept runs masked again", body,
-                  "python benchmarks/bench_phone.py " + " ".join(argv if argv is not None else sys.argv[1:]))
+                  command_line(argv))
     return 0
 
 
@@ -415,7 +429,7 @@ def main(argv: list[str] | None = None) -> int:
             + "\n\nRendering (wall seconds, 2x supersampled colour, masks and depth for ground_truth/):\n\n"
             + markdown_table(["object", "views", "size", "capture (s)"], renders))
     write_section("phone", "Phone captures: the board and the world frame", body,
-                  "python benchmarks/bench_phone.py " + " ".join(argv if argv is not None else sys.argv[1:]))
+                  command_line(argv))
     return 0
 
 

@@ -364,11 +364,19 @@ def simulate_candidate(representation_urdf_path: Path, contact_model: str, run_s
             raise ValueError(f"{label}: reference is run {reference.run}")
         initial = _state_at(reference, 0)
     else:
-        mesh = Path(initial_mesh_path) if initial_mesh_path else urdf.resolve().parent.parent / "visual" / "model.obj"
-        if not mesh.is_file():
-            raise FileNotFoundError(f"{label}: no reference given and no mesh for the initial pose at {mesh}")
-        props_path = urdf.resolve().parent.parent / "physical_properties.json"
-        com_m = read_physical_properties(props_path).com_m if props_path.is_file() else None
-        initial = _initial_state(scene, initial_object_pose(_mesh_vertices(mesh), run_spec, scene_config,
-                                                            com_m=com_m))
+        initial = candidate_initial_state(scene, urdf, run_spec, scene_config, initial_mesh_path, label)
     return _simulate(scene, initial, reference, scene_config, label, name, run_spec.run, deadline)
+
+
+def candidate_initial_state(scene: Scene, urdf: Path, run_spec: RunSpec, scene_config: SceneConfig,
+                            initial_mesh_path: Path | None = None, label: str = "candidate") -> _State:
+    """A candidate's state at t = 0 without a reference: at rest, posed by :func:`initial_object_pose` from
+    ``initial_mesh_path`` (default: the asset's ``visual/model.obj`` two folders up from ``urdf``) and the
+    CoM in the asset's ``physical_properties.json`` when present, as :func:`simulate_reference` poses that
+    mesh."""
+    mesh = Path(initial_mesh_path) if initial_mesh_path else urdf.resolve().parent.parent / "visual" / "model.obj"
+    if not mesh.is_file():
+        raise FileNotFoundError(f"{label}: no reference given and no mesh for the initial pose at {mesh}")
+    props_path = urdf.resolve().parent.parent / "physical_properties.json"
+    com_m = read_physical_properties(props_path).com_m if props_path.is_file() else None
+    return _initial_state(scene, initial_object_pose(_mesh_vertices(mesh), run_spec, scene_config, com_m=com_m))
