@@ -49,7 +49,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from common import markdown_table, write_section  # noqa: E402
+from common import dataclass_settings, markdown_table, write_section  # noqa: E402
 
 #: The arbitrary SfM frame the true poses are moved into: scale, rotation (z-y-x Euler, degrees), shift.
 SFM_SCALE, SFM_EULER_DEG, SFM_SHIFT = 3.7, (40.0, -70.0, 15.0), (1.0, 2.0, -0.5)
@@ -324,21 +324,17 @@ def true_masks_main(args, argv) -> int:
 def remask_main(args, argv) -> int:
     """Each kept run's masked dataset masked again with ``--parallax`` settings and reconstructed as ``run``
     does: the masks against the truth, and the Chamfer distance, beside the run's own."""
-    import dataclasses
     import json
 
     from real2sim.pipeline.masks import PARALLAX, make_masks
     from real2sim.reconstruct.parallax_masks import ParallaxConfig
     from real2sim.reconstruct.views import load_views
 
-    fields = {f.name: f.type for f in dataclasses.fields(ParallaxConfig)}
-    settings = {}
-    for item in args.parallax or []:
-        name, _, value = item.partition("=")
-        if name not in fields or not value:
-            print(f"--parallax {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(fields)}", file=sys.stderr)
-            return 2
-        settings[name] = int(value) if fields[name] in (int, "int") else float(value)
+    try:
+        settings = dataclass_settings(ParallaxConfig, args.parallax, "--parallax")
+    except ValueError as e:
+        print(e, file=sys.stderr)
+        return 2
     config = ParallaxConfig(**settings)
     label = ", ".join(f"{k}={v:g}" for k, v in settings.items()) or "defaults"
     if not kept_runs_ok(args.remask):

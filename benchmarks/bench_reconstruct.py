@@ -108,11 +108,18 @@ def _dataset_size(ds: Path) -> tuple[int, int, int]:
 
 
 def _stage_row(name: str, label: str, report: dict) -> list:
-    """Seconds per stage of one reconstruction (report.json's stages), the visual hull and carving apart."""
+    """Seconds per stage of one reconstruction (report.json's stages), and where train_field's went."""
     stages = {k: v["seconds"] for k, v in report["stages"].items()}
     cells = ", ".join(f"{k} {v:.3g}" for k, v in stages.items())
-    carving = report.get("hull_and_carving_seconds")
-    return [name, label, cells, "-" if carving is None else f"{carving:.3g}", f"{sum(stages.values()):.4g}"]
+    phases = report.get("train_field_phase_seconds") or {}
+    if not phases and report.get("hull_and_carving_seconds") is not None:  # a report from before the phases
+        phases = {"hull_and_carving": report["hull_and_carving_seconds"]}
+    within = ", ".join(f"{k} {v:.3g}" for k, v in phases.items()) or "-"
+    batches = report.get("field_batches")
+    if batches:
+        within += (f" ({batches['rays_per_step']} rays a step, {batches['coarse_steps']} coarse and "
+                   f"{batches['fine_steps']} fine steps)")
+    return [name, label, cells, within, f"{sum(stages.values()):.4g}"]
 
 
 def _write(args, argv, rows: list, pose_rows: list, stage_rows: list | None = None) -> None:
@@ -136,7 +143,7 @@ def _write(args, argv, rows: list, pose_rows: list, stage_rows: list | None = No
                           "field PSNR dB",
                           "mesh PSNR dB", "faces", "wall s", "CPU s", "peak MB"], rows)
         + ("\n\n### Where the time goes (report.json's stages, s)\n\n"
-           + markdown_table(["object", "method", "stages s", "of train_field: hull and carving s", "total s"],
+           + markdown_table(["object", "method", "stages s", "within train_field s", "total s"],
                             stage_rows) if stage_rows else "")
         + "\n\nPSNR is over the pixels that the true mask or the prediction covers, both composited on black; the "
         "mesh is rendered unlit (its texture as baked), the capture is lit, so mesh PSNR is a lower bound on how "
@@ -165,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tag", default="", help="write docs/benchmarks/reconstruct_TAG.md instead (a partial run)")
     ap.add_argument("--variants", default="field,hull",
                     help="among field (the defaults), field-poses and field-no-poses (the field with its per-view pose "
-                         "correction on or off), hull")
+                         "correction on or off), field-gpu-batches (the batches a GPU trains in, on this device), hull")
     args = ap.parse_args(argv)
 
     from dataclasses import replace
@@ -180,6 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     known = {"field": ReconstructConfig(field=field_cfg),
              "field-poses": ReconstructConfig(field=replace(field_cfg, pose_refinement=True)),
              "field-no-poses": ReconstructConfig(field=replace(field_cfg, pose_refinement=False)),
+             # a GPU's batches (FieldConfig.on_device) trained on this device: their quality measured on a CPU
+             "field-gpu-batches": ReconstructConfig(field=replace(field_cfg.on_device("cuda"), device_batch_scale=1)),
              "hull": ReconstructConfig(backend="hull")}
     unknown = [v for v in args.variants.split(",") if v not in known]
     if unknown:

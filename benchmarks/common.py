@@ -56,6 +56,24 @@ def today() -> str:
     return _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 
 
+def dataclass_settings(cls, items: list[str] | None, option: str) -> dict:
+    """``FIELD=VALUE`` strings as settings of the dataclass ``cls`` (int, float or bool fields); ValueError
+    with one line naming ``option`` and the fields when one is not."""
+    import dataclasses
+
+    fields = {f.name: f.type for f in dataclasses.fields(cls)}
+    settings = {}
+    for item in items or []:
+        name, _, value = item.partition("=")
+        kind = str(fields.get(name, ""))
+        if kind not in ("int", "float", "bool", str(int), str(float), str(bool)) or not value:
+            raise ValueError(f"{option} {item!r}: expected FIELD=VALUE with FIELD a number setting among "
+                             f"{', '.join(fields)}")
+        settings[name] = (value.lower() in ("1", "true", "yes") if "bool" in kind
+                          else int(value) if "int" in kind else float(value))
+    return settings
+
+
 def markdown_table(header: list[str], rows: list[list]) -> str:
     def fmt(v) -> str:
         if isinstance(v, float):

@@ -250,3 +250,24 @@ def test_temple_at_320_px_every_side_within_2_mm(temple_views):
     errors_m = np.concatenate([np.asarray(truth["bbox_min_m"]) - lo, hi - np.asarray(truth["bbox_max_m"])])
     assert np.abs(errors_m).max() <= 0.002, errors_m
     assert result.report["mask_edges"]["method"] == "colour" and result.report["mask_edges"]["band_px"] == 2
+
+
+@pytest.mark.cuda
+def test_cuda_carves_as_the_cpu():
+    """The silhouette scores counted on a GPU (the field's hull and its occupancy, on its device) are the
+    CPU's: the same votes, float32 bilinear mask values in another order."""
+    import torch
+
+    from real2sim.reconstruct.hull import VoxelGrid, carve
+
+    if not torch.cuda.is_available():
+        pytest.skip("needs a CUDA GPU")
+    rings = [ring_views(azimuths_deg=np.linspace(start, start + 330, 12), elevation_deg=elevation,
+                        distance_m=0.4, fx_px=200.0) for start, elevation in ((0, 30.0), (15, -10.0))]
+    views = replace(rings[0], **{f: np.concatenate([getattr(r, f) for r in rings]) for f in ("rgb", "mask", "c2w_cv")},
+                    names=tuple(f"v{i}" for i in range(24)))
+    grid = VoxelGrid.covering(CENTRE_M - 1.3 * RADIUS_M, CENTRE_M + 1.3 * RADIUS_M, 40, None)
+    cpu = carve(views, grid, 0.03, device="cpu")
+    gpu = carve(views, grid, 0.03, device="cuda")
+    assert 0.1 < (cpu >= 0.5).mean() < 0.6  # the sphere, not an empty or full grid
+    np.testing.assert_allclose(gpu, cpu, atol=1e-5)

@@ -40,7 +40,8 @@ def register(sub) -> None:
     p.add_argument("--device", type=device, default="cpu", help="cpu (default), cuda or cuda:N")
     p.add_argument("--seed", type=seed(), default=0, help="random seed of the field's training (default 0)")
     p.add_argument("--steps", type=STEPS, default=None,
-                   help="fine-grid training steps (default from the field settings); the coarse grid gets half")
+                   help="fine-grid training steps (default from the field settings); the coarse grid gets half; "
+                        "a GPU takes half as many steps of twice the rays")
     p.add_argument("--voxels", type=VOXELS, default=None,
                    help="fine-grid voxels along the object's longest side (default from the field settings)")
     p.add_argument("--texture-px", type=TEXTURE_PX, default=1024, help="texture image size, px (default 1024)")

@@ -70,6 +70,10 @@ class VoxelRadianceField(torch.nn.Module):
         lo, hi = grid.bounds_m
         self._lo = torch.tensor(lo, dtype=torch.float32, device=device)
         self._hi = torch.tensor(hi, dtype=torch.float32, device=device)
+        ny, nz = grid.shape[1], grid.shape[2]
+        # made once: a tensor made per lookup is a host-to-device copy on a GPU, several per training step
+        self._corner_offsets = torch.tensor([(dx * ny + dy) * nz + dz for dx in (0, 1) for dy in (0, 1)
+                                             for dz in (0, 1)], device=device)
 
     @property
     def device(self) -> torch.device:
@@ -112,13 +116,11 @@ class VoxelRadianceField(torch.nn.Module):
         base = base.long()
         ny, nz = self.grid.shape[1], self.grid.shape[2]
         row = (base[:, 0] * ny + base[:, 1]) * nz + base[:, 2]
-        offsets = torch.tensor([(dx * ny + dy) * nz + dz for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)],
-                               device=points_m.device)
         wx = torch.stack([1 - frac[:, 0], frac[:, 0]], dim=1)
         wy = torch.stack([1 - frac[:, 1], frac[:, 1]], dim=1)
         wz = torch.stack([1 - frac[:, 2], frac[:, 2]], dim=1)
         weights = (wx[:, :, None, None] * wy[:, None, :, None] * wz[:, None, None, :]).reshape(-1, 8)
-        return row[:, None] + offsets, weights
+        return row[:, None] + self._corner_offsets, weights
 
     def interpolate(self, points_m: torch.Tensor) -> torch.Tensor:
         """(P, 1 + C) trilinear blend of raw density and features at world points (clamped to the grid)."""
@@ -209,16 +211,17 @@ class VoxelRadianceField(torch.nn.Module):
         with torch.no_grad():
             while len(alive):
                 count = torch.clamp(per_ray[alive] - first, 0, chunk)
-                ray_of = torch.repeat_interleave(alive, count)
-                position = first + torch.arange(len(ray_of), device=device) - (torch.cumsum(count, 0) - count)[
-                    torch.repeat_interleave(torch.arange(len(alive), device=device), count)]
+                of_alive = torch.repeat_interleave(count)  # each sample's ray among the alive ones
+                ray_of = alive[of_alive]
+                position = first + torch.arange(len(ray_of), device=device) - (torch.cumsum(count, 0) - count)[of_alive]
                 t = t_near[ray_of] + (position + offset[ray_of]) * step_m
                 points = origins[ray_of] + t[:, None] * directions[ray_of]
-                occupied = self.occupied(points)
+                # one index list for the three: each boolean index waits for the device on a GPU
+                occupied = torch.nonzero(self.occupied(points))[:, 0]
                 ray_of, position, points = ray_of[occupied], position[occupied], points[occupied]
                 tau = (F.softplus(self._density_raw(points)) * step_voxels).double()
                 before = optical[ray_of] + _exclusive_segment_cumsum(tau, ray_of, len(origins))
-                front = before < _OPAQUE_OPTICAL_DEPTH
+                front = torch.nonzero(before < _OPAQUE_OPTICAL_DEPTH)[:, 0]
                 rays_kept.append(ray_of[front])
                 positions_kept.append(position[front])
                 optical.index_add_(0, ray_of, tau)

@@ -122,7 +122,7 @@ def _middle_eigenvalue(a: torch.Tensor) -> torch.Tensor:
     whole rest of the silhouette scores."""
     q = torch.diagonal(a, dim1=1, dim2=2).sum(dim=1) / 3.0
     off = a[:, 0, 1] ** 2 + a[:, 0, 2] ** 2 + a[:, 1, 2] ** 2
-    centred = a - q[:, None, None] * torch.eye(3, dtype=a.dtype)
+    centred = a - q[:, None, None] * torch.eye(3, dtype=a.dtype, device=a.device)
     p = torch.sqrt((torch.diagonal(centred, dim1=1, dim2=2) ** 2).sum(dim=1) + 2.0 * off) / np.sqrt(6.0)
     b = centred / p.clamp_min(1e-30)[:, None, None]
     phi = torch.acos((torch.linalg.det(b) / 2.0).clamp(-1.0, 1.0)) / 3.0
@@ -169,15 +169,15 @@ def _constrained(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tensor, m
     return ok
 
 
-def _mask_votes(views: PosedViews, points_m: np.ndarray, chunk: int):
+def _mask_votes(views: PosedViews, points_m: np.ndarray, chunk: int, device: str | torch.device = "cpu"):
     """Per chunk of ``chunk`` world points (metres): its first index, the points (tensor), their
     grid_sample coordinates in every view, which views vote on them (:func:`_votes`), and each view's
     bilinear mask value there, (V, chunk). Callers hold ``torch.no_grad()``."""
-    masks = torch.from_numpy(views.mask[:, None])  # (V, 1, H, W)
-    touched = torch.from_numpy(border_touched(views.mask))
-    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
+    masks = torch.from_numpy(views.mask[:, None]).to(device)  # (V, 1, H, W)
+    touched = torch.from_numpy(border_touched(views.mask)).to(device)
+    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float().to(device)
     for start in range(0, len(points_m), chunk):
-        pts = torch.from_numpy(np.asarray(points_m[start:start + chunk], dtype=np.float32))
+        pts = torch.from_numpy(np.asarray(points_m[start:start + chunk], dtype=np.float32)).to(device)
         grid, _, seen = _votes(views, w2c, pts, touched)
         vals = torch.nn.functional.grid_sample(masks, grid[:, None], mode="bilinear", align_corners=False)[:, 0, 0]
         yield start, pts, grid, seen, vals
@@ -185,22 +185,23 @@ def _mask_votes(views: PosedViews, points_m: np.ndarray, chunk: int):
 
 def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction: float,
                       chunk: int = 100_000, min_votes: int = MIN_VOTES,
-                      min_spread_deg: float = MIN_SPREAD_DEG, trusted: np.ndarray | None = None) -> np.ndarray:
+                      min_spread_deg: float = MIN_SPREAD_DEG, trusted: np.ndarray | None = None,
+                      device: str | torch.device = "cpu") -> np.ndarray:
     """(P,) float32 silhouette score of world points: see the module docstring.
 
     A point fewer than ``min_votes`` cameras see, or seen only from directions less than
     ``min_spread_deg`` apart, scores 0: nothing constrains it, and counting it as inside
     would let the hull run off where the views are sparse. ``trusted``: (V,) bool, views
     whose masks may carve alone (:func:`consistent_views`); the score is then at most
-    their lowest vote.
+    their lowest vote. ``device``: where the votes are counted (the result is the same on any).
     """
-    centres = torch.from_numpy(views.c2w_cv[:, :3, 3]).float()
+    centres = torch.from_numpy(views.c2w_cv[:, :3, 3]).float().to(device)
     if trusted is not None:
-        trusted_t = torch.from_numpy(np.asarray(trusted, bool))
-        outside_px = torch.from_numpy(_outside_distance_px(views.mask, trusted))[:, None]
+        trusted_t = torch.from_numpy(np.asarray(trusted, bool)).to(device)
+        outside_px = torch.from_numpy(_outside_distance_px(views.mask, trusted))[:, None].to(device)
     out = np.empty(len(points_m), dtype=np.float32)
     with torch.no_grad():
-        for start, pts, grid, seen, vals in _mask_votes(views, points_m, chunk):
+        for start, pts, grid, seen, vals in _mask_votes(views, points_m, chunk, device):
             count = seen.sum(dim=0)
             floor = torch.where(count >= 2 * min_votes, MIN_AGREEING - 1, 0)
             rank = torch.maximum(torch.floor(outlier_fraction * count).long(), floor)
@@ -223,7 +224,7 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
             keep = count >= min_votes
             if bool(candidate.any()):
                 keep = keep & (~candidate | _constrained(centres, pts, seen & candidate[None], min_votes, min_spread_deg))
-            out[start:start + chunk] = torch.where(keep, score, torch.zeros_like(score)).numpy()
+            out[start:start + chunk] = torch.where(keep, score, torch.zeros_like(score)).cpu().numpy()
     return out
 
 
@@ -238,16 +239,18 @@ def _outside_distance_px(mask: np.ndarray, which: np.ndarray) -> np.ndarray:
     return out
 
 
-def lone_carving(views: PosedViews, points_m: np.ndarray, chunk: int = 100_000) -> np.ndarray:
+def lone_carving(views: PosedViews, points_m: np.ndarray, chunk: int = 100_000,
+                 device: str | torch.device = "cpu") -> np.ndarray:
     """(V,) how many of ``points_m`` (world, metres) each view alone puts outside its mask (a vote below 0.5)."""
-    counts = torch.zeros(views.count, dtype=torch.long)
+    counts = torch.zeros(views.count, dtype=torch.long, device=device)
     with torch.no_grad():
-        for _, _, _, seen, vals in _mask_votes(views, points_m, chunk):
+        for _, _, _, seen, vals in _mask_votes(views, points_m, chunk, device):
             counts += (seen & (vals < 0.5)).sum(dim=1)
-    return counts.numpy()
+    return counts.cpu().numpy()
 
 
-def consistent_views(views: PosedViews, grid: VoxelGrid, inside: np.ndarray) -> np.ndarray:
+def consistent_views(views: PosedViews, grid: VoxelGrid, inside: np.ndarray,
+                     device: str | torch.device = "cpu") -> np.ndarray:
     """(V,) bool: views whose masks agree with the hull ``inside`` (bool, ``grid.shape``) found without
     trusting any one view, so that they may carve alone.
 
@@ -262,7 +265,7 @@ def consistent_views(views: PosedViews, grid: VoxelGrid, inside: np.ndarray) -> 
     skin = int((inside & ~binary_erosion(inside, border_value=0)).sum())
     if skin == 0:
         return np.zeros(views.count, bool)
-    return lone_carving(views, grid.centres()[inside.reshape(-1)]) <= TRUSTED_SKIN_FRACTION * skin
+    return lone_carving(views, grid.centres()[inside.reshape(-1)], device=device) <= TRUSTED_SKIN_FRACTION * skin
 
 
 def seen_together(views: PosedViews, points_m: np.ndarray, *, min_votes: int = MIN_VOTES,
@@ -331,8 +334,8 @@ def _padded_box(grid: VoxelGrid, inside: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def carve(views: PosedViews, grid: VoxelGrid, outlier_fraction: float = 0.03, block: int = 3,
-          trust_consistent: bool = True) -> np.ndarray:
-    """Silhouette scores on ``grid`` (shape ``grid.shape``), float32 in [0, 1].
+          trust_consistent: bool = True, device: str | torch.device = "cpu") -> np.ndarray:
+    """Silhouette scores on ``grid`` (shape ``grid.shape``), float32 in [0, 1], counted on ``device``.
 
     Scores are computed exactly only near the hull's surface: first at the centres
     of ``block``^3 blocks; a block whose 26 neighbours all agree with it (all
@@ -341,13 +344,13 @@ def carve(views: PosedViews, grid: VoxelGrid, outlier_fraction: float = 0.03, bl
     shape = np.asarray(grid.shape)
     coarse_shape = tuple(int(n) for n in np.ceil(shape / block))
     coarse = VoxelGrid(grid.origin_m + 0.5 * (block - 1) * grid.voxel_m, grid.voxel_m * block, coarse_shape)
-    coarse_in = silhouette_scores(views, coarse.centres(), outlier_fraction).reshape(coarse_shape) >= 0.5
-    trusted = consistent_views(views, coarse, coarse_in) if trust_consistent and coarse_in.any() else None
+    coarse_in = silhouette_scores(views, coarse.centres(), outlier_fraction, device=device).reshape(coarse_shape) >= 0.5
+    trusted = consistent_views(views, coarse, coarse_in, device) if trust_consistent and coarse_in.any() else None
     if trusted is not None and not trusted.any():
         trusted = None
     if trusted is not None:
         coarse_in = silhouette_scores(views, coarse.centres(), outlier_fraction,
-                                      trusted=trusted).reshape(coarse_shape) >= 0.5
+                                      trusted=trusted, device=device).reshape(coarse_shape) >= 0.5
     from scipy.ndimage import binary_dilation, binary_erosion
 
     cube = np.ones((3, 3, 3), bool)
@@ -357,7 +360,7 @@ def carve(views: PosedViews, grid: VoxelGrid, outlier_fraction: float = 0.03, bl
     scores = np.where(expand(certain_in), 1.0, 0.0).astype(np.float32)
     band = ~(expand(certain_in) | expand(certain_out))
     scores[band] = silhouette_scores(views, grid.centres().reshape(*grid.shape, 3)[band], outlier_fraction,
-                                     trusted=trusted)
+                                     trusted=trusted, device=device)
     return scores
 
 

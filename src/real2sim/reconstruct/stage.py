@@ -227,7 +227,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     if config.backend == "hull":
         with clock.stage("hull_surface"):
             grid = VoxelGrid.covering(*region, config.hull_voxels, config.table_z_m)
-            scores = carve(train, grid, config.hull_outlier_fraction)
+            scores = carve(train, grid, config.hull_outlier_fraction, device=device)
             mesh = largest_parts(surface_from_grid(scores, grid, 0.5, config.table_z_m), config.min_part_volume_fraction)
             mesh = simplified(mesh, config.max_faces)
         with clock.stage("texture"):
@@ -263,6 +263,10 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         if trained.carving_exposure is not None:
             report["photo_carving_exposure"] = trained.carving_exposure
         report["hull_and_carving_seconds"] = trained.hull_and_carving_seconds  # part of train_field's
+        report["train_field_phase_seconds"] = trained.phase_seconds  # where train_field's time went
+        trained_as = config.field.on_device(device)
+        report["field_batches"] = {"rays_per_step": trained_as.rays_per_step, "coarse_steps": trained_as.coarse_steps,
+                                   "fine_steps": trained_as.fine_steps}
         report["field_voxel_mm"] = 1000.0 * trained.field.grid.voxel_m
         with clock.stage("extract_mesh"):
             if progress:

@@ -62,6 +62,16 @@ class FieldConfig:
     grid as well it had cost a quarter more time); ``colour_correction`` (on): each view's exposure
     and white balance, all through training. Both with the rates and priors of ``corrections``; see
     :mod:`real2sim.reconstruct.view_corrections`.
+
+    ``device_batch_scale`` (2): on a GPU, each step draws this many times ``rays_per_step`` and the
+    steps (and the poses' warm-up) are as many times fewer, so training sees the same rays. A GPU step
+    is bound by the host launching its few hundred operators, not by its rays: on an H200 a mug's step
+    took 16 ms on the coarse grid and 12 ms on the fine one at 4096 and at 8192 rays alike
+    (``benchmarks/bench_field_step.py``, docs/benchmarks/field_step_cuda.md), so its steps took 11.7-12.6 s
+    instead of 20.1. The geometry stays about the CPU's: these batches trained on a CPU gave the mug
+    0.514 mm, IoU 0.729 against 0.505 mm, 0.733, the can 0.140 against 0.141 mm; the field's held-out PSNR
+    was 0.36-0.46 dB lower (docs/benchmarks/reconstruct_gpu_batches_cpu.md). A scale of 4 lost 1.2 dB on
+    the mug (by script, not kept). 1 trains on a GPU as on a CPU.
     """
 
     coarse_voxels: int = 80
@@ -87,6 +97,18 @@ class FieldConfig:
     pose_refinement: bool = True
     colour_correction: bool = True
     corrections: CorrectionConfig = dataclass_field(default_factory=CorrectionConfig)
+    device_batch_scale: int = 2
+
+    def on_device(self, device: str | torch.device) -> "FieldConfig":
+        """These settings as trained on ``device``: on anything but a CPU, ``device_batch_scale`` times the
+        rays per step in as many times fewer steps (see the class docstring)."""
+        scale = 1 if torch.device(device).type == "cpu" else int(self.device_batch_scale)
+        if scale == 1:
+            return self
+        fewer = lambda steps: -(-steps // scale)  # rounded up: a stage of one step keeps it
+        return replace(self, rays_per_step=self.rays_per_step * scale, coarse_steps=fewer(self.coarse_steps),
+                       fine_steps=fewer(self.fine_steps),
+                       corrections=replace(self.corrections, warmup_steps=self.corrections.warmup_steps // scale))
 
     def with_budget(self, steps: int | None = None, voxels: int | None = None) -> "FieldConfig":
         """These settings with ``steps`` fine-grid training steps (the coarse grid gets half, so 1 step
@@ -110,6 +132,8 @@ class FieldConfig:
         for name in ("coarse_voxels", "fine_voxels", "rays_per_step", "feature_channels"):
             if int(getattr(self, name)) < 4:
                 raise UserInputError(f"field setting {name} must be at least 4 (got {getattr(self, name)})")
+        if int(self.device_batch_scale) < 1:
+            raise UserInputError(f"field setting device_batch_scale must be at least 1 (got {self.device_batch_scale})")
         if self.coarse_steps < 0 or self.fine_steps < 1:
             raise UserInputError("field training needs at least one fine step")
         self.corrections.validate()
@@ -133,15 +157,18 @@ class TrainResult:
     corrections: ViewCorrections | None = None
     # (N, 4, 4) the training views' camera-to-world poses the field was fitted to: the corrected ones
     c2w_cv: np.ndarray | None = None
+    # where ``seconds`` went: the rays' pool, the starting density, then per grid (named by its longest side
+    # in voxels) the setup (the region the field may fill, the field made or upsampled) and its training steps
+    phase_seconds: dict[str, float] = dataclass_field(default_factory=dict)
 
     def corrected_views(self, views: PosedViews) -> PosedViews:
         """``views`` (the ones trained on) with the poses the field was fitted to."""
         return views if self.c2w_cv is None else replace(views, c2w_cv=self.c2w_cv)
 
 
-def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig) -> np.ndarray:
+def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig, device: str = "cpu") -> np.ndarray:
     """The carved region the field may fill: a relaxed visual hull, dilated by a few voxels."""
-    inside = carve(views, grid, config.carve_outlier_fraction) >= 0.5
+    inside = carve(views, grid, config.carve_outlier_fraction, device=device) >= 0.5
     return binary_dilation(inside, np.ones((3, 3, 3), bool), iterations=config.carve_dilation_voxels)
 
 
@@ -151,7 +178,7 @@ def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig,
     nearly nothing outside it over about a voxel (a smooth step of the silhouette score), and
     nearly nothing where photo-consistent carving removed the hull; the voxels carved (bool); and
     the carving's result on its own grid (None without photo carving)."""
-    score = carve(views, grid, config.hull_outlier_fraction)
+    score = carve(views, grid, config.hull_outlier_fraction, device=device)
     density = config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
     if not config.photo_carving:
         return density, np.zeros(grid.shape, bool), None
@@ -172,7 +199,7 @@ def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: 
         return hull & ~result.solid, result
     lo, hi = grid.bounds_m
     fine = VoxelGrid.covering(lo, hi, config.carving.voxels, table_z_m=float(lo[2]))
-    fine_hull = carve(views, fine, config.hull_outlier_fraction) >= 0.5
+    fine_hull = carve(views, fine, config.hull_outlier_fraction, device=device) >= 0.5
     result = photo_carve(views, fine, fine_hull, config.carving, progress=progress, device=device)
     return _resampled(fine_hull & ~result.solid, fine, grid), result
 
@@ -199,8 +226,10 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
                 device: str = "cpu", seed: int = 0, progress: ProgressFn | None = None,
                 table_z_m: float = 0.0) -> TrainResult:
     """Fit a :class:`VoxelRadianceField` to ``views`` inside the world box ``region_m`` (metres), with
-    the views' corrections (``config.pose_refinement``, ``config.colour_correction``)."""
+    the views' corrections (``config.pose_refinement``, ``config.colour_correction``); on a GPU in fewer,
+    larger steps (:meth:`FieldConfig.on_device`)."""
     config.validate()
+    config = config.on_device(device)
     t_start = time.perf_counter()
     rng = np.random.default_rng(seed)
     gen = torch.Generator(device="cpu").manual_seed(seed)
@@ -219,12 +248,15 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     init_density, carved, carving = hull_density(views, first_grid, config, progress, device)
     hull_and_carving_s = time.perf_counter() - t_hull
     field, done, curve = None, 0, []
+    # the rays' pool put on the device comes first: on a GPU it pays for starting the device
+    phases = {"ray_pool": t_hull - t_start, "hull_and_carving": hull_and_carving_s}
     learner = _Learner(corrections, total) if corrections is not None else None
     for voxels, steps in stages:
+        t_setup = time.perf_counter()
         grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
         # the region the field may fill, seen by the views as they are now corrected
         now = views if field is None or corrections is None else replace(views, c2w_cv=corrections.corrected_c2w())
-        occupancy = field_occupancy(now, grid, config) & ~_deep_carved(carved, first_grid, grid,
+        occupancy = field_occupancy(now, grid, config, device) & ~_deep_carved(carved, first_grid, grid,
                                                                          config.carved_margin_voxels)
         if field is None:
             field = VoxelRadianceField(grid, occupancy, feature_channels=config.feature_channels,
@@ -237,13 +269,16 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
                 # there cost a quarter more time (rays cast again as they move, gradients through every
                 # sample's position) for no gain measured.
                 corrections.freeze_poses()
+        t_steps = time.perf_counter()
         done = _optimise(field, pool, config, steps, done, total, gen, progress, curve, learner)
+        phases[f"grid_{voxels}_setup"] = t_steps - t_setup
+        phases[f"grid_{voxels}_steps"] = time.perf_counter() - t_steps  # the loss read at its end waits for them
     return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
                        carved_voxels=int(carved.sum()), restored_voxels=carving.restored_voxels if carving else 0,
                        opened_voxels=carving.opened_voxels if carving else 0,
                        carving_exposure=carving.exposure if carving else None,
                        hull_and_carving_seconds=hull_and_carving_s, corrections=corrections,
-                       c2w_cv=corrections.corrected_c2w() if corrections is not None else None)
+                       c2w_cv=corrections.corrected_c2w() if corrections is not None else None, phase_seconds=phases)
 
 
 @dataclass
