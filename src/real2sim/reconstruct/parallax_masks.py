@@ -154,7 +154,8 @@ class ParallaxConfig:
     0.98 / 1.70 / 1.29 mm. A third run of seed 1 (1.73 mm as run) went 1.73 -> 1.32 mm (excess 1.96 %,
     missed 3.01 %; `phone_remask_sliding_rerun2_seed1.md`). Better on three runs of four (mean 1.49 ->
     1.32 mm), worse on one, on a pipeline whose result moves by up to 0.4 mm between two runs on the same
-    photos; the bottle not measured with it: not the default until the bottle says it does no harm."""
+    photos. The bottle's 60 photos went 0.81 -> 0.93 mm with it (what the masks miss 0.3 -> 0.72 %,
+    `phone_remask_sliding_bottle_seed0.md`): it helps the mug's handle and hurts the bottle, so it is off."""
 
     neighbours: int = 8
     min_angle_deg: float = 8.0
