@@ -51,6 +51,7 @@ def sfm_dir(handheld, tmp_path_factory) -> Path:
 
 
 def test_sfm_stage_writes_a_colmap_dataset_with_its_truth(handheld, sfm_dir):
+    import real2sim.capture.board_focal as board_focal
     from real2sim.formats.colmap_model import read_colmap_model
 
     ds = read_colmap_model(sfm_dir)
@@ -64,7 +65,15 @@ def test_sfm_stage_writes_a_colmap_dataset_with_its_truth(handheld, sfm_dir):
     # board's 0.07-0.24 % short over three runs)
     true_focal_px = json.loads((handheld / "ground_truth" / "transforms.json").read_text())["fl_x"]
     (focal,) = record["focal_from_board"]
-    assert focal["board_views"] >= VIEWS // 2 and "not_used" not in focal
+    assert focal["board_views"] >= VIEWS // 2
+    if "not_used" in focal:
+        # On these 20 small views the two halves' estimates straddle the 0.5 % rule from one SfM run to
+        # the next (SfM's distortion is the calibration's first guess): 0.62 % once in about ten CI runs.
+        # Then the rule must be why, the halves near it, and the model must keep SfM's focal length.
+        assert "disagree" in focal["not_used"]
+        assert board_focal.MAX_SPLIT_DISAGREEMENT < focal["split_disagreement"] < 2 * board_focal.MAX_SPLIT_DISAGREEMENT
+        assert record["cameras"][0]["params"][0] == focal["sfm_focal_px"] == ds.intrinsics.fl_x
+        return
     assert focal["board_focal_px"] == pytest.approx(true_focal_px, rel=0.005)
     assert record["cameras"][0]["params"][0] == focal["board_focal_px"] == ds.intrinsics.fl_x
 
