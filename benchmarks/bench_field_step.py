@@ -44,7 +44,7 @@ class _StepClock:
         self.device = device
         self.window = window
         self.start_fraction = start_fraction
-        self.stage_steps: dict[str, list[float]] = {}  # stage label -> step end times (s)
+        self.step_times: dict[str, list[float]] = {}  # stage label -> step end times (s)
         self.profiles: dict[str, object] = {}
         self._profiler = None
         self._profiling = None
@@ -58,7 +58,7 @@ class _StepClock:
         if not label.startswith("training field"):
             return
         now = time.perf_counter()
-        steps = self.stage_steps.setdefault(label, [])
+        steps = self.step_times.setdefault(label, [])
         steps.append(now)
         if self._profiling == label and len(steps) - self._profile_start >= self.window:
             self._sync()
@@ -66,7 +66,7 @@ class _StepClock:
             self.profiles[label] = (self._profiler, self.window)
             self._profiler, self._profiling = None, None
             return
-        stage_total = self._stage_length(label, total)
+        stage_total = self._stage_length(label)
         if (self.window > 0 and self._profiling is None and label not in self.profiles and stage_total
                 and len(steps) == max(int(self.start_fraction * stage_total), 1)):
             self._sync()
@@ -77,7 +77,7 @@ class _StepClock:
             self._profiler.start()
             self._profiling, self._profile_start = label, len(steps)
 
-    def _stage_length(self, label: str, total: int) -> int:
+    def _stage_length(self, label: str) -> int:
         # the label names the grid's shape, "training field (AxBxC)"; its longest side names the stage
         shape = [int(v) for v in label[label.index("(") + 1:label.index(")")].split("x")]
         return self._steps_by_grid.get(max(shape), 0)
@@ -192,7 +192,7 @@ def _object_section(name: str, dataset: Path, cfg, args) -> list[str]:
     r = result.report
     truth = r.get("truth", {})
     stage_rows = []
-    for label, times in clock.stage_steps.items():
+    for label, times in clock.step_times.items():
         stage_rows.append([label, len(times), _per_step_ms(times), times[-1] - times[0]])
     body.append(f"### {name}\n\nWhole reconstruction {wall:.1f} s (Chamfer {truth.get('chamfer_mm', '-')} mm); "
                 "stages: " + ", ".join(f"{k} {v['seconds']:.3g}" for k, v in r["stages"].items()) + " s; "

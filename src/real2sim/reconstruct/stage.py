@@ -264,9 +264,8 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
             report["photo_carving_exposure"] = trained.carving_exposure
         report["hull_and_carving_seconds"] = trained.hull_and_carving_seconds  # part of train_field's
         report["train_field_phase_seconds"] = trained.phase_seconds  # where train_field's time went
-        trained_as = config.field.on_device(device)
-        report["field_batches"] = {"rays_per_step": trained_as.rays_per_step, "coarse_steps": trained_as.coarse_steps,
-                                   "fine_steps": trained_as.fine_steps}
+        report["field_batches"] = {"rays_per_step": trained.config.rays_per_step,
+                                   "coarse_steps": trained.config.coarse_steps, "fine_steps": trained.config.fine_steps}
         report["field_voxel_mm"] = 1000.0 * trained.field.grid.voxel_m
         with clock.stage("extract_mesh"):
             if progress:

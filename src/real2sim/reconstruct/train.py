@@ -151,8 +151,6 @@ class TrainResult:
     opened_voxels: int = 0
     # the views' exposure and white balance as photo carving found them (photo_carving.CarvingResult.exposure)
     carving_exposure: dict | None = None
-    # of ``seconds``, the starting density: the visual hull's score and photo-consistent carving
-    hull_and_carving_seconds: float = 0.0
     # the per-view corrections learnt with the field (None when neither poses nor colours are corrected)
     corrections: ViewCorrections | None = None
     # (N, 4, 4) the training views' camera-to-world poses the field was fitted to: the corrected ones
@@ -160,6 +158,13 @@ class TrainResult:
     # where ``seconds`` went: the rays' pool, the starting density, then per grid (named by its longest side
     # in voxels) the setup (the region the field may fill, the field made or upsampled) and its training steps
     phase_seconds: dict[str, float] = dataclass_field(default_factory=dict)
+    # the settings the field trained with: the ones given, as this device takes them (FieldConfig.on_device)
+    config: FieldConfig | None = None
+
+    @property
+    def hull_and_carving_seconds(self) -> float:
+        """Of ``seconds``, the starting density: the visual hull's score and photo-consistent carving."""
+        return self.phase_seconds.get("hull_and_carving", 0.0)
 
     def corrected_views(self, views: PosedViews) -> PosedViews:
         """``views`` (the ones trained on) with the poses the field was fitted to."""
@@ -277,8 +282,9 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
                        carved_voxels=int(carved.sum()), restored_voxels=carving.restored_voxels if carving else 0,
                        opened_voxels=carving.opened_voxels if carving else 0,
                        carving_exposure=carving.exposure if carving else None,
-                       hull_and_carving_seconds=hull_and_carving_s, corrections=corrections,
-                       c2w_cv=corrections.corrected_c2w() if corrections is not None else None, phase_seconds=phases)
+                       corrections=corrections,
+                       c2w_cv=corrections.corrected_c2w() if corrections is not None else None, phase_seconds=phases,
+                       config=config)
 
 
 @dataclass
