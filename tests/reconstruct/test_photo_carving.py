@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from tests.reconstruct.conftest import H, W
 
@@ -190,8 +191,8 @@ def test_row_quantile_matches_numpys_nanquantile(quantile):
     spreads[:, 5] = rng.random(400)  # every voxel seen at least once
     spreads[3, 6:] = np.nan
     spreads[3, :5] = np.nan  # a voxel seen once
-    np.testing.assert_allclose(_row_nanquantile(spreads, quantile), np.nanquantile(spreads, quantile, axis=1),
-                               atol=1e-6)
+    np.testing.assert_allclose(_row_nanquantile(torch.from_numpy(spreads), quantile).numpy(),
+                               np.nanquantile(spreads, quantile, axis=1), atol=1e-6)
 
 
 @pytest.mark.slow
@@ -263,3 +264,28 @@ def test_carving_on_cuda_matches_the_voxel_walk_on_the_cpu(mug_capture, mug_hull
     gpu = photo_carve(views, grid, hull, CarvingConfig(), device="cuda")
     cpu = photo_carve(views, grid, hull, CarvingConfig(visibility="voxels"), device="cpu")
     assert np.count_nonzero(gpu.solid ^ cpu.solid) <= 0.002 * np.count_nonzero(hull)
+
+
+def test_the_rounds_grid_morphology_is_scipys():
+    """The carving rounds run their grid morphology in torch, on the carving's device: the same voxels as
+    scipy's binary erosion, dilation and box counts (the CPU carving before them), borders included."""
+    from scipy.ndimage import binary_dilation, binary_erosion, convolve
+
+    from real2sim.reconstruct.photo_carving import _face_dilated, _mostly_bad_neighbourhood, _near, _surface
+
+    faces = np.zeros((3, 3, 3), bool)
+    faces[1, 1, :] = faces[1, :, 1] = faces[:, 1, 1] = True
+    rng = np.random.default_rng(0)
+    solid = rng.random((9, 7, 6)) < 0.7
+    sparse = rng.random((9, 7, 6)) < 0.05
+    bad = solid & (rng.random(solid.shape) < 0.5)
+    as_t = torch.from_numpy
+    np.testing.assert_array_equal(_surface(as_t(solid)).numpy(), solid & ~binary_erosion(solid, faces, border_value=0))
+    np.testing.assert_array_equal(_face_dilated(as_t(sparse)).numpy(), binary_dilation(sparse, faces))
+    np.testing.assert_array_equal(_near(as_t(sparse)).numpy(), binary_dilation(sparse, np.ones((3, 3, 3), bool),
+                                                                               iterations=2))
+    surface = solid & ~binary_erosion(solid, faces, border_value=0)
+    cube = np.ones((3, 3, 3), np.float32)
+    expected = convolve(bad.astype(np.float32), cube, mode="constant") >= \
+        0.5 * np.maximum(convolve(surface.astype(np.float32), cube, mode="constant"), 1.0)
+    np.testing.assert_array_equal(_mostly_bad_neighbourhood(as_t(bad), as_t(surface), 0.5).numpy(), expected)

@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 from real2sim.reconstruct.view_exposure import corrected_images, linear_to_srgb, srgb_to_linear, view_gains
 
@@ -98,7 +99,8 @@ def test_carving_leaves_a_can_shot_with_changing_exposure_alone(jittered_can):
     idx = np.argwhere(_surface(hull) & ~floor)
     view_of, point_of, uv, _ = observations(views, grid, grid.origin_m + idx * grid.voxel_m,
                                             occluder(grid, hull, "mesh", "cpu"), 1.0)
-    gains, _ = view_gains(_bilinear(views.rgb, view_of, uv), view_of, point_of, views.count)
+    colours = _bilinear(torch.from_numpy(views.rgb), torch.from_numpy(view_of), torch.from_numpy(uv)).numpy()
+    gains, _ = view_gains(colours, view_of, point_of, views.count)
     # measured: log-gain errors of 0.084 (median) against the capture's spread of 0.22; correlation 0.94
     assert np.median(np.abs(np.log(gains / true))) < 0.12
     assert np.corrcoef(np.log(gains).ravel(), np.log(true).ravel())[0, 1] > 0.9

@@ -125,7 +125,12 @@ def _middle_eigenvalue(a: torch.Tensor) -> torch.Tensor:
     centred = a - q[:, None, None] * torch.eye(3, dtype=a.dtype, device=a.device)
     p = torch.sqrt((torch.diagonal(centred, dim1=1, dim2=2) ** 2).sum(dim=1) + 2.0 * off) / np.sqrt(6.0)
     b = centred / p.clamp_min(1e-30)[:, None, None]
-    phi = torch.acos((torch.linalg.det(b) / 2.0).clamp(-1.0, 1.0)) / 3.0
+    # the 3x3 determinant written out: torch.linalg.det on CUDA loads its solver library on first use
+    # (0.9 s of the mug's hull on an H200)
+    det = (b[:, 0, 0] * (b[:, 1, 1] * b[:, 2, 2] - b[:, 1, 2] * b[:, 2, 1])
+           - b[:, 0, 1] * (b[:, 1, 0] * b[:, 2, 2] - b[:, 1, 2] * b[:, 2, 0])
+           + b[:, 0, 2] * (b[:, 1, 0] * b[:, 2, 1] - b[:, 1, 1] * b[:, 2, 0]))
+    phi = torch.acos((det / 2.0).clamp(-1.0, 1.0)) / 3.0
     largest = q + 2.0 * p * torch.cos(phi)
     smallest = q + 2.0 * p * torch.cos(phi + 2.0 * np.pi / 3.0)
     return torch.where(p > 1e-15, 3.0 * q - largest - smallest, q)
@@ -283,18 +288,20 @@ def seen_together(views: PosedViews, points_m: np.ndarray, *, min_votes: int = M
 
 
 def object_region(views: PosedViews, *, outlier_fraction: float = 0.03, coarse_voxels: int = 64,
-                  table_z_m: float | None = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                  table_z_m: float | None = 0.0, device: str | torch.device = "cpu") -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) world box (metres) holding the visual hull, found on a coarse grid around the cameras' common point;
     nothing below ``table_z_m`` (None: no table, the box is bounded below by the views alone).
 
     The search box grows until the hull no longer touches its sides. UserInputError
-    when the masks agree on no region at all.
+    when the masks agree on no region at all. ``device``: where the silhouettes are scored (the same box
+    on any).
     """
     centre = common_look_at_point(views)
     radius = 0.5 * float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - centre, axis=1)))
     for _ in range(4):
         grid = VoxelGrid.covering(centre - radius, centre + radius, coarse_voxels, table_z_m)
-        inside = silhouette_scores(views, grid.centres(), outlier_fraction).reshape(grid.shape) >= 0.5
+        inside = silhouette_scores(views, grid.centres(), outlier_fraction,
+                                   device=device).reshape(grid.shape) >= 0.5
         if not inside.any():
             raise UserInputError("the masks agree on no region of space: check the masks and the camera poses")
         idx = np.argwhere(inside)
@@ -306,19 +313,19 @@ def object_region(views: PosedViews, *, outlier_fraction: float = 0.03, coarse_v
         if not touches:
             if table_z_m is not None:
                 lo[2] = max(lo[2], table_z_m)
-            return _tightened(views, lo, hi, outlier_fraction, coarse_voxels, table_z_m)
+            return _tightened(views, lo, hi, outlier_fraction, coarse_voxels, table_z_m, device)
         radius *= 2.0
     raise UserInputError("the visual hull does not close: the masks leave the object unbounded (too few views "
                          "from different directions?)")
 
 
 def _tightened(views: PosedViews, lo: np.ndarray, hi: np.ndarray, outlier_fraction: float, voxels: int,
-               table_z_m: float | None) -> tuple[np.ndarray, np.ndarray]:
+               table_z_m: float | None, device: str | torch.device = "cpu") -> tuple[np.ndarray, np.ndarray]:
     """The box ``[lo, hi]``, which holds the hull with room to spare, shrunk to the hull found on a grid
     of ``voxels`` across it, plus a voxel and a half: the search grid's cells are a camera distance over
     64, centimetres for a long lens, and every later grid spends its voxels across this box."""
     grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
-    inside = silhouette_scores(views, grid.centres(), outlier_fraction).reshape(grid.shape) >= 0.5
+    inside = silhouette_scores(views, grid.centres(), outlier_fraction, device=device).reshape(grid.shape) >= 0.5
     if not inside.any():
         return lo, hi
     new_lo, new_hi = _padded_box(grid, inside)

@@ -73,13 +73,14 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.ndimage import binary_dilation, binary_erosion, convolve, distance_transform_edt, gaussian_filter
+import torch
+from scipy.ndimage import distance_transform_edt, gaussian_filter
 
 from real2sim.formats.progress import ProgressFn
-from real2sim.reconstruct.carving_views import Occluder, in_image, observations, occluder
+from real2sim.reconstruct.carving_views import Cameras, Occluder, cameras_on, in_image, occluder, sightings
 from real2sim.reconstruct.hull import VoxelGrid, voxel_footprint_px, voxel_parts
 from real2sim.reconstruct.mask_recheck import put_back_for_masks
-from real2sim.reconstruct.views import PosedViews, project
+from real2sim.reconstruct.views import PosedViews, project_torch
 
 
 @dataclass(frozen=True)
@@ -144,63 +145,81 @@ class CarvingResult:
 #: Parts of the carved solid smaller than this fraction of it, cut off from the rest, are dropped.
 FLOATER_FRACTION = 0.01
 
-_FACES = np.zeros((3, 3, 3), bool)
-_FACES[1, 1, :] = _FACES[1, :, 1] = _FACES[:, 1, 1] = True
+class _Scene(NamedTuple):
+    """What a carving round looks at, on the carving's device: the views' ``cameras``, their ``images``
+    (V, H, W, 3 float32 tensor, blurred and exposure-corrected), the ``grid`` and its origin (3,) float64."""
+
+    cameras: Cameras
+    images: torch.Tensor
+    grid: VoxelGrid
+    origin_m: torch.Tensor
+
+    def points(self, idx: torch.Tensor) -> torch.Tensor:
+        """The centres (P, 3, float64, metres) of voxels ``idx`` (P, 3)."""
+        return self.origin_m + idx.to(torch.float64) * self.grid.voxel_m
 
 
 def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: CarvingConfig = CarvingConfig(),
                 progress: ProgressFn | None = None, device: str = "cpu") -> CarvingResult:
     """Carve the photo-inconsistent surface voxels of ``solid`` (bool, ``grid.shape``) round by round.
-    ``device``: where the masks' rays are walked (torch); the colour tests run on the CPU."""
-    original, solid = solid, solid.copy()
+    ``device``: where the rounds run (torch: the colour tests, the lines of sight and the grids' morphology;
+    on a GPU the rounds were host-bound in numpy, 7 s of the mug's 13 s carving on an H200)."""
     footprint_px = voxel_footprint_px(views, grid)
     images = _blurred(views.rgb, config.blur_voxels * footprint_px)
-    floor = np.zeros(solid.shape, bool)
+    cameras = cameras_on(views, device)
+    origin = torch.as_tensor(grid.origin_m, dtype=torch.float64, device=device)
+    original = torch.as_tensor(solid, device=device)
+    now = original.clone()
+    floor = torch.zeros_like(original)
     floor[:, :, 0] = True
-    candidates = _surface(solid) & ~floor
+    candidates = _surface(now) & ~floor
     exposure = None
     if config.exposure_correction:
-        images, exposure = _exposure_corrected(views, images, grid, solid, candidates, config, device)
+        images, exposure = _exposure_corrected(_Scene(cameras, torch.as_tensor(images, device=device), grid, origin),
+                                               images, candidates, now, config)
+    scene = _Scene(cameras, torch.as_tensor(images, device=device), grid, origin)
     rounds = 0
     for rounds in range(1, config.max_rounds + 1):
-        if not candidates.any():
+        if not bool(candidates.any()):
             break
-        idx, verdict = _tested(views, images, grid, candidates, original, solid, config, device)
+        idx, verdict = _tested(scene, candidates, original, now, config)
         # a carve starts only where the views disagree in hue, and grows wherever they disagree
         # at all: brightness alone differs between views of a shiny or curved true surface
-        bad, hue_bad = np.zeros(solid.shape, bool), np.zeros(solid.shape, bool)
         inconsistent = (verdict.seen >= config.min_views) & (verdict.spread > config.max_spread)
-        bad[tuple(idx[inconsistent].T)] = True
-        hue_bad[tuple(idx[inconsistent & (verdict.hue_spread > config.max_hue_spread)].T)] = True
-        grows = binary_dilation(original & ~solid, _FACES)
+        bad = _marked(original.shape, idx[inconsistent])
+        hue_bad = _marked(original.shape, idx[inconsistent & (verdict.hue_spread > config.max_hue_spread)])
+        grows = _face_dilated(original & ~now)
         # a voxel some views reach through the carved space and others from outside is a wall
-        grows[tuple(idx[(verdict.through >= config.min_views) & (verdict.outside >= config.min_views)].T)] = False
-        carve = bad & (grows | hue_bad) & _mostly_bad_neighbourhood(bad, _surface(solid), config.neighbour_fraction)
+        wall = idx[(verdict.through >= config.min_views) & (verdict.outside >= config.min_views)]
+        grows[wall[:, 0], wall[:, 1], wall[:, 2]] = False
+        carve = bad & (grows | hue_bad) & _mostly_bad_neighbourhood(bad, _surface(now), config.neighbour_fraction)
         if progress:
             progress("photo-consistent carving", rounds, config.max_rounds)
-        if not carve.any():
+        if not bool(carve.any()):
             break
-        solid &= ~carve
-        candidates = _surface(solid) & _near(carve) & ~floor
+        now &= ~carve
+        candidates = _surface(now) & _near(carve) & ~floor
     recheck = dict(band_voxels=config.restore_band_voxels, max_rounds=config.max_restore_rounds,
                    void_gap_voxels=config.void_gap_voxels, device=device)
-    put_back = put_back_for_masks(views, grid, original, solid, **recheck)
-    solid |= put_back
-    solid |= _small_components(original & ~solid, config.min_component_fraction * original.sum())
+    carved_solid = now.cpu().numpy()
+    put_back = put_back_for_masks(views, grid, solid, carved_solid, **recheck)
+    carved_solid |= put_back
+    carved_solid |= _small_components(solid & ~carved_solid, config.min_component_fraction * solid.sum())
     restored, opened_count = int(put_back.sum()), 0
-    if config.hollow_prior and (original & ~solid).any():
-        contrast = _local_contrast(images, config.contrast_window_voxels * footprint_px)
-        opened = _open_concavity(views, images, contrast, grid, original, solid, floor, config, progress, device)
+    if config.hollow_prior and (solid & ~carved_solid).any():
+        contrast = torch.as_tensor(_local_contrast(images, config.contrast_window_voxels * footprint_px),
+                                   device=device)
+        opened = _open_concavity(scene, contrast, solid, carved_solid, floor, config, progress)
         # the masks judge the second pass on its own: a ray it emptied gets back what that pass took
         # from it (the concavity the first pass opened stays open)
-        again = put_back_for_masks(views, grid, solid, opened, **recheck)
+        again = put_back_for_masks(views, grid, carved_solid, opened, **recheck)
         opened |= again
-        opened_count, restored = int((solid & ~opened).sum()), restored + int(again.sum())
-        solid = opened
+        opened_count, restored = int((carved_solid & ~opened).sum()), restored + int(again.sum())
+        carved_solid = opened
     # A ray that lost a thin rim to carving gets back every carved voxel on it, specks in mid-air
     # included; what is left of them floating is no object.
-    solid &= ~_small_components(solid, FLOATER_FRACTION * solid.sum())
-    return CarvingResult(solid=solid, carved_voxels=int((original & ~solid).sum()), rounds=rounds,
+    carved_solid &= ~_small_components(carved_solid, FLOATER_FRACTION * carved_solid.sum())
+    return CarvingResult(solid=carved_solid, carved_voxels=int((solid & ~carved_solid).sum()), rounds=rounds,
                          restored_voxels=restored, opened_voxels=opened_count, exposure=exposure)
 
 
@@ -208,49 +227,51 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
 EXPOSURE_SAMPLE_VOXELS = 20_000
 
 
-def _exposure_corrected(views: PosedViews, images: np.ndarray, grid: VoxelGrid, solid: np.ndarray,
-                        surface: np.ndarray, config: CarvingConfig, device: str) -> tuple[np.ndarray, dict]:
-    """``images`` with each view's exposure and white balance divided out, as the views see the
-    ``surface`` voxels of ``solid`` (:mod:`view_exposure`), and a report of the gains."""
+def _exposure_corrected(scene: _Scene, images: np.ndarray, surface: torch.Tensor, solid: torch.Tensor,
+                        config: CarvingConfig) -> tuple[np.ndarray, dict]:
+    """``images`` (``scene.images`` as an array) with each view's exposure and white balance divided out, as
+    the views see the ``surface`` voxels of ``solid`` (:mod:`view_exposure`), and a report of the gains."""
     from real2sim.reconstruct.view_exposure import corrected_images, gains_summary, view_gains
 
-    idx = np.argwhere(surface)
+    idx = torch.nonzero(surface)
     idx = idx[::max(1, -(-len(idx) // EXPOSURE_SAMPLE_VOXELS))]
-    view_of, point_of, pixel_uv, _ = observations(views, grid, grid.origin_m + idx * grid.voxel_m,
-                                                  occluder(grid, solid, config.visibility, device),
-                                                  config.visibility_tolerance_voxels)
-    gains, evidence = view_gains(_bilinear(images, view_of, pixel_uv), view_of, point_of, views.count,
-                                 min_views=config.min_views)
+    view_of, point_of, pixel_uv, _ = sightings(scene.cameras, scene.grid, scene.points(idx),
+                                               occluder(scene.grid, solid, config.visibility, solid.device),
+                                               config.visibility_tolerance_voxels)
+    colours = _bilinear(scene.images, view_of, pixel_uv)
+    gains, evidence = view_gains(colours.cpu().numpy(), view_of.cpu().numpy(), point_of.cpu().numpy(),
+                                 scene.cameras.count, min_views=config.min_views)
     if not evidence["applied"]:
         return images, evidence
     return corrected_images(images, gains), {**evidence, **gains_summary(gains)}
 
 
-def _tested(views: PosedViews, images: np.ndarray, grid: VoxelGrid, candidates: np.ndarray, original: np.ndarray,
-            solid: np.ndarray, config: CarvingConfig, device: str,
-            contrast: np.ndarray | None = None, behind_m: float = 0.0) -> tuple[np.ndarray, _Verdict]:
+def _tested(scene: _Scene, candidates: torch.Tensor, original: torch.Tensor, solid: torch.Tensor,
+            config: CarvingConfig, contrast: torch.Tensor | None = None,
+            behind_m: float = 0.0) -> tuple[torch.Tensor, _Verdict]:
     """The indices (P, 3) of the ``candidates`` voxels and the views' :class:`_Verdict` on each, seen
     against the current ``solid`` (carved so far: ``original & ~solid``)."""
-    idx = np.argwhere(candidates)
-    sight = occluder(grid, solid, config.visibility, device)
-    return idx, _spread(views, images, grid, idx, sight, original & ~solid, config, contrast, behind_m)
+    idx = torch.nonzero(candidates)
+    sight = occluder(scene.grid, solid, config.visibility, solid.device)
+    return idx, _spread(scene, idx, sight, original & ~solid, config, contrast, behind_m)
 
 
-def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray, grid: VoxelGrid,
-                    original: np.ndarray, solid: np.ndarray, floor: np.ndarray, config: CarvingConfig,
-                    progress: ProgressFn | None, device: str) -> np.ndarray:
+def _open_concavity(scene: _Scene, contrast: torch.Tensor, original: np.ndarray, solid: np.ndarray,
+                    floor: torch.Tensor, config: CarvingConfig, progress: ProgressFn | None) -> np.ndarray:
     """``solid`` (a copy) with the space behind an opened concavity that the images cannot place a
     surface in removed, round by round (the hollow prior of the module docstring). ``contrast``:
-    :func:`_local_contrast` of ``images``; ``floor``: voxels never carved."""
-    solid = solid.copy()
+    :func:`_local_contrast` of the images; ``floor``: voxels never carved."""
+    device = floor.device
     # the wall the silhouettes vouch for: near the hull's outside, or near the table under it
-    keep = floor | (distance_transform_edt(np.pad(original, 1))[1:-1, 1:-1, 1:-1] <= config.min_wall_voxels)
-    candidates = _surface(solid) & binary_dilation(original & ~solid, _FACES) & ~keep
+    wall = distance_transform_edt(np.pad(original, 1))[1:-1, 1:-1, 1:-1] <= config.min_wall_voxels
+    keep = floor | torch.as_tensor(wall, device=device)
+    original_t, now = torch.as_tensor(original, device=device), torch.as_tensor(solid, device=device).clone()
+    candidates = _surface(now) & _face_dilated(original_t & ~now) & ~keep
     for rounds in range(1, config.max_rounds + 1):
-        if not candidates.any():
+        if not bool(candidates.any()):
             break
-        idx, verdict = _tested(views, images, grid, candidates, original, solid, config, device, contrast,
-                               behind_m=config.depth_test_voxels * grid.voxel_m)
+        idx, verdict = _tested(scene, candidates, original_t, now, config, contrast,
+                               behind_m=config.depth_test_voxels * scene.grid.voxel_m)
         unplaced = (verdict.contrast < config.featureless_contrast) | \
             (verdict.spread >= config.min_spread_to_contrast * verdict.contrast)
         if verdict.behind is not None:
@@ -258,13 +279,12 @@ def _open_concavity(views: PosedViews, images: np.ndarray, contrast: np.ndarray,
         open_ = (verdict.through >= config.min_views) & (verdict.outside < config.min_views) & unplaced
         if progress:
             progress("hollow prior", rounds, config.max_rounds)
-        if not open_.any():
+        if not bool(open_.any()):
             break
-        carve = np.zeros(solid.shape, bool)
-        carve[tuple(idx[open_].T)] = True
-        solid &= ~carve
-        candidates = _surface(solid) & _near(carve) & ~keep
-    return solid
+        carve = _marked(now.shape, idx[open_])
+        now &= ~carve
+        candidates = _surface(now) & _near(carve) & ~keep
+    return now.cpu().numpy()
 
 
 def _small_components(carved: np.ndarray, min_voxels: float) -> np.ndarray:
@@ -287,108 +307,150 @@ def _blurred(rgb: np.ndarray, sigma_px: float) -> np.ndarray:
     return gaussian_filter(rgb, sigma=(0, sigma_px, sigma_px, 0)).astype(np.float32)
 
 
-def _surface(solid: np.ndarray) -> np.ndarray:
-    """Voxels of ``solid`` with an empty face neighbour (outside the grid counts as empty)."""
-    return solid & ~binary_erosion(solid, _FACES, border_value=0)
+def _marked(shape: tuple, idx: torch.Tensor) -> torch.Tensor:
+    """A bool grid of ``shape`` set at the voxels ``idx`` (P, 3)."""
+    grid = torch.zeros(shape, dtype=torch.bool, device=idx.device)
+    grid[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    return grid
 
 
-def _near(removed: np.ndarray) -> np.ndarray:
+def _shifted_along(grid: torch.Tensor, axis: int, radius: int, combine, outside: int = 0) -> torch.Tensor:
+    """``combine`` (an elementwise reduction) of ``grid`` shifted by -radius..radius along ``axis``; beyond
+    the grid the values are ``outside``."""
+    pad = [0] * 6
+    pad[2 * (2 - axis)] = pad[2 * (2 - axis) + 1] = radius
+    padded = torch.nn.functional.pad(grid, pad, value=outside)
+    n = grid.shape[axis]
+    out = padded.narrow(axis, 0, n)
+    for k in range(1, 2 * radius + 1):
+        out = combine(out, padded.narrow(axis, k, n))
+    return out
+
+
+def _face_neighbour(grid: torch.Tensor, outside: bool = False) -> torch.Tensor:
+    """Whether any of each voxel's six face neighbours is set in ``grid`` (bool); beyond it counts as ``outside``."""
+    padded = torch.nn.functional.pad(grid.to(torch.uint8), (1, 1, 1, 1, 1, 1), value=int(outside))
+    return (padded[:-2, 1:-1, 1:-1] | padded[2:, 1:-1, 1:-1] | padded[1:-1, :-2, 1:-1] | padded[1:-1, 2:, 1:-1]
+            | padded[1:-1, 1:-1, :-2] | padded[1:-1, 1:-1, 2:]) > 0
+
+
+def _face_dilated(grid: torch.Tensor) -> torch.Tensor:
+    """``grid`` (bool) grown by its face neighbours (scipy's ``binary_dilation`` with the 6-neighbour cross)."""
+    return grid | _face_neighbour(grid)
+
+
+def _surface(solid):
+    """Voxels of ``solid`` (bool tensor, or array) with an empty face neighbour (outside the grid counts as empty)."""
+    if isinstance(solid, np.ndarray):
+        return _surface(torch.from_numpy(solid)).numpy()
+    return solid & _face_neighbour(~solid, outside=True)
+
+
+def _near(removed: torch.Tensor) -> torch.Tensor:
     """Voxels within two (26-neighbour steps) of ``removed``: only those can change verdict after a
     round: the newly exposed ones and those that now see more views. Both passes use it; re-testing
     only the face neighbours in the second pass left more wrong voxels (kept outside the true solid
     plus removed inside it, 80 voxels, the benchmark captures: mug 11315 against 10322, bowl 27660
     against 27349)."""
-    return binary_dilation(removed, np.ones((3, 3, 3), bool), iterations=2)
+    grown = removed.to(torch.uint8)
+    for axis in range(3):  # the 5x5x5 box, one axis at a time
+        grown = _shifted_along(grown, axis, 2, torch.maximum)
+    return grown > 0
 
 
-def _mostly_bad_neighbourhood(bad: np.ndarray, surface: np.ndarray, fraction: float) -> np.ndarray:
+def _mostly_bad_neighbourhood(bad: torch.Tensor, surface: torch.Tensor, fraction: float) -> torch.Tensor:
     """Where at least ``fraction`` of the surface voxels in the 3x3x3 neighbourhood are ``bad``."""
-    cube = np.ones((3, 3, 3), np.float32)
-    bad_count = convolve(bad.astype(np.float32), cube, mode="constant")
-    surface_count = convolve(surface.astype(np.float32), cube, mode="constant")
-    return bad_count >= fraction * np.maximum(surface_count, 1.0)
+    def count(grid):
+        total = grid.to(torch.int16)
+        for axis in range(3):
+            total = _shifted_along(total, axis, 1, torch.add)
+        return total.to(torch.float32)
+
+    return count(bad) >= fraction * torch.clamp(count(surface), min=1.0)
 
 
 class _Verdict(NamedTuple):
-    """Per tested voxel: its views' colour ``spread`` and ``hue_spread`` (see :func:`_spread`), how
+    """Per tested voxel (tensors): its views' colour ``spread`` and ``hue_spread`` (see :func:`_spread`), how
     many views see it (``seen``), how many of those reach it through the carved space (``through``)
     and from outside (``outside``), the median image ``contrast`` around its projections in
     the views that see it (NaN when none does, or when no contrast map was given), and the spread
     those views would see of a surface deeper along their line of sight (``behind``,
     :func:`_spread_behind`; None when not asked for)."""
 
-    spread: np.ndarray
-    hue_spread: np.ndarray
-    seen: np.ndarray
-    through: np.ndarray
-    outside: np.ndarray
-    contrast: np.ndarray
-    behind: np.ndarray | None = None
+    spread: torch.Tensor
+    hue_spread: torch.Tensor
+    seen: torch.Tensor
+    through: torch.Tensor
+    outside: torch.Tensor
+    contrast: torch.Tensor
+    behind: torch.Tensor | None = None
 
 
-def _spread(views: PosedViews, images: np.ndarray, grid: VoxelGrid, idx: np.ndarray, sight: Occluder,
-            carved: np.ndarray, config: CarvingConfig, contrast: np.ndarray | None = None,
-            behind_m: float = 0.0) -> _Verdict:
+def _spread(scene: _Scene, idx: torch.Tensor, sight: Occluder, carved: torch.Tensor, config: CarvingConfig,
+            contrast: torch.Tensor | None = None, behind_m: float = 0.0) -> _Verdict:
     """The verdict on each voxel of ``idx`` (P, 3): the ``spread_quantile`` of its views' colour
     distances from their median, the same for their hues, and the counts of :class:`_Verdict`."""
-    points = grid.origin_m + idx * grid.voxel_m
-    height, width = views.mask.shape[1:]
-    view_of, point_of, pixel_uv, directions = observations(views, grid, points, sight,
-                                                           config.visibility_tolerance_voxels)
+    grid, views = scene.grid, scene.cameras.count
+    points = scene.points(idx)
+    count = len(points)
+    view_of, point_of, pixel_uv, directions = sightings(scene.cameras, grid, points, sight,
+                                                        config.visibility_tolerance_voxels)
     # a view reaches the voxel through carved space when the ray is in it just before the voxel
     before = points[point_of] - 1.5 * grid.voxel_m * directions
-    cell = np.clip(np.round((before - grid.origin_m) / grid.voxel_m).astype(int), 0, np.asarray(grid.shape) - 1)
-    through = carved[tuple(cell.T)]
-    through_count = np.bincount(point_of, weights=through, minlength=len(points))
-    outside_count = np.bincount(point_of, weights=~through, minlength=len(points))
-    colours = _bilinear(images, view_of, pixel_uv)
+    cell = torch.round((before - scene.origin_m) / grid.voxel_m).to(torch.int64).clamp_min(0)
+    cell = torch.minimum(cell, torch.as_tensor(grid.shape, device=cell.device) - 1)
+    through = carved[cell[:, 0], cell[:, 1], cell[:, 2]]
+    through_count = torch.bincount(point_of, weights=through.to(torch.float64), minlength=count)
+    outside_count = torch.bincount(point_of, weights=(~through).to(torch.float64), minlength=count)
+    colours = _bilinear(scene.images, view_of, pixel_uv)
     # hue: colour over brightness, damped for dark pixels whose ratios are noise
-    hues = 3.0 * colours / (colours.sum(axis=1, keepdims=True) + config.hue_floor)
-    seen = np.bincount(point_of, minlength=len(points))
+    hues = 3.0 * colours / (colours.sum(dim=1, keepdim=True) + config.hue_floor)
+    seen = torch.bincount(point_of, minlength=count)
     some = seen > 0
-    spreads = [np.nan_to_num(_colour_spread(values, view_of, point_of, len(points), views.count, quantile))
+    spreads = [torch.nan_to_num(_colour_spread(values, view_of, point_of, count, views, quantile))
                for values, quantile in ((colours, config.spread_quantile), (hues, config.hue_quantile))]
-    median_contrast = np.full(len(points), np.nan)
-    if contrast is not None and some.any():
-        u, v = (np.clip(pixel_uv[:, k].astype(int), 0, n - 1) for k, n in ((0, width), (1, height)))
-        per_view = np.full((len(points), views.count), np.nan, dtype=np.float32)
+    median_contrast = torch.full((count,), torch.nan, dtype=torch.float64, device=points.device)
+    if contrast is not None:
+        height, width = contrast.shape[1:]
+        u = pixel_uv[:, 0].to(torch.int64).clamp(0, width - 1)
+        v = pixel_uv[:, 1].to(torch.int64).clamp(0, height - 1)
+        per_view = torch.full((count, views), torch.nan, dtype=torch.float32, device=points.device)
         per_view[point_of, view_of] = contrast[view_of, v, u]
         median_contrast[some] = _row_nanquantile(per_view[some], 0.5)
     behind = None
-    if behind_m > 0 and some.any():
-        behind = _spread_behind(views, images, points, view_of, point_of, directions, behind_m, config)
+    if behind_m > 0:
+        behind = _spread_behind(scene, points, view_of, point_of, directions, behind_m, config)
     return _Verdict(spreads[0], spreads[1], seen, through_count, outside_count, median_contrast, behind)
 
 
-def _spread_behind(views: PosedViews, images: np.ndarray, points: np.ndarray, view_of: np.ndarray,
-                   point_of: np.ndarray, directions: np.ndarray, behind_m: float, config: CarvingConfig) -> np.ndarray:
+def _spread_behind(scene: _Scene, points: torch.Tensor, view_of: torch.Tensor, point_of: torch.Tensor,
+                   directions: torch.Tensor, behind_m: float, config: CarvingConfig) -> torch.Tensor:
     """Per point: the colour spread its views would see were the surface ``behind_m`` farther along their
     mean line of sight (the same views, the same quantile as :func:`_spread`; NaN where fewer than two of
     them see that point inside their image). Where it is no larger than the spread at the point itself,
     the views cannot tell this depth from a deeper one."""
-    mean_dir = np.zeros_like(points)
-    np.add.at(mean_dir, point_of, directions)
-    mean_dir /= np.maximum(np.linalg.norm(mean_dir, axis=1, keepdims=True), 1e-12)
+    mean_dir = torch.zeros_like(points).index_add_(0, point_of, directions)
+    mean_dir /= torch.clamp(torch.linalg.vector_norm(mean_dir, dim=1, keepdim=True), min=1e-12)
     deeper = points + behind_m * mean_dir
-    uv_all, depth_all = project(views.intrinsics, views.c2w_cv, deeper)  # (V, P, 2), (V, P)
-    uv = uv_all[view_of, point_of]
-    inside = in_image(views, uv, depth_all[view_of, point_of])
-    return _colour_spread(_bilinear(images, view_of[inside], uv[inside]), view_of[inside], point_of[inside],
-                          len(points), views.count, config.spread_quantile, min_views=2)
+    u, v, depth = project_torch(scene.cameras.intrinsics, scene.cameras.w2c, deeper.float())  # (V, P) each
+    uv = torch.stack([u[view_of, point_of], v[view_of, point_of]], dim=-1)
+    inside = in_image(scene.cameras, uv, depth[view_of, point_of])
+    return _colour_spread(_bilinear(scene.images, view_of[inside], uv[inside]), view_of[inside], point_of[inside],
+                          len(points), scene.cameras.count, config.spread_quantile, min_views=2)
 
 
-def _colour_spread(values: np.ndarray, view_of: np.ndarray, point_of: np.ndarray, points: int, views: int,
-                   quantile: float, min_views: int = 1) -> np.ndarray:
+def _colour_spread(values: torch.Tensor, view_of: torch.Tensor, point_of: torch.Tensor, points: int, views: int,
+                   quantile: float, min_views: int = 1) -> torch.Tensor:
     """Per point: the ``quantile`` of its observations' distances from their per-channel median
     (``values`` (N, 3), one row per observation); NaN where fewer than ``min_views`` observe it."""
-    per_point = np.full((points, views, 3), np.nan, dtype=np.float32)
-    per_point[point_of, view_of] = values
-    spread = np.full(points, np.nan)
-    some = np.bincount(point_of, minlength=points) >= min_views
-    if some.any():
-        rows = per_point[some]  # (S, V, 3): the per-channel median over views, by rows of (S * 3, V)
-        median = _row_nanquantile(rows.transpose(0, 2, 1).reshape(-1, views), 0.5).reshape(-1, 3)
-        spread[some] = _row_nanquantile(np.linalg.norm(rows - median[:, None], axis=2), quantile)
+    device = values.device
+    per_point = torch.full((points, views, 3), torch.nan, dtype=torch.float32, device=device)
+    per_point[point_of, view_of] = values.to(torch.float32)
+    spread = torch.full((points,), torch.nan, dtype=torch.float64, device=device)
+    some = torch.bincount(point_of, minlength=points) >= min_views
+    rows = per_point[some]  # (S, V, 3): the per-channel median over views, by rows of (S * 3, V)
+    median = _row_nanquantile(rows.transpose(1, 2).reshape(-1, views), 0.5).reshape(-1, 3)
+    spread[some] = _row_nanquantile(torch.linalg.vector_norm(rows - median[:, None], dim=2), quantile)
     return spread
 
 
@@ -406,26 +468,27 @@ def _local_contrast(images: np.ndarray, window_px: float) -> np.ndarray:
     return contrast
 
 
-def _row_nanquantile(values: np.ndarray, quantile: float) -> np.ndarray:
+def _row_nanquantile(values: torch.Tensor, quantile: float) -> torch.Tensor:
     """``np.nanquantile(values, quantile, axis=1)`` (linear interpolation) for rows (P, V) with at
-    least one number each. numpy's own runs a Python function per row when there are NaNs: 10 s
-    of a 21 s mug carving."""
-    ordered = np.sort(values, axis=1)  # NaNs last
-    count = (~np.isnan(values)).sum(axis=1)
-    position = quantile * (count - 1)
-    below = np.floor(position).astype(np.int64)
-    above = np.minimum(below + 1, count - 1)
-    low = np.take_along_axis(ordered, below[:, None], axis=1)[:, 0]
-    high = np.take_along_axis(ordered, above[:, None], axis=1)[:, 0]
+    least one number each, as a float64 tensor. numpy's own runs a Python function per row when there
+    are NaNs: 10 s of a 21 s mug carving."""
+    ordered = torch.sort(values, dim=1).values  # NaNs last
+    count = (~torch.isnan(values)).sum(dim=1)
+    position = quantile * (count - 1).to(torch.float64)
+    below = torch.floor(position).to(torch.int64)
+    above = torch.minimum(below + 1, count - 1)
+    low = ordered.gather(1, below[:, None])[:, 0]
+    high = ordered.gather(1, above[:, None])[:, 0]
     return low + (high - low) * (position - below)
 
 
-def _bilinear(images: np.ndarray, view_of: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Colours (N, 3) of images[view_of] at continuous pixel positions ``uv`` (N, 2) (pixel centres at +0.5)."""
+def _bilinear(images: torch.Tensor, view_of: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
+    """Colours (N, 3, float64) of images[view_of] at continuous pixel positions ``uv`` (N, 2) (pixel centres at +0.5)."""
     u, v = uv[:, 0] - 0.5, uv[:, 1] - 0.5
     h, w = images.shape[1:3]
-    u0 = np.clip(np.floor(u).astype(int), 0, w - 2)
-    v0 = np.clip(np.floor(v).astype(int), 0, h - 2)
-    fu, fv = np.clip(u - u0, 0, 1)[:, None], np.clip(v - v0, 0, 1)[:, None]
+    u0 = torch.floor(u).to(torch.int64).clamp(0, w - 2)
+    v0 = torch.floor(v).to(torch.int64).clamp(0, h - 2)
+    fu = torch.clamp(u.to(torch.float64) - u0, 0, 1)[:, None]
+    fv = torch.clamp(v.to(torch.float64) - v0, 0, 1)[:, None]
     return ((1 - fu) * (1 - fv) * images[view_of, v0, u0] + fu * (1 - fv) * images[view_of, v0, u0 + 1]
             + (1 - fu) * fv * images[view_of, v0 + 1, u0] + fu * fv * images[view_of, v0 + 1, u0 + 1])

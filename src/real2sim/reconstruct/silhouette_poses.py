@@ -40,15 +40,15 @@ STEP_DEG, STEP_MM = 1.0, 5.0
 
 
 def hull_surface_points(views: PosedViews, *, outlier_fraction: float, table_z_m: float,
-                        longest_side_voxels: int = 160) -> np.ndarray:
-    """(P, 3) centres of the visual hull's boundary voxels (metres, world frame)."""
+                        longest_side_voxels: int = 160, device: str = "cpu") -> np.ndarray:
+    """(P, 3) centres of the visual hull's boundary voxels (metres, world frame), the hull scored on ``device``."""
     from scipy.ndimage import binary_erosion
 
     from real2sim.reconstruct.hull import VoxelGrid, carve, object_region
 
-    lo, hi = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+    lo, hi = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m, device=device)
     grid = VoxelGrid.covering(lo, hi, longest_side_voxels, table_z_m)
-    inside = carve(views, grid, outlier_fraction) >= 0.5
+    inside = carve(views, grid, outlier_fraction, device=device) >= 0.5
     boundary = inside & ~binary_erosion(inside, border_value=0)
     return grid.centres()[boundary.ravel()]
 
@@ -138,15 +138,17 @@ def _fit_window(views: PosedViews, index: int, c2w_cv: np.ndarray, points_m: np.
 
 
 def align_unrefined(views: PosedViews, *, outlier_fraction: float, table_z_m: float, min_coverage: float = 0.97,
-                    progress=None) -> tuple[PosedViews, dict]:
+                    progress=None, device: str = "cpu") -> tuple[PosedViews, dict]:
     """``views`` with its unrefined views' cameras moved onto the refined views' visual hull (those whose
     masks it then still leaves uncovered are left out), and a report (per view: coverage of its mask,
-    how far its camera moved, kept or not). ``views`` as it is when fewer than 8 views are refined."""
+    how far its camera moved, kept or not). ``views`` as it is when fewer than 8 views are refined. ``device``:
+    where the refined views' hull is scored (on a GPU's host it was 4.5 of the 5 s this took for one view)."""
     is_unrefined = views.is_unrefined
     unrefined, refined = np.nonzero(is_unrefined)[0], np.nonzero(~is_unrefined)[0]
     if not len(unrefined) or len(refined) < MIN_VIEWS:
         return views, {}
-    points = hull_surface_points(views.subset(refined), outlier_fraction=outlier_fraction, table_z_m=table_z_m)
+    points = hull_surface_points(views.subset(refined), outlier_fraction=outlier_fraction, table_z_m=table_z_m,
+                                 device=device)
     c2w = views.c2w_cv.copy()
     keep = np.ones(views.count, dtype=bool)
     coverage = np.ones(views.count)

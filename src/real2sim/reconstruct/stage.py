@@ -205,14 +205,16 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
             from real2sim.reconstruct.silhouette_poses import align_unrefined
 
             train, report["unrefined_views"] = align_unrefined(
-                train, outlier_fraction=config.hull_outlier_fraction, table_z_m=config.table_z_m, progress=progress)
+                train, outlier_fraction=config.hull_outlier_fraction, table_z_m=config.table_z_m, progress=progress,
+                device=device)
             if report["unrefined_views"]:  # a held-out view with a wrong pose would judge the pose, not the field
                 report["held_out_views_left_out_unrefined"] = list(held.unrefined)
                 held = held.subset(np.nonzero(~held.is_unrefined)[0])
     if progress:
         progress("visual hull", 0, 0)
     with clock.stage("visual_hull"):
-        region = object_region(train, outlier_fraction=config.hull_outlier_fraction, table_z_m=table_z_m)
+        region = object_region(train, outlier_fraction=config.hull_outlier_fraction, table_z_m=table_z_m,
+                               device=device)
     if table_z_m is None and support_z_m is not None and support_z_m > region[0][2]:
         # no table in the images, but the rig says where the object stands: nothing of it is below, and
         # the unseen cone the views leave under its bottom (they all look down at it) is cut there
