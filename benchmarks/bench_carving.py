@@ -37,7 +37,8 @@ def carve_both(dataset: Path, device: str, methods: tuple[str, ...]) -> list[lis
     """The rows of one dataset: ``train.hull_density`` with each visibility test."""
     import torch
 
-    from real2sim.reconstruct.hull import VoxelGrid, object_region
+    from real2sim.reconstruct.hull import object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
     from real2sim.reconstruct.train import FieldConfig, hull_density
     from real2sim.reconstruct.views import load_views
 

@@ -44,7 +44,8 @@ def measure(name: str, work: Path, views_count: int, width: int, height: int, se
     from real2sim.capture.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.fidelity import surface_distance_m
     from real2sim.geometry.objects import make_textured_object
-    from real2sim.reconstruct.hull import VoxelGrid, carve, object_region, surface_from_grid, voxel_footprint_px
+    from real2sim.reconstruct.hull import carve, object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid, surface_from_grid, voxel_footprint_px
     from real2sim.reconstruct.photo_carving import CarvingConfig, _blurred, _spread, _surface, photo_carve
     from real2sim.reconstruct.truth import load_truth
     from real2sim.reconstruct.views import load_views

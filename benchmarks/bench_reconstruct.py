@@ -44,7 +44,7 @@ def _cpu_s() -> float:
 def _tsdf_row(name: str, ds: Path, field, cfg, seed: int) -> list:
     """The same trained field's surface by the paper's TSDF fusion, measured against the truth."""
     from real2sim.reconstruct.extract import tsdf_mesh
-    from real2sim.reconstruct.hull import largest_parts, simplified
+    from real2sim.reconstruct.voxel_grid import largest_parts, simplified
     from real2sim.reconstruct.truth import compare_to_truth, load_truth
     from real2sim.reconstruct.views import held_out_split, load_views
 

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from real2sim.reconstruct.field import VoxelRadianceField
-from real2sim.reconstruct.hull import VoxelGrid
+from real2sim.reconstruct.voxel_grid import VoxelGrid
 
 VOXEL = 0.01
 SHAPE = (8, 6, 10)

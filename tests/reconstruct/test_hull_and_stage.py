@@ -290,7 +290,7 @@ def test_largest_parts_keeps_an_open_surface_over_a_closed_speck():
     """A TSDF surface is open: a tiny closed speck beside it must not win on 'volume' (bench regression)."""
     import trimesh
 
-    from real2sim.reconstruct.hull import largest_parts
+    from real2sim.reconstruct.voxel_grid import largest_parts
 
     sheet = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
     sheet.update_faces(sheet.vertices[sheet.faces][:, :, 2].min(axis=1) > -0.03)  # open at the bottom
@@ -355,7 +355,7 @@ def test_the_masks_level_is_nearer_the_truth_than_half_light(field_result, truth
     """On the tiny field (2.1 mm voxels) the surface at the masks' level (0.83 ln 2) is nearer the true can
     than the one at ln 2 per voxel, which lies inside it (measured: 0.52 against 0.61 mm Chamfer)."""
     from real2sim.reconstruct.extract import density_mesh
-    from real2sim.reconstruct.hull import largest_parts, simplified
+    from real2sim.reconstruct.voxel_grid import largest_parts, simplified
 
     half_light = simplified(largest_parts(density_mesh(field_result.field)), tiny_config.max_faces)
     chosen = _errors(field_result.mesh, truth)

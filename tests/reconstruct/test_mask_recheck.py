@@ -13,7 +13,8 @@ VOXELS = 48  # longest side of the grid, as in test_photo_carving
 @pytest.fixture(scope="module")
 def can_hull(can_capture):
     """The can's views, a grid over it and its visual hull (bool)."""
-    from real2sim.reconstruct.hull import VoxelGrid, carve, object_region
+    from real2sim.reconstruct.hull import carve, object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
     from real2sim.reconstruct.views import load_views
 
     views = load_views(can_capture)

@@ -192,7 +192,7 @@ def test_no_undecided_pixels_returns_table_unchanged():
 
 
 def _grid(shape=(12, 12, 40)):
-    from real2sim.reconstruct.hull import VoxelGrid
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
 
     return VoxelGrid(np.array([0.0, 0.0, 0.0005]), 0.001, shape)
 

@@ -29,7 +29,8 @@ def mug_capture(tmp_path_factory):
 
 def _views_and_hull(dataset):
     """The dataset's views, the carving grid over its object region and the visual hull on it."""
-    from real2sim.reconstruct.hull import VoxelGrid, carve, object_region
+    from real2sim.reconstruct.hull import carve, object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
     from real2sim.reconstruct.views import load_views
 
     views = load_views(dataset)
@@ -199,7 +200,8 @@ def test_row_quantile_matches_numpys_nanquantile(quantile):
 def test_the_fields_start_leaves_the_opened_cavity_empty(mug_capture):
     """train_field's starting density: nearly nothing where either pass carved, and the hollow prior's
     count carried out (the stage reports it as ``photo_carving_opened_voxels``)."""
-    from real2sim.reconstruct.hull import VoxelGrid, object_region
+    from real2sim.reconstruct.hull import object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
     from real2sim.reconstruct.photo_carving import CarvingConfig
     from real2sim.reconstruct.train import FieldConfig, hull_density
     from real2sim.reconstruct.views import load_views

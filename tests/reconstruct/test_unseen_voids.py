@@ -7,7 +7,7 @@ import numpy as np
 
 from real2sim.reconstruct.extract import density_mesh, unseen_voids
 from real2sim.reconstruct.field import VoxelRadianceField
-from real2sim.reconstruct.hull import VoxelGrid
+from real2sim.reconstruct.voxel_grid import VoxelGrid
 
 SHAPE = (40, 40, 40)
 

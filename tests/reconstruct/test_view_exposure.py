@@ -80,7 +80,8 @@ def test_carving_leaves_a_can_shot_with_changing_exposure_alone(jittered_can):
     """Without the gains taken out, carving removed 23 % of this can's hull (8624 of 37314 voxels): every
     view disagreed with the others in colour. The gains found match the capture's own."""
     from real2sim.reconstruct.carving_views import observations, occluder
-    from real2sim.reconstruct.hull import VoxelGrid, carve, object_region
+    from real2sim.reconstruct.hull import carve, object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
     from real2sim.reconstruct.photo_carving import CarvingConfig, _bilinear, _surface, photo_carve
     from real2sim.reconstruct.views import load_views
 

@@ -3,7 +3,7 @@
 import numpy as np
 import torch
 
-from real2sim.reconstruct.hull import VoxelGrid
+from real2sim.reconstruct.voxel_grid import VoxelGrid
 from real2sim.reconstruct.voxel_rays import flat_samples, segments_clear
 
 VOXEL_M = 0.01

@@ -116,7 +116,8 @@ def test_a_point_beyond_an_edge_the_mask_stays_clear_of_is_outside():
 def test_views_cut_by_the_image_border_do_not_cut_the_object():
     """A third of the views aim 10 cm off, so the sphere leaves their image: where a view cannot see,
     it casts no vote, and the hull keeps the whole sphere."""
-    from real2sim.reconstruct.hull import VoxelGrid, border_touched, carve, object_region
+    from real2sim.reconstruct.hull import border_touched, carve, object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
 
     az = np.linspace(0, 360, 24, endpoint=False)
     offsets = [np.array([0.0, 0.0, 0.1]) if i % 3 == 0 else np.zeros(3) for i in range(len(az))]
@@ -136,7 +137,7 @@ def test_views_cut_by_the_image_border_do_not_cut_the_object():
 def _ring_with_one_wrong_mask():
     """A 20-view ring of the sphere whose first mask lost the sphere's upper half, and a 40-voxel grid
     around the sphere."""
-    from real2sim.reconstruct.hull import VoxelGrid
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
 
     views = ring_views(azimuths_deg=np.linspace(0, 360, 20, endpoint=False), elevation_deg=25, distance_m=0.8,
                        fx_px=400)
@@ -220,7 +221,8 @@ def test_trusted_views_trim_the_skin_that_robust_carving_leaves():
     sphere is bounded by one view's silhouette only, so the rule that two views must agree leaves a
     skin there; views whose masks all agree with each other carve alone and the hull's box error
     falls by two thirds (9 -> 3 mm here; what is left is six views' polygon around a sphere)."""
-    from real2sim.reconstruct.hull import VoxelGrid, carve
+    from real2sim.reconstruct.hull import carve
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
 
     views = ring_views(azimuths_deg=np.linspace(135, 270, 6), elevation_deg=20, distance_m=0.6, fx_px=800)
     grid = VoxelGrid.covering(CENTRE_M - 1.5 * RADIUS_M, CENTRE_M + 1.5 * RADIUS_M, 60, None)
@@ -258,7 +260,8 @@ def test_cuda_carves_as_the_cpu():
     CPU's: the same votes, float32 bilinear mask values in another order."""
     import torch
 
-    from real2sim.reconstruct.hull import VoxelGrid, carve
+    from real2sim.reconstruct.hull import carve
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
 
     if not torch.cuda.is_available():
         pytest.skip("needs a CUDA GPU")

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from real2sim.formats.dataset import CameraIntrinsics
-from real2sim.reconstruct.hull import VoxelGrid, surface_from_grid
+from real2sim.reconstruct.voxel_grid import VoxelGrid, surface_from_grid
 from real2sim.reconstruct.views import PosedViews, project_torch
 
 

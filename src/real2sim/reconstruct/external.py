@@ -53,7 +53,7 @@ def import_nerfstudio_mesh(mesh_path: Path | str, dataparser_transforms: Path | 
                            min_part_volume_fraction: float = 0.05) -> trimesh.Trimesh:
     """The exported mesh in the world frame (metres), texture kept, cleaned: nothing below the table, no floaters."""
     from real2sim.formats.mesh_io import load_mesh
-    from real2sim.reconstruct.hull import largest_parts
+    from real2sim.reconstruct.voxel_grid import largest_parts
 
     mesh = load_mesh(mesh_path)
     matrix, scale = read_dataparser_transforms(dataparser_transforms)

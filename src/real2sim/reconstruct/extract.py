@@ -24,7 +24,7 @@ from scipy.ndimage import binary_fill_holes
 
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.field import VoxelRadianceField
-from real2sim.reconstruct.hull import VoxelGrid, largest_parts, surface_from_grid
+from real2sim.reconstruct.voxel_grid import VoxelGrid, largest_parts, surface_from_grid
 from real2sim.reconstruct.ray_pool import occupancy_ranges
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 
@@ -71,7 +71,7 @@ def unseen_voids(solid: np.ndarray, gap_voxels: int = UNSEEN_VOID_GAP_VOXELS,
                  min_fraction: float = MIN_UNSEEN_VOID_FRACTION) -> np.ndarray:
     """The empty voxels of ``solid`` (bool, a grid whose last axis is up and whose lowest layer stands on
     the table) that no view can see into: enclosed but for openings at most ``2 * gap_voxels`` wide
-    (:func:`~real2sim.reconstruct.hull.closed_off`), in connected parts of at least ``min_fraction`` of
+    (:func:`~real2sim.reconstruct.voxel_grid.closed_off`), in connected parts of at least ``min_fraction`` of
     the solid's volume.
 
     Rays stop at the first opaque surface, so the field's inside is never trained: where its surface
@@ -81,7 +81,7 @@ def unseen_voids(solid: np.ndarray, gap_voxels: int = UNSEEN_VOID_GAP_VOXELS,
     with the fill (4724 voxels, 8.1 ml) the same capture's reconstruction went 1.70 -> 0.84 mm Chamfer.
     The mug from 60 photos, whose cavity and handle are open wide, had none of this size (crevices of at
     most 150 voxels, 0.04 % of it, stay as trained), nor had the robot-captured mug."""
-    from real2sim.reconstruct.hull import closed_off, voxel_parts
+    from real2sim.reconstruct.voxel_grid import closed_off, voxel_parts
 
     voids = closed_off(~solid, gap_voxels)
     if not voids.any():

@@ -1,6 +1,6 @@
 """A radiance field on a voxel grid, rendered by the paper's equations 1-4 (in discrete form).
 
-The field stores, at every voxel centre of a :class:`~real2sim.reconstruct.hull.VoxelGrid`,
+The field stores, at every voxel centre of a :class:`~real2sim.reconstruct.voxel_grid.VoxelGrid`,
 a raw density and ``feature_channels`` colour features, in one table so that one
 sparse gather serves both. A point's values are the trilinear blend of its cell's
 eight corners (an explicit 8-corner gather: on CPU several times faster than
@@ -27,7 +27,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from real2sim.reconstruct.hull import VoxelGrid
+from real2sim.reconstruct.voxel_grid import VoxelGrid
 
 
 @dataclass(frozen=True)
@@ -87,7 +87,7 @@ class VoxelRadianceField(torch.nn.Module):
         if grow_voxels not in surfaces:
             from scipy.ndimage import binary_dilation
 
-            from real2sim.reconstruct.hull import surface_from_grid
+            from real2sim.reconstruct.voxel_grid import surface_from_grid
 
             grown = binary_dilation(self.occupancy.cpu().numpy(), iterations=max(int(grow_voxels), 1))
             surfaces[grow_voxels] = surface_from_grid(grown.astype(np.float32), self.grid, 0.5,

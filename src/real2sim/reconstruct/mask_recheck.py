@@ -8,7 +8,7 @@ The masks catch that: the rays through it no longer meet anything. They say only
 is on such a ray, not where, so what is put back is chosen by how the carving went wrong
 (:func:`put_back_for_masks`).
 
-World frame, metres; solids are bool arrays of a :class:`~real2sim.reconstruct.hull.VoxelGrid`'s
+World frame, metres; solids are bool arrays of a :class:`~real2sim.reconstruct.voxel_grid.VoxelGrid`'s
 shape. The rays are walked with torch on ``device``.
 """
 
@@ -21,7 +21,7 @@ import torch
 from scipy.ndimage import binary_dilation, binary_erosion
 
 from real2sim.reconstruct.field import ray_box
-from real2sim.reconstruct.hull import VoxelGrid, closed_off, voxel_footprint_px
+from real2sim.reconstruct.voxel_grid import VoxelGrid, closed_off, voxel_footprint_px
 from real2sim.reconstruct.views import PosedViews, pixel_rays
 from real2sim.reconstruct.voxel_rays import VoxelIndex, flat_samples
 

@@ -77,7 +77,8 @@ def leave_one_out_surfaces(views: PosedViews, *, outlier_fraction: float, table_
     import torch
     from scipy.ndimage import binary_erosion
 
-    from real2sim.reconstruct.hull import VoxelGrid, _mask_votes, object_region
+    from real2sim.reconstruct.hull import _mask_votes, object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
 
     if region is None:
         region = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m)

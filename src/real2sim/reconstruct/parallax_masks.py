@@ -68,8 +68,8 @@ import trimesh
 from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress
-from real2sim.reconstruct.hull import (VoxelGrid, carve, object_region, surface_from_grid, voxel_footprint_px,
-                                      voxel_parts)
+from real2sim.reconstruct.hull import carve, object_region
+from real2sim.reconstruct.voxel_grid import VoxelGrid, surface_from_grid, voxel_footprint_px, voxel_parts
 from real2sim.reconstruct.parallax_table import neighbour_views, table_evidence
 from real2sim.reconstruct.views import PosedViews, pixel_rays, project, project_torch
 

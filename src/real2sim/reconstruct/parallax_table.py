@@ -17,7 +17,7 @@ import torch
 from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.progress import ProgressFn, null_progress
-from real2sim.reconstruct.hull import voxel_parts
+from real2sim.reconstruct.voxel_grid import voxel_parts
 from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, plane_hits, project_torch
 
 if TYPE_CHECKING:

@@ -78,7 +78,7 @@ from scipy.ndimage import distance_transform_edt, gaussian_filter
 
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.carving_views import Cameras, Occluder, cameras_on, in_image, occluder, sightings
-from real2sim.reconstruct.hull import VoxelGrid, voxel_footprint_px, voxel_parts
+from real2sim.reconstruct.voxel_grid import VoxelGrid, voxel_footprint_px, voxel_parts
 from real2sim.reconstruct.mask_recheck import put_back_for_masks
 from real2sim.reconstruct.views import PosedViews, project_torch
 

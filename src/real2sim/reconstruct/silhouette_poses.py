@@ -44,7 +44,8 @@ def hull_surface_points(views: PosedViews, *, outlier_fraction: float, table_z_m
     """(P, 3) centres of the visual hull's boundary voxels (metres, world frame), the hull scored on ``device``."""
     from scipy.ndimage import binary_erosion
 
-    from real2sim.reconstruct.hull import VoxelGrid, carve, object_region
+    from real2sim.reconstruct.hull import carve, object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid
 
     lo, hi = object_region(views, outlier_fraction=outlier_fraction, table_z_m=table_z_m, device=device)
     grid = VoxelGrid.covering(lo, hi, longest_side_voxels, table_z_m)

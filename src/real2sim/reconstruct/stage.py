@@ -163,7 +163,8 @@ class _StageClock:
 def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConfig(), *, device: str = "cpu",
                 seed: int = 0, progress: ProgressFn | None = None) -> Reconstruction:
     """Run the stage on a dataset folder; see the module docstring. Raises UserInputError for unusable input."""
-    from real2sim.reconstruct.hull import VoxelGrid, carve, largest_parts, object_region, simplified, surface_from_grid
+    from real2sim.reconstruct.hull import carve, object_region
+    from real2sim.reconstruct.voxel_grid import VoxelGrid, largest_parts, simplified, surface_from_grid
     from real2sim.reconstruct.truth import load_truth
 
     config.validate()

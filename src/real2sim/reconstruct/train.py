@@ -27,7 +27,8 @@ from scipy.ndimage import binary_dilation, binary_erosion
 
 from real2sim.formats.progress import ProgressFn
 from real2sim.reconstruct.field import VoxelRadianceField
-from real2sim.reconstruct.hull import VoxelGrid, carve
+from real2sim.reconstruct.hull import carve
+from real2sim.reconstruct.voxel_grid import VoxelGrid
 from real2sim.reconstruct.photo_carving import CarvingConfig, CarvingResult, photo_carve
 from real2sim.reconstruct.ray_pool import PoolRanges, RayPool, ray_pool
 from real2sim.reconstruct.view_corrections import CorrectionConfig, ViewCorrections

@@ -7,7 +7,7 @@ a camera and a voxel?). On a CPU carving asks Embree instead, on the solid's mar
 there a BVH over a few thousand triangles beats walking every ray; on a GPU the walk is a few
 gathers and rebuilding a mesh and a BVH every carving round is what costs.
 
-World frame, metres; solids are bool arrays of a :class:`~real2sim.reconstruct.hull.VoxelGrid`'s shape.
+World frame, metres; solids are bool arrays of a :class:`~real2sim.reconstruct.voxel_grid.VoxelGrid`'s shape.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from real2sim.reconstruct.field import ray_box
-from real2sim.reconstruct.hull import VoxelGrid
+from real2sim.reconstruct.voxel_grid import VoxelGrid
 
 
 def flat_samples(start: torch.Tensor, count: torch.Tensor, step_m: float, samples_per_chunk: int
