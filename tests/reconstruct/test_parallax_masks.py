@@ -604,14 +604,37 @@ def test_a_barrier_keeps_a_plain_base_apart_from_the_plain_table():
 def test_table_specks_inside_the_object_are_dropped_and_a_hole_is_kept():
     """Chance matches on a patterned object leave table specks of a few pixels; a table seen through a
     handle is a part of some size: the specks go, the hole and the table around stay."""
-    from real2sim.reconstruct.parallax_table import _without_table_specks
+    from real2sim.reconstruct.parallax_table import without_table_specks
 
     shape = (120, 160)
     table = ~_disc(shape, (60, 80), 45)
     hole = _disc(shape, (60, 80), 8)  # 197 px: the table through a handle
     specks = np.zeros(shape, bool)
     specks[40, 60] = specks[41, 61] = specks[80, 90] = specks[70, 50:53] = True  # 1-3 px, 8-connected
-    out = _without_table_specks(table | hole | specks, min_share=0.005)  # 96 px at this size
+    out = without_table_specks(table | hole | specks, min_share=0.005)  # 96 px at this size
     assert not out[specks].any()
     assert out[hole].all() and out[table].all()
-    assert np.array_equal(_without_table_specks(table | specks, 0.0), table | specks)
+    assert np.array_equal(without_table_specks(table | specks, 0.0), table | specks)
+
+
+def test_the_plates_specks_are_dropped_and_its_band_and_hole_kept():
+    """What the table plate explains joins the table verdict (step 6) less its islands: its band beside the
+    silhouette (touching the table), a hole's table of some size and a speck touching the band stay; a lone
+    speck of the plate's inside the object goes, and every part of the table's own verdict stays, small or
+    not (step 2 judged those)."""
+    from real2sim.reconstruct.parallax_masks import _plate_joined
+
+    shape = (120, 160)
+    table = ~_disc(shape, (60, 80), 45)
+    own = _disc(shape, (40, 80), 2)  # 13 px of step 2's table inside the object
+    band = _disc(shape, (60, 80), 45) & ~_disc(shape, (60, 80), 42)
+    hole = _disc(shape, (60, 80), 8)  # 197 px
+    speck = np.zeros(shape, bool)
+    speck[30, 70:73] = True  # 3 px inside the object
+    touching = np.zeros(shape, bool)
+    touching[60, 121:123] = True  # 2 px inside the object, next to the band
+    joined = _plate_joined((table | own)[None], (band | hole | speck | touching)[None], min_share=0.005)[0]
+    assert joined[table].all() and joined[own].all()
+    assert joined[band].all() and joined[hole].all() and joined[touching].all()
+    assert not joined[speck].any()
+    assert not _plate_joined((table | own)[None], hole[None], min_share=0.02)[0][hole].any()  # 197 < 384 px

@@ -22,8 +22,9 @@ With ``pixel_threshold`` set, the window may slide (stereo's shiftable windows):
 when *some* window that holds it passes, and the pixel itself differs by less than ``pixel_threshold``.
 The masks' excess beside a silhouette is a band a few pixels wide: the window centred on a table pixel
 there holds the object's edge and fails, one further out holds table only; the pixel's own test keeps
-the object's edge pixels out of the windows that reach over them. It takes more of that band and more
-of the object too (``test_table_plate.py`` has the figures), so it is not the default yet.
+the object's edge pixels out of the windows that reach over them. It takes more of that band and a little
+more of the object too (``test_table_plate.py`` has the figures); the parallax masks use it at 0.04
+(``ParallaxConfig.plate_pixel_threshold``, where the measurements are).
 
 The explained pixels join the table verdict of one more round of the standing hull; a voxel then
 goes only when several views call it table, as before, so a view that explains part of the object by
