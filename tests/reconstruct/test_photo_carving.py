@@ -226,8 +226,9 @@ def test_the_voxel_walk_sees_what_embree_sees(mug_hull):
     from real2sim.reconstruct.photo_carving import _surface
 
     views, grid, hull = mug_hull
-    surface = np.argwhere(_surface(hull))
-    inner = np.argwhere(hull & ~_surface(hull) & ~np.roll(_surface(hull), 1, 0) & ~np.roll(_surface(hull), -1, 0))
+    skin = _surface(torch.from_numpy(hull)).numpy()
+    surface = np.argwhere(skin)
+    inner = np.argwhere(hull & ~skin & ~np.roll(skin, 1, 0) & ~np.roll(skin, -1, 0))
     points = grid.origin_m + np.r_[surface, inner[:50]] * grid.voxel_m
     seen = {}
     for method in ("mesh", "voxels"):

@@ -97,7 +97,7 @@ def test_carving_leaves_a_can_shot_with_changing_exposure_alone(jittered_can):
     true /= np.exp(np.log(true).mean(axis=0))
     floor = np.zeros(hull.shape, bool)
     floor[:, :, 0] = True
-    idx = np.argwhere(_surface(hull) & ~floor)
+    idx = np.argwhere(_surface(torch.from_numpy(hull)).numpy() & ~floor)
     view_of, point_of, uv, _ = observations(views, grid, grid.origin_m + idx * grid.voxel_m,
                                             occluder(grid, hull, "mesh", "cpu"), 1.0)
     colours = _bilinear(torch.from_numpy(views.rgb), torch.from_numpy(view_of), torch.from_numpy(uv)).numpy()

@@ -339,10 +339,8 @@ def _face_dilated(grid: torch.Tensor) -> torch.Tensor:
     return grid | _face_neighbour(grid)
 
 
-def _surface(solid):
-    """Voxels of ``solid`` (bool tensor, or array) with an empty face neighbour (outside the grid counts as empty)."""
-    if isinstance(solid, np.ndarray):
-        return _surface(torch.from_numpy(solid)).numpy()
+def _surface(solid: torch.Tensor) -> torch.Tensor:
+    """Voxels of ``solid`` (bool) with an empty face neighbour (outside the grid counts as empty)."""
     return solid & _face_neighbour(~solid, outside=True)
 
 
