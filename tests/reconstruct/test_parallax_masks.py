@@ -604,17 +604,17 @@ def test_a_barrier_keeps_a_plain_base_apart_from_the_plain_table():
 def test_table_specks_inside_the_object_are_dropped_and_a_hole_is_kept():
     """Chance matches on a patterned object leave table specks of a few pixels; a table seen through a
     handle is a part of some size: the specks go, the hole and the table around stay."""
-    from real2sim.reconstruct.parallax_table import without_table_specks
+    from real2sim.reconstruct.parallax_table import _without_table_specks
 
     shape = (120, 160)
     table = ~_disc(shape, (60, 80), 45)
     hole = _disc(shape, (60, 80), 8)  # 197 px: the table through a handle
     specks = np.zeros(shape, bool)
     specks[40, 60] = specks[41, 61] = specks[80, 90] = specks[70, 50:53] = True  # 1-3 px, 8-connected
-    out = without_table_specks(table | hole | specks, min_share=0.005)  # 96 px at this size
+    out = _without_table_specks(table | hole | specks, min_share=0.005)  # 96 px at this size
     assert not out[specks].any()
     assert out[hole].all() and out[table].all()
-    assert np.array_equal(without_table_specks(table | specks, 0.0), table | specks)
+    assert np.array_equal(_without_table_specks(table | specks, 0.0), table | specks)
 
 
 def test_the_plates_specks_are_dropped_and_its_band_and_hole_kept():

@@ -184,12 +184,12 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[
                 close = torch.maximum(own - high, low - own).clamp_min(0.0).amax(dim=1) * 255.0 <= config.threshold
                 matches = _agreed(voters, close, config.agreement).numpy()
                 table = _plain_patches_decided(matches & decided, ~matches & decided, beyond, barrier)
-                out[r, i] = without_table_specks(table, config.min_table_speck_share)
+                out[r, i] = _without_table_specks(table, config.min_table_speck_share)
             progress("parallax masks: table", i + 1, views.count)
     return out
 
 
-def without_table_specks(table: np.ndarray, min_share: float) -> np.ndarray:
+def _without_table_specks(table: np.ndarray, min_share: float) -> np.ndarray:
     """``table`` (H, W) bool without its connected parts (8-neighbours) smaller than ``min_share`` of the
     image: a neighbour's warped texture matches a patterned object by chance here and there (a black dot
     landing on another), and where a few views' specks line up the hull loses a tunnel through the object.
