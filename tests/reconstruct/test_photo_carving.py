@@ -184,7 +184,7 @@ def test_small_carved_pockets_are_put_back(mug_capture, mug_hull):
 @pytest.mark.parametrize("quantile", [0.0, 0.3, 0.5, 0.8, 1.0])
 def test_row_quantile_matches_numpys_nanquantile(quantile):
     """The colour-spread quantile over each voxel's views (NaN where a view does not see it)."""
-    from real2sim.reconstruct.photo_carving import _row_nanquantile
+    from real2sim.reconstruct.carving_verdict import row_nanquantile
 
     rng = np.random.default_rng(0)
     spreads = rng.random((400, 90)).astype(np.float32)
@@ -192,7 +192,7 @@ def test_row_quantile_matches_numpys_nanquantile(quantile):
     spreads[:, 5] = rng.random(400)  # every voxel seen at least once
     spreads[3, 6:] = np.nan
     spreads[3, :5] = np.nan  # a voxel seen once
-    np.testing.assert_allclose(_row_nanquantile(torch.from_numpy(spreads), quantile).numpy(),
+    np.testing.assert_allclose(row_nanquantile(torch.from_numpy(spreads), quantile).numpy(),
                                np.nanquantile(spreads, quantile, axis=1), atol=1e-6)
 
 

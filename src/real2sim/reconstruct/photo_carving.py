@@ -70,17 +70,17 @@ World frame, metres; the lowest layer of voxels (standing on the table) is never
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 import torch
 from scipy.ndimage import distance_transform_edt, gaussian_filter
 
 from real2sim.formats.progress import ProgressFn
-from real2sim.reconstruct.carving_views import Cameras, Occluder, cameras_on, in_image, occluder, sightings
+from real2sim.reconstruct.carving_verdict import CarvingScene, Verdict, bilinear, voxel_verdicts
+from real2sim.reconstruct.carving_views import cameras_on, occluder, sightings
 from real2sim.reconstruct.voxel_grid import VoxelGrid, voxel_footprint_px, voxel_parts
 from real2sim.reconstruct.mask_recheck import put_back_for_masks
-from real2sim.reconstruct.views import PosedViews, project_torch
+from real2sim.reconstruct.views import PosedViews
 
 
 @dataclass(frozen=True)
@@ -145,20 +145,6 @@ class CarvingResult:
 #: Parts of the carved solid smaller than this fraction of it, cut off from the rest, are dropped.
 FLOATER_FRACTION = 0.01
 
-class _Scene(NamedTuple):
-    """What a carving round looks at, on the carving's device: the views' ``cameras``, their ``images``
-    (V, H, W, 3 float32 tensor, blurred and exposure-corrected), the ``grid`` and its origin (3,) float64."""
-
-    cameras: Cameras
-    images: torch.Tensor
-    grid: VoxelGrid
-    origin_m: torch.Tensor
-
-    def points(self, idx: torch.Tensor) -> torch.Tensor:
-        """The centres (P, 3, float64, metres) of voxels ``idx`` (P, 3)."""
-        return self.origin_m + idx.to(torch.float64) * self.grid.voxel_m
-
-
 def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: CarvingConfig = CarvingConfig(),
                 progress: ProgressFn | None = None, device: str = "cpu") -> CarvingResult:
     """Carve the photo-inconsistent surface voxels of ``solid`` (bool, ``grid.shape``) round by round.
@@ -175,9 +161,9 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
     candidates = _surface(now) & ~floor
     exposure = None
     if config.exposure_correction:
-        images, exposure = _exposure_corrected(_Scene(cameras, torch.as_tensor(images, device=device), grid, origin),
-                                               images, candidates, now, config)
-    scene = _Scene(cameras, torch.as_tensor(images, device=device), grid, origin)
+        images, exposure = _exposure_corrected(CarvingScene(cameras, torch.as_tensor(images, device=device), grid,
+                                                            origin), images, candidates, now, config)
+    scene = CarvingScene(cameras, torch.as_tensor(images, device=device), grid, origin)
     rounds = 0
     for rounds in range(1, config.max_rounds + 1):
         if not bool(candidates.any()):
@@ -227,7 +213,7 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
 EXPOSURE_SAMPLE_VOXELS = 20_000
 
 
-def _exposure_corrected(scene: _Scene, images: np.ndarray, surface: torch.Tensor, solid: torch.Tensor,
+def _exposure_corrected(scene: CarvingScene, images: np.ndarray, surface: torch.Tensor, solid: torch.Tensor,
                         config: CarvingConfig) -> tuple[np.ndarray, dict]:
     """``images`` (``scene.images`` as an array) with each view's exposure and white balance divided out, as
     the views see the ``surface`` voxels of ``solid`` (:mod:`view_exposure`), and a report of the gains."""
@@ -238,7 +224,7 @@ def _exposure_corrected(scene: _Scene, images: np.ndarray, surface: torch.Tensor
     view_of, point_of, pixel_uv, _ = sightings(scene.cameras, scene.grid, scene.points(idx),
                                                occluder(scene.grid, solid, config.visibility, solid.device),
                                                config.visibility_tolerance_voxels)
-    colours = _bilinear(scene.images, view_of, pixel_uv)
+    colours = bilinear(scene.images, view_of, pixel_uv)
     gains, evidence = view_gains(colours.cpu().numpy(), view_of.cpu().numpy(), point_of.cpu().numpy(),
                                  scene.cameras.count, min_views=config.min_views)
     if not evidence["applied"]:
@@ -246,17 +232,17 @@ def _exposure_corrected(scene: _Scene, images: np.ndarray, surface: torch.Tensor
     return corrected_images(images, gains), {**evidence, **gains_summary(gains)}
 
 
-def _tested(scene: _Scene, candidates: torch.Tensor, original: torch.Tensor, solid: torch.Tensor,
+def _tested(scene: CarvingScene, candidates: torch.Tensor, original: torch.Tensor, solid: torch.Tensor,
             config: CarvingConfig, contrast: torch.Tensor | None = None,
-            behind_m: float = 0.0) -> tuple[torch.Tensor, _Verdict]:
-    """The indices (P, 3) of the ``candidates`` voxels and the views' :class:`_Verdict` on each, seen
+            behind_m: float = 0.0) -> tuple[torch.Tensor, Verdict]:
+    """The indices (P, 3) of the ``candidates`` voxels and the views' :class:`Verdict` on each, seen
     against the current ``solid`` (carved so far: ``original & ~solid``)."""
     idx = torch.nonzero(candidates)
     sight = occluder(scene.grid, solid, config.visibility, solid.device)
-    return idx, _spread(scene, idx, sight, original & ~solid, config, contrast, behind_m)
+    return idx, voxel_verdicts(scene, idx, sight, original & ~solid, config, contrast, behind_m)
 
 
-def _open_concavity(scene: _Scene, contrast: torch.Tensor, original: np.ndarray, solid: np.ndarray,
+def _open_concavity(scene: CarvingScene, contrast: torch.Tensor, original: np.ndarray, solid: np.ndarray,
                     floor: torch.Tensor, config: CarvingConfig, progress: ProgressFn | None) -> np.ndarray:
     """``solid`` (a copy) with the space behind an opened concavity that the images cannot place a
     surface in removed, round by round (the hollow prior of the module docstring). ``contrast``:
@@ -367,91 +353,6 @@ def _mostly_bad_neighbourhood(bad: torch.Tensor, surface: torch.Tensor, fraction
     return count(bad) >= fraction * torch.clamp(count(surface), min=1.0)
 
 
-class _Verdict(NamedTuple):
-    """Per tested voxel (tensors): its views' colour ``spread`` and ``hue_spread`` (see :func:`_spread`), how
-    many views see it (``seen``), how many of those reach it through the carved space (``through``)
-    and from outside (``outside``), the median image ``contrast`` around its projections in
-    the views that see it (NaN when none does, or when no contrast map was given), and the spread
-    those views would see of a surface deeper along their line of sight (``behind``,
-    :func:`_spread_behind`; None when not asked for)."""
-
-    spread: torch.Tensor
-    hue_spread: torch.Tensor
-    seen: torch.Tensor
-    through: torch.Tensor
-    outside: torch.Tensor
-    contrast: torch.Tensor
-    behind: torch.Tensor | None = None
-
-
-def _spread(scene: _Scene, idx: torch.Tensor, sight: Occluder, carved: torch.Tensor, config: CarvingConfig,
-            contrast: torch.Tensor | None = None, behind_m: float = 0.0) -> _Verdict:
-    """The verdict on each voxel of ``idx`` (P, 3): the ``spread_quantile`` of its views' colour
-    distances from their median, the same for their hues, and the counts of :class:`_Verdict`."""
-    grid, views = scene.grid, scene.cameras.count
-    points = scene.points(idx)
-    count = len(points)
-    view_of, point_of, pixel_uv, directions = sightings(scene.cameras, grid, points, sight,
-                                                        config.visibility_tolerance_voxels)
-    # a view reaches the voxel through carved space when the ray is in it just before the voxel
-    before = points[point_of] - 1.5 * grid.voxel_m * directions
-    cell = torch.round((before - scene.origin_m) / grid.voxel_m).to(torch.int64).clamp_min(0)
-    cell = torch.minimum(cell, torch.as_tensor(grid.shape, device=cell.device) - 1)
-    through = carved[cell[:, 0], cell[:, 1], cell[:, 2]]
-    through_count = torch.bincount(point_of, weights=through.to(torch.float64), minlength=count)
-    outside_count = torch.bincount(point_of, weights=(~through).to(torch.float64), minlength=count)
-    colours = _bilinear(scene.images, view_of, pixel_uv)
-    # hue: colour over brightness, damped for dark pixels whose ratios are noise
-    hues = 3.0 * colours / (colours.sum(dim=1, keepdim=True) + config.hue_floor)
-    seen = torch.bincount(point_of, minlength=count)
-    some = seen > 0
-    spreads = [torch.nan_to_num(_colour_spread(values, view_of, point_of, count, views, quantile))
-               for values, quantile in ((colours, config.spread_quantile), (hues, config.hue_quantile))]
-    median_contrast = torch.full((count,), torch.nan, dtype=torch.float64, device=points.device)
-    if contrast is not None:
-        height, width = contrast.shape[1:]
-        u = pixel_uv[:, 0].to(torch.int64).clamp(0, width - 1)
-        v = pixel_uv[:, 1].to(torch.int64).clamp(0, height - 1)
-        per_view = torch.full((count, views), torch.nan, dtype=torch.float32, device=points.device)
-        per_view[point_of, view_of] = contrast[view_of, v, u]
-        median_contrast[some] = _row_nanquantile(per_view[some], 0.5)
-    behind = None
-    if behind_m > 0:
-        behind = _spread_behind(scene, points, view_of, point_of, directions, behind_m, config)
-    return _Verdict(spreads[0], spreads[1], seen, through_count, outside_count, median_contrast, behind)
-
-
-def _spread_behind(scene: _Scene, points: torch.Tensor, view_of: torch.Tensor, point_of: torch.Tensor,
-                   directions: torch.Tensor, behind_m: float, config: CarvingConfig) -> torch.Tensor:
-    """Per point: the colour spread its views would see were the surface ``behind_m`` farther along their
-    mean line of sight (the same views, the same quantile as :func:`_spread`; NaN where fewer than two of
-    them see that point inside their image). Where it is no larger than the spread at the point itself,
-    the views cannot tell this depth from a deeper one."""
-    mean_dir = torch.zeros_like(points).index_add_(0, point_of, directions)
-    mean_dir /= torch.clamp(torch.linalg.vector_norm(mean_dir, dim=1, keepdim=True), min=1e-12)
-    deeper = points + behind_m * mean_dir
-    u, v, depth = project_torch(scene.cameras.intrinsics, scene.cameras.w2c, deeper.float())  # (V, P) each
-    uv = torch.stack([u[view_of, point_of], v[view_of, point_of]], dim=-1)
-    inside = in_image(scene.cameras, uv, depth[view_of, point_of])
-    return _colour_spread(_bilinear(scene.images, view_of[inside], uv[inside]), view_of[inside], point_of[inside],
-                          len(points), scene.cameras.count, config.spread_quantile, min_views=2)
-
-
-def _colour_spread(values: torch.Tensor, view_of: torch.Tensor, point_of: torch.Tensor, points: int, views: int,
-                   quantile: float, min_views: int = 1) -> torch.Tensor:
-    """Per point: the ``quantile`` of its observations' distances from their per-channel median
-    (``values`` (N, 3), one row per observation); NaN where fewer than ``min_views`` observe it."""
-    device = values.device
-    per_point = torch.full((points, views, 3), torch.nan, dtype=torch.float32, device=device)
-    per_point[point_of, view_of] = values.to(torch.float32)
-    spread = torch.full((points,), torch.nan, dtype=torch.float64, device=device)
-    some = torch.bincount(point_of, minlength=points) >= min_views
-    rows = per_point[some]  # (S, V, 3): the per-channel median over views, by rows of (S * 3, V)
-    median = _row_nanquantile(rows.transpose(1, 2).reshape(-1, views), 0.5).reshape(-1, 3)
-    spread[some] = _row_nanquantile(torch.linalg.vector_norm(rows - median[:, None], dim=2), quantile)
-    return spread
-
-
 def _local_contrast(images: np.ndarray, window_px: float) -> np.ndarray:
     """Per pixel (V, H, W): the RGB standard deviation (norm over channels) over a square window
     ``window_px`` wide: how well a view can tell one depth of a surface from another there."""
@@ -466,27 +367,3 @@ def _local_contrast(images: np.ndarray, window_px: float) -> np.ndarray:
     return contrast
 
 
-def _row_nanquantile(values: torch.Tensor, quantile: float) -> torch.Tensor:
-    """``np.nanquantile(values, quantile, axis=1)`` (linear interpolation) for rows (P, V) with at
-    least one number each, as a float64 tensor. numpy's own runs a Python function per row when there
-    are NaNs: 10 s of a 21 s mug carving."""
-    ordered = torch.sort(values, dim=1).values  # NaNs last
-    count = (~torch.isnan(values)).sum(dim=1)
-    position = quantile * (count - 1).to(torch.float64)
-    below = torch.floor(position).to(torch.int64)
-    above = torch.minimum(below + 1, count - 1)
-    low = ordered.gather(1, below[:, None])[:, 0]
-    high = ordered.gather(1, above[:, None])[:, 0]
-    return low + (high - low) * (position - below)
-
-
-def _bilinear(images: torch.Tensor, view_of: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
-    """Colours (N, 3, float64) of images[view_of] at continuous pixel positions ``uv`` (N, 2) (pixel centres at +0.5)."""
-    u, v = uv[:, 0] - 0.5, uv[:, 1] - 0.5
-    h, w = images.shape[1:3]
-    u0 = torch.floor(u).to(torch.int64).clamp(0, w - 2)
-    v0 = torch.floor(v).to(torch.int64).clamp(0, h - 2)
-    fu = torch.clamp(u.to(torch.float64) - u0, 0, 1)[:, None]
-    fv = torch.clamp(v.to(torch.float64) - v0, 0, 1)[:, None]
-    return ((1 - fu) * (1 - fv) * images[view_of, v0, u0] + fu * (1 - fv) * images[view_of, v0, u0 + 1]
-            + (1 - fu) * fv * images[view_of, v0 + 1, u0] + fu * fv * images[view_of, v0 + 1, u0 + 1])
