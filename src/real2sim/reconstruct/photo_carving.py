@@ -160,10 +160,11 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
     floor[:, :, 0] = True
     candidates = _surface(now) & ~floor
     exposure = None
-    if config.exposure_correction:
-        images, exposure = _exposure_corrected(CarvingScene(cameras, torch.as_tensor(images, device=device), grid,
-                                                            origin), images, candidates, now, config)
     scene = CarvingScene(cameras, torch.as_tensor(images, device=device), grid, origin)
+    if config.exposure_correction:
+        images, exposure = _exposure_corrected(scene, images, candidates, now, config)
+        if exposure["applied"]:  # the corrected images replace the uploaded ones
+            scene = scene._replace(images=torch.as_tensor(images, device=device))
     rounds = 0
     for rounds in range(1, config.max_rounds + 1):
         if not bool(candidates.any()):
