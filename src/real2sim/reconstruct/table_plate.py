@@ -26,9 +26,11 @@ the object's edge pixels out of the windows that reach over them. It takes more 
 more of the object too (``test_table_plate.py`` has the figures); the parallax masks use it at 0.04
 (``ParallaxConfig.plate_pixel_threshold``, where the measurements are).
 
-The explained pixels join the table verdict of one more round of the standing hull; a voxel then
-goes only when several views call it table, as before, so a view that explains part of the object by
-chance does not carve it alone. World frame: the views', table plane z = ``table_z_m``, metres.
+A view that explains part of the object by chance does not carve it alone: the explained pixels join
+the table verdict of one more round of the standing hull, where a voxel goes only when several views call
+it table. But views a few degrees apart (a video's) repeat one chance match, so each explained pixel gets
+a second opinion from the object (:func:`explained_by_object`): where the neighbouring views see the same
+colour on the masks' solid, the pixel stays object. World frame: the views', table plane z = ``table_z_m``, metres.
 """
 
 from __future__ import annotations
@@ -55,13 +57,15 @@ GAIN_CHUNKS = 16
 class TablePlate:
     """``colour``: (T, T, 3) float32 RGB of the table plane on a square grid of texels (NaN where fewer
     than :data:`MIN_PLATE_VIEWS` views saw it); texel (r, c) covers x = ``origin_xy_m[0]`` + c
-    ``texel_m`` and y = ``origin_xy_m[1]`` + r ``texel_m`` (its corner); ``seen_by``: (T, T) views."""
+    ``texel_m`` and y = ``origin_xy_m[1]`` + r ``texel_m`` (its corner); ``seen_by``: (T, T) views;
+    ``view_gain``: (N, 3) each view's per-channel exposure gain against the others, measured on the table."""
 
     colour: np.ndarray
     seen_by: np.ndarray
     origin_xy_m: tuple[float, float]
     texel_m: float
     table_z_m: float
+    view_gain: np.ndarray
 
 
 def table_plate(views: PosedViews, masks: np.ndarray, table_z_m: float, *, occluder_margin_px: int = 3,
@@ -102,7 +106,8 @@ def table_plate(views: PosedViews, masks: np.ndarray, table_z_m: float, *, occlu
             colour[start:start + rgb.shape[1]] = torch.nanmedian(rgb, dim=0).values.numpy()
             seen_by[start:start + rgb.shape[1]] = seen.sum(0).numpy()
     colour[seen_by < MIN_PLATE_VIEWS] = np.nan
-    return TablePlate(colour.reshape(n, n, 3), seen_by.reshape(n, n), origin, float(texel_m), float(table_z_m))
+    return TablePlate(colour.reshape(n, n, 3), seen_by.reshape(n, n), origin, float(texel_m), float(table_z_m),
+                      gain.numpy().astype(np.float64))
 
 
 def _plate_extent(views: PosedViews, masks: np.ndarray, table_z_m: float) -> tuple[np.ndarray, float, float]:
@@ -207,4 +212,73 @@ def explained_by_plate(views: PosedViews, masks: np.ndarray, plate: TablePlate, 
             out[i] = masks[i] & windows
         else:
             out[i] = masks[i] & binary_dilation(windows, np.ones((side, side), bool)) & (pixel < pixel_threshold)
+    return out
+
+
+def explained_by_object(views: PosedViews, explained: np.ndarray, solid, neighbours: np.ndarray,
+                        view_gain: np.ndarray, *, threshold: float = 0.08, window_px: int = 2, min_views: int = 2,
+                        visibility_tolerance: float = 0.01) -> np.ndarray:
+    """(N, H, W) bool: the plate's ``explained`` pixels whose image the object explains as well.
+
+    The plate matches some of the object by chance: a printed label whose colours happen to be the table's
+    behind it. From a video the views come a few degrees apart, so such a patch is explained in many views
+    in a row and the hull carves a hollow through the object. Each explained pixel has a second hypothesis:
+    that it sees the surface of ``solid`` (the masks' solid, metres, world frame) where its ray first meets
+    it. ``neighbours`` (N, K) are views with parallax against it (``parallax_table.neighbour_views``); those
+    that see that surface point unhidden (nothing of ``solid`` nearer than ``visibility_tolerance`` of the
+    distance) sample their image there, the best of the sample shifted by up to a pixel, each view at its
+    exposure (``view_gain`` (N, 3)). The object explains the pixel when at least ``min_views`` of them see
+    the point and the median of their differences (largest channel, RGB in [0, 1]), averaged over the
+    scored pixels of a ``2 window_px + 1`` window, is below ``threshold``. Where the pixel sees the table
+    (through a handle, beside a silhouette) the hull's surface lies centimetres in front of it and the
+    neighbours see other things there; on a label the hull lies within millimetres of the surface and
+    they see the same print."""
+    from real2sim.reconstruct.carving_verdict import bilinear
+
+    k = views.intrinsics
+    side = 2 * window_px + 1
+    images = torch.from_numpy(np.ascontiguousarray(views.rgb, dtype=np.float32))
+    out = np.zeros_like(explained, dtype=bool)
+    for i in range(views.count):
+        rows, cols = np.nonzero(explained[i])
+        if not len(rows):
+            continue
+        origin, direction = pixel_rays(k, views.c2w_cv[i], cols + 0.5, rows + 0.5)
+        hits, ray_of, _ = solid.ray.intersects_location(origin, direction, multiple_hits=False)
+        if not len(ray_of):
+            continue
+        colour = views.rgb[i][rows[ray_of], cols[ray_of]] / view_gain[i]
+        others = neighbours[i]
+        centres = views.c2w_cv[others, :3, 3]
+        offsets = hits[None] - centres[:, None]  # (K, P, 3)
+        distance = np.linalg.norm(offsets, axis=-1)
+        ray_origin = np.repeat(centres, len(hits), axis=0)
+        ray_direction = (offsets / distance[..., None]).reshape(-1, 3)
+        first = np.full(ray_origin.shape[0], np.inf)
+        blocked_at, blocked, _ = solid.ray.intersects_location(ray_origin, ray_direction, multiple_hits=False)
+        first[blocked] = np.linalg.norm(blocked_at - ray_origin[blocked], axis=-1)
+        unhidden = first.reshape(distance.shape) >= (1 - visibility_tolerance) * distance
+        w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv[others])).float()
+        u, v, depth = project_torch(k, w2c, torch.from_numpy(hits.astype(np.float32)))  # (K, P)
+        seen = unhidden & (depth > 0).numpy() & (u >= 1).numpy() & (u < k.width - 2).numpy() \
+            & (v >= 1).numpy() & (v < k.height - 2).numpy()
+        view_of = torch.from_numpy(np.repeat(others, len(hits)))
+        best = torch.full((len(others) * len(hits),), float("inf"), dtype=torch.float64)
+        target = torch.from_numpy(np.tile(colour, (len(others), 1)))
+        gain = torch.from_numpy(np.repeat(view_gain[others], len(hits), axis=0))
+        for dv in (-1.0, 0.0, 1.0):  # a print resampled a fraction of a pixel off is no evidence
+            for du in (-1.0, 0.0, 1.0):
+                uv = torch.stack([u.reshape(-1) + du, v.reshape(-1) + dv], -1)
+                sampled = bilinear(images, view_of, uv) / gain
+                best = torch.minimum(best, (sampled - target).abs().max(-1).values)
+        difference = np.where(seen, best.numpy().reshape(seen.shape), np.nan)
+        scored = seen.sum(0) >= min_views
+        with np.errstate(all="ignore"):
+            median = np.nanmedian(np.where(scored[None], difference, 0.0), axis=0)
+        score = np.zeros(explained.shape[1:], np.float32)
+        counted = np.zeros(explained.shape[1:], np.float32)
+        score[rows[ray_of][scored], cols[ray_of][scored]] = median[scored]
+        counted[rows[ray_of][scored], cols[ray_of][scored]] = 1.0
+        mean = uniform_filter(score, side) / np.maximum(uniform_filter(counted, side), 1e-6)
+        out[i] = (counted > 0) & (mean < threshold)
     return out
