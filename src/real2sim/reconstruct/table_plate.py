@@ -28,9 +28,10 @@ more of the object too (``test_table_plate.py`` has the figures); the parallax m
 
 A view that explains part of the object by chance does not carve it alone: the explained pixels join
 the table verdict of one more round of the standing hull, where a voxel goes only when several views call
-it table. But views a few degrees apart (a video's) repeat one chance match, so each explained pixel gets
-a second opinion from the object (:func:`explained_by_object`): where the neighbouring views see the same
-colour on the masks' solid, the pixel stays object. World frame: the views', table plane z = ``table_z_m``, metres.
+it table. But views a few degrees apart (a video's) repeat one chance match, so there each explained pixel
+gets a second opinion from the object (:func:`explained_by_object`, on where
+``ParallaxConfig.plate_object_threshold`` is set): where the neighbouring views see the same colour on the
+masks' solid, the pixel stays object. World frame: the views', table plane z = ``table_z_m``, metres.
 """
 
 from __future__ import annotations
