@@ -189,7 +189,9 @@ class ParallaxConfig:
     explained pixels it takes back 59-87 % of those on the object and 13-16 % of those on the table. Hence on
     for a video only, whose frames, a few degrees apart along one path, repeat one chance match until the
     hull carves it through; photos come from more varied places. The window's largest score instead of its
-    mean (fewer table pixels taken back): the bottle's video 1.63 mm, the mug's seed 1 2.05."""
+    mean (fewer table pixels taken back): the bottle's video 1.63 mm, the mug's seed 1 2.05. The hull carved
+    both ways and the second one's voxels restored only within 6 voxels behind the taken-back pixels'
+    surface (their deeper votes kept for the handle's hole): 1.66 and 1.73 (`phone_remask_object_shell.md`)."""
 
     neighbours: int = 8
     min_angle_deg: float = 8.0
