@@ -57,7 +57,7 @@ def today() -> str:
 
 
 def dataclass_settings(cls, items: list[str] | None, option: str) -> dict:
-    """``FIELD=VALUE`` strings as settings of the dataclass ``cls`` (int, float or bool fields); ValueError
+    """``FIELD=VALUE`` strings as settings of the dataclass ``cls`` (int, float, optional float or bool fields); ValueError
     with one line naming ``option`` and the fields when one is not."""
     import dataclasses
 
@@ -66,7 +66,7 @@ def dataclass_settings(cls, items: list[str] | None, option: str) -> dict:
     for item in items or []:
         name, _, value = item.partition("=")
         kind = str(fields.get(name, ""))
-        if kind not in ("int", "float", "bool", str(int), str(float), str(bool)) or not value:
+        if kind not in ("int", "float", "bool", "float | None", str(int), str(float), str(bool)) or not value:
             raise ValueError(f"{option} {item!r}: expected FIELD=VALUE with FIELD a number setting among "
                              f"{', '.join(fields)}")
         settings[name] = (value.lower() in ("1", "true", "yes") if "bool" in kind

@@ -115,7 +115,7 @@ def test_parallax_masks_with_the_plate_cover_less_of_the_hole(mug_on_board):
     640x480 0.7 -> 1.6 %, with its centred windows). With the object's second opinion (0.08, a video's) a
     third of what it missed comes back, for a little of the hole and the band (missed 12.1 -> 9.0 %, hole
     0.88 -> 1.31 %, beside 19.1 -> 19.6 %)."""
-    from real2sim.reconstruct.parallax_masks import (VIDEO_PLATE_OBJECT_THRESHOLD, ParallaxConfig, parallax_masks,
+    from real2sim.reconstruct.parallax_masks import (PHONE_PLATE_OBJECT_THRESHOLD, ParallaxConfig, parallax_masks,
                                                      render_silhouettes)
 
     views, hull, _ = mug_on_board
@@ -128,7 +128,7 @@ def test_parallax_masks_with_the_plate_cover_less_of_the_hole(mug_on_board):
 
     hole_plate, beside_plate, missed_plate = shares(ParallaxConfig())
     hole_without, beside_without, missed_without = shares(ParallaxConfig(plate_threshold=0.0))
-    hole, beside, missed = shares(ParallaxConfig(plate_object_threshold=VIDEO_PLATE_OBJECT_THRESHOLD))
+    hole, beside, missed = shares(ParallaxConfig(plate_object_threshold=PHONE_PLATE_OBJECT_THRESHOLD))
     assert hole_plate < 0.7 * hole_without and beside_plate < beside_without - 0.03
     assert missed_plate < missed_without + 0.06
     assert missed < missed_plate - 0.02
@@ -136,7 +136,7 @@ def test_parallax_masks_with_the_plate_cover_less_of_the_hole(mug_on_board):
 
 
 @pytest.mark.parametrize("field", ["plate_threshold", "plate_window_px", "plate_min_texture", "plate_pixel_threshold",
-                                   "plate_min_island_share", "plate_object_threshold"])
+                                   "plate_min_island_share", "plate_object_threshold", "plate_outlier_fraction"])
 def test_plate_settings_must_not_be_negative(field):
     from real2sim.reconstruct.parallax_masks import ParallaxConfig
 

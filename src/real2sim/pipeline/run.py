@@ -78,7 +78,7 @@ class RunConfig:
     stage's defaults. mask_method: None -> the dataset's own masks (every frame must
     have one); else masks are made with :func:`real2sim.pipeline.masks.make_masks` (``mask``
     the capture methods' settings, or for parallax masks a ParallaxConfig; otherwise their defaults, and
-    for a phone video with the object's second opinion on) on a copy; ``parallax`` masks of a robot
+    for a phone capture :func:`phone_mask_config`'s) on a copy; ``parallax`` masks of a robot
     capture are made after refine_poses, on the refined poses. refine: None -> no pose refinement
     (the API does what it is given; the command line refines by default where :func:`poses_to_refine`).
     evaluation: None -> no evaluation. object_height_m (the object's height above the table,
@@ -204,17 +204,21 @@ def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: 
 
 
 def phone_mask_config(config: RunConfig, kind: str) -> RunConfig:
-    """``config`` for a phone capture of ``kind`` ("photos" or "video"): a video masked by parallax gets the
-    object's second opinion on the table plate (``ParallaxConfig.plate_object_threshold``) unless ``config.mask``
-    is a ParallaxConfig already. A clip's frames come a few degrees apart along one path and repeat the plate's
-    chance matches on a printed object, which the hull then carves into a hollow; photos, taken from more
-    varied places, lost more of a mug's handle to it than they gained (the measurements are in the setting's
-    docstring)."""
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig, VIDEO_PLATE_OBJECT_THRESHOLD
+    """``config`` for a phone capture of ``kind`` ("photos" or "video") masked by parallax, unless ``config.mask``
+    is a ParallaxConfig already: the object's second opinion on the table plate
+    (``ParallaxConfig.plate_object_threshold``), and for photos step 6's stricter outlier share
+    (``plate_outlier_fraction``). A clip's frames come a few degrees apart along one path and repeat the
+    plate's chance matches on a printed object, which the hull then carves into a hollow; with the opinion
+    photos can let fewer views carve (a mug's handle hole), a clip cannot (the measurements are in the
+    settings' docstrings)."""
+    from real2sim.reconstruct.parallax_masks import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
+                                                     ParallaxConfig)
 
-    if kind != "video" or config.mask_method != PARALLAX or isinstance(config.mask, ParallaxConfig):
+    if config.mask_method != PARALLAX or isinstance(config.mask, ParallaxConfig):
         return config
-    return replace(config, mask=ParallaxConfig(plate_object_threshold=VIDEO_PLATE_OBJECT_THRESHOLD))
+    outliers = PHONE_PHOTOS_PLATE_OUTLIER_FRACTION if kind == "photos" else None
+    return replace(config, mask=ParallaxConfig(plate_object_threshold=PHONE_PLATE_OBJECT_THRESHOLD,
+                                               plate_outlier_fraction=outliers))
 
 
 def _counted_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfig, recon_cfg, asset_cfg
