@@ -261,8 +261,8 @@ def explained_by_object(views: PosedViews, explained: np.ndarray, solid, neighbo
         unhidden = first.reshape(distance.shape) >= (1 - visibility_tolerance) * distance
         w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv[others])).float()
         u, v, depth = project_torch(k, w2c, torch.from_numpy(hits.astype(np.float32)))  # (K, P)
-        seen = unhidden & (depth > 0).numpy() & (u >= 1).numpy() & (u < k.width - 2).numpy() \
-            & (v >= 1).numpy() & (v < k.height - 2).numpy()
+        # in front, and a pixel inside the border for the shifted bilinear samples
+        seen = unhidden & ((depth > 0) & (u >= 1) & (u < k.width - 2) & (v >= 1) & (v < k.height - 2)).numpy()
         view_of = torch.from_numpy(np.repeat(others, len(hits)))
         best = torch.full((len(others) * len(hits),), float("inf"), dtype=torch.float64)
         target = torch.from_numpy(np.tile(colour, (len(others), 1)))
@@ -274,12 +274,11 @@ def explained_by_object(views: PosedViews, explained: np.ndarray, solid, neighbo
                 best = torch.minimum(best, (sampled - target).abs().max(-1).values)
         difference = np.where(seen, best.numpy().reshape(seen.shape), np.nan)
         scored = seen.sum(0) >= min_views
-        with np.errstate(all="ignore"):
-            median = np.nanmedian(np.where(scored[None], difference, 0.0), axis=0)
+        at = rows[ray_of][scored], cols[ray_of][scored]
         score = np.zeros(explained.shape[1:], np.float32)
         counted = np.zeros(explained.shape[1:], np.float32)
-        score[rows[ray_of][scored], cols[ray_of][scored]] = median[scored]
-        counted[rows[ray_of][scored], cols[ray_of][scored]] = 1.0
+        score[at] = np.nanmedian(difference[:, scored], axis=0)
+        counted[at] = 1.0
         mean = uniform_filter(score, side) / np.maximum(uniform_filter(counted, side), 1e-6)
         out[i] = (counted > 0) & (mean < threshold)
     return out
