@@ -328,8 +328,8 @@ def test_a_phone_capture_masked_by_parallax_gets_the_objects_second_opinion():
     from real2sim.capture.masking import MaskConfig
     from real2sim.formats.spec import parse_spec
     from real2sim.pipeline.run import RunConfig, phone_mask_config
-    from real2sim.reconstruct.parallax_masks import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
-                                                     ParallaxConfig)
+    from real2sim.reconstruct.parallax_config import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
+                                                      ParallaxConfig)
 
     asset = AssetConfig(mass_kg=0.35, specs=(parse_spec("boxes:8"),))
     config = RunConfig(asset=asset, mask_method="parallax", mask=MaskConfig())

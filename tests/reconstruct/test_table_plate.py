@@ -115,8 +115,8 @@ def test_parallax_masks_with_the_plate_cover_less_of_the_hole(mug_on_board):
     640x480 0.7 -> 1.6 %, with its centred windows). With the object's second opinion (0.08, a video's) a
     third of what it missed comes back, for a little of the hole and the band (missed 12.1 -> 9.0 %, hole
     0.88 -> 1.31 %, beside 19.1 -> 19.6 %)."""
-    from real2sim.reconstruct.parallax_masks import (PHONE_PLATE_OBJECT_THRESHOLD, ParallaxConfig, parallax_masks,
-                                                     render_silhouettes)
+    from real2sim.reconstruct.parallax_config import PHONE_PLATE_OBJECT_THRESHOLD, ParallaxConfig
+    from real2sim.reconstruct.parallax_masks import parallax_masks, render_silhouettes
 
     views, hull, _ = mug_on_board
     mug = views.mask > 0.5

@@ -22,7 +22,7 @@ def make_masks(dataset_dir: Path | str, method: str, cfg=None, *, table_z_m: flo
                progress: ProgressFn = null_progress, may_replace: str = "unchanged"):
     """:func:`real2sim.capture.compute_masks` for its methods (``cfg``: its MaskConfig), or parallax masks;
     a :class:`~real2sim.capture.masking.MaskResult` either way; for parallax ``cfg`` may be a
-    :class:`~real2sim.reconstruct.parallax_masks.ParallaxConfig` (its table height is ``table_z_m``'s). ``masks_<method>/`` is replaced only
+    :class:`~real2sim.reconstruct.parallax_config.ParallaxConfig` (its table height is ``table_z_m``'s). ``masks_<method>/`` is replaced only
     when `mask` made it and holds nothing else (:mod:`real2sim.capture.mask_folder`; ``may_replace``: its
     policy, "edited" for ``mask --overwrite``, "any" for `run`'s private copy of a dataset)."""
     from real2sim.capture.mask_folder import check_mask_folder
@@ -30,7 +30,8 @@ def make_masks(dataset_dir: Path | str, method: str, cfg=None, *, table_z_m: flo
 
     if method != PARALLAX:
         return compute_masks(dataset_dir, method, cfg or MaskConfig(), progress=progress, may_replace=may_replace)
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig, parallax_masks, render_silhouettes
+    from real2sim.reconstruct.parallax_config import ParallaxConfig
+    from real2sim.reconstruct.parallax_masks import parallax_masks, render_silhouettes
     from real2sim.reconstruct.views import load_views
 
     root = Path(dataset_dir)

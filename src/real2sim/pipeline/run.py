@@ -59,7 +59,7 @@ if TYPE_CHECKING:
     from real2sim.capture.pose_refinement import RefineConfig
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.pipeline.phone import PhoneConfig
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig
+    from real2sim.reconstruct.parallax_config import ParallaxConfig
     from real2sim.reconstruct.stage import ReconstructConfig
 
 # Evaluation settings that change how fast, not what: not part of the evaluate stage's key.
@@ -211,8 +211,8 @@ def phone_mask_config(config: RunConfig, kind: str) -> RunConfig:
     plate's chance matches on a printed object, which the hull then carves into a hollow; with the opinion
     photos can let fewer views carve (a mug's handle hole), a clip cannot (the measurements are in the
     settings' docstrings)."""
-    from real2sim.reconstruct.parallax_masks import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
-                                                     ParallaxConfig)
+    from real2sim.reconstruct.parallax_config import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
+                                                      ParallaxConfig)
 
     if config.mask_method != PARALLAX or isinstance(config.mask, ParallaxConfig):
         return config
@@ -274,7 +274,7 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
         mask_cfg = config.mask or MaskConfig()
         settings = {"method": config.mask_method, "config": mask_cfg}
         if config.mask_method == PARALLAX:
-            from real2sim.reconstruct.parallax_masks import ParallaxConfig
+            from real2sim.reconstruct.parallax_config import ParallaxConfig
 
             settings = {"method": PARALLAX, "table_z_m": table_z_m, "seed": config.seed}
             if isinstance(mask_cfg, ParallaxConfig):  # only what differs from the defaults: older runs still match

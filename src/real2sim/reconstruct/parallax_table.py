@@ -21,7 +21,7 @@ from real2sim.reconstruct.voxel_grid import voxel_parts
 from real2sim.reconstruct.views import PosedViews, common_look_at_point, pixel_rays, plane_hits, project_torch
 
 if TYPE_CHECKING:
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig
+    from real2sim.reconstruct.parallax_config import ParallaxConfig
 
 TABLE_VOTE_RATIO = 3.0
 
