@@ -64,6 +64,29 @@ def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
                          contact, visual_mesh_relpath="../visual/model.obj", model_name=out_dir.name)
 
 
+def one_sphere_representation(rep_dir: Path, out_dir: Path, contact) -> None:
+    """``out_dir``: the body of ``rep_dir`` (same mass properties) whose only collision is one sphere, its
+    radius a quarter of the smallest horizontal extent of ``rep_dir``'s pieces, resting where their lowest
+    point is. Not a fit: the cost of the rest of the scene plus one touching piece, which no
+    representation of the object can undercut by much."""
+    from dataclasses import replace
+
+    from real2sim.asset.writers import write_representation
+    from real2sim.geometry.collision_mesh import union_mesh
+    from real2sim.formats.collision import CollisionShape, read_collision_json, write_collision_json
+    from real2sim.formats.physical import read_physical_properties
+
+    geometry = read_collision_json(rep_dir / "collision.json")
+    lo, hi = union_mesh(geometry, rep_dir).bounds
+    radius = 0.25 * float(min(hi[:2] - lo[:2]))
+    centre = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), float(lo[2]) + radius)
+    geometry = replace(geometry, shapes=(CollisionShape("sphere", (radius,), centre),))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_collision_json(geometry, out_dir / "collision.json")
+    write_representation(out_dir, geometry, read_physical_properties(rep_dir.parent / "physical_properties.json"),
+                         contact, visual_mesh_relpath="../visual/model.obj", model_name=out_dir.name)
+
+
 def step_cost(asset: Path, rep: str, contact: str, task: str) -> list:
     """(ms per step, mean pieces touching, mean polygons, max polygons) of run 0 of ``task``."""
     from real2sim.evaluate.scene_config import SceneConfig
@@ -102,6 +125,8 @@ def main() -> int:
     parser.add_argument("--contact", nargs="+", default=["point", "hydroelastic"], choices=["point", "hydroelastic"])
     parser.add_argument("--hints", default="0.01,0.02,0.04", help="hydroelastic resolution hints, m (comma-separated)")
     parser.add_argument("--polytopes", action="store_true", help="ellipsoid fits also as compliant convex polytopes")
+    parser.add_argument("--floor", action="store_true",
+                        help="also the object's body with one sphere as its only collision (the scene's cost floor)")
     parser.add_argument("--work", type=Path, default=ROOT / "benchmarks" / "out" / "contact_cost")
     parser.add_argument("--tag", default=None)
     args = parser.parse_args()
@@ -119,14 +144,21 @@ def main() -> int:
     rows = []
     for asset in assets:
         variants = []  # (contact, hint, asset folder, representation)
+        if args.floor:
+            one_sphere_representation(asset / reps[0], asset / "one_sphere", ContactProperties())
+            reps_here = [*reps, "one_sphere"]
+        else:
+            reps_here = reps
         if "point" in args.contact:
-            variants += [("point", "-", asset, rep) for rep in reps]
+            variants += [("point", "-", asset, rep) for rep in reps_here]
         for hint in hints if "hydroelastic" in args.contact else []:
             hinted = args.work / "hinted" / f"{asset.name}_{hint:g}"
             if not hinted.exists():
                 shutil.copytree(asset, hinted)
+            if args.floor and not (hinted / "one_sphere").exists():
+                shutil.copytree(asset / "one_sphere", hinted / "one_sphere")
             rewrite_models(hinted, ContactProperties(resolution_hint_m=hint))
-            variants += [("hydroelastic", f"{hint:g}", hinted, rep) for rep in reps]
+            variants += [("hydroelastic", f"{hint:g}", hinted, rep) for rep in reps_here]
             if args.polytopes:
                 for rep in [r for r in reps if r.startswith("ellipsoids_")]:
                     polytope_representation(hinted / rep, hinted / f"{rep}_polytopes",
@@ -141,7 +173,8 @@ def main() -> int:
             "hydroelastic contact surfaces plus point pairs, polygons: the surfaces' faces (one contact constraint "
             "each), both averaged over every 10th step of a second rollout. hint: the compliant shapes' "
             "`mesh_resolution_hint` (boxes and convex pieces do not use it); `_polytopes`: the ellipsoids as the "
-            "convex polytopes of `model_portable.urdf`.\n\n" + markdown_table(HEADER, rows))
+            "convex polytopes of `model_portable.urdf`; `one_sphere` (`--floor`): the object's body with one sphere as its "
+            "only collision, the cost of the rest of the scene plus one touching piece.\n\n" + markdown_table(HEADER, rows))
     section = "contact_cost" + (f"_{args.tag}" if args.tag else "")
     write_section(section, "What a simulation step costs, per representation", body,
                   "python benchmarks/bench_contact_cost.py " + " ".join(sys.argv[1:]))
