@@ -18,6 +18,7 @@ evaluation sweep (rows already in runs.csv are skipped). Writes docs/benchmarks/
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -140,6 +141,34 @@ def hinted_copies(asset: Path, contact) -> None:
                              model_name=copy.name)
 
 
+BOUND_SCALE = 0.001
+
+
+def bound_representations(asset: Path, contact) -> None:
+    """Two rows that bound what any fit can reach, written into ``asset`` (they are not fits):
+    ``bound_hull``, the exact convex hull of the reference mesh as one piece with ``contact`` (compliant by
+    default, as every candidate: a perfect convex fit), and ``bound_mesh``, the reference mesh itself
+    0.1 % larger about its centroid as a rigid body (the reference's own model, so its error is the
+    protocol's sensitivity to a 0.1 % change of the true shape)."""
+    import trimesh
+
+    from real2sim.asset.writers import write_representation
+    from real2sim.formats.collision import CollisionGeometry, CollisionShape, write_collision_json
+    from real2sim.formats.physical import read_physical_properties
+
+    props = read_physical_properties(asset / "physical_properties.json")
+    reference = trimesh.load(asset / "visual" / "collision_reference.obj", force="mesh")
+    scaled = reference.copy()
+    scaled.vertices = reference.centroid + (1.0 + BOUND_SCALE) * (reference.vertices - reference.centroid)
+    for name, kind, mesh in (("bound_hull", "convex", reference.convex_hull), ("bound_mesh", "mesh", scaled)):
+        rep = asset / name
+        (rep / "pieces").mkdir(parents=True, exist_ok=True)
+        mesh.export(rep / "pieces" / "piece_000.obj")
+        geometry = CollisionGeometry(name, name, (CollisionShape(kind, (), mesh_file="pieces/piece_000.obj"),))
+        write_collision_json(geometry, rep / "collision.json")
+        write_representation(rep, geometry, props, contact, visual_mesh_relpath="../visual/model.obj", model_name=name)
+
+
 def fit_table(work: Path, specs: tuple[str, ...], objects: tuple[str, ...] = OBJECTS) -> list[list]:
     """One row per object and SPEC from the builds' fit reports."""
     import json
@@ -212,6 +241,9 @@ def main() -> int:
     parser.add_argument("--contact-weight", type=float, default=None, metavar="GAIN",
                         help="FitConfig.contact_weight of the primitive fits (contact-aware fitting; default: "
                         "FitConfig's). Use a --work folder of its own")
+    parser.add_argument("--bounds", action="store_true",
+                        help="also simulate bound_hull (the reference's exact convex hull, one compliant piece) and "
+                        "bound_mesh (the reference mesh 0.1 %% larger, rigid): what a perfect fit could reach")
     parser.add_argument("--tag", default=None,
                         help="results in <work>/results_<tag>, section docs/benchmarks/table1_<tag>.md")
     args = parser.parse_args()
@@ -238,6 +270,11 @@ def main() -> int:
                     **({} if args.contact_weight is None else {"contact_weight": args.contact_weight})}
     fit_config = FitConfig(**fit_settings) if fit_settings else None
     asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config, objects, tuple(args.extra_hint))
+    for asset in asset_dirs:
+        for stale in asset.glob("bound_*"):
+            shutil.rmtree(stale)
+        if args.bounds:
+            bound_representations(asset, contact)
     build_s = time.perf_counter() - start
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=tuple(args.contact), runs=runs,
                               seed=args.seed, **({"jobs": args.jobs} if args.jobs else {}))
@@ -263,7 +300,7 @@ def main() -> int:
         cands = [(lab, r[metric]) for lab, r in ours.items() if prefix_filter(lab) and r[metric] == r[metric]]
         return min(cands, key=lambda t: t[1]) if cands else ("-", float("nan"))
 
-    is_prim = lambda lab: not lab.startswith(("coacd", "vhacd", "mesh"))  # noqa: E731
+    is_prim = lambda lab: not lab.startswith(("coacd", "vhacd", "mesh", "bound_"))  # noqa: E731
     is_coacd = lambda lab: lab.startswith("coacd")  # noqa: E731
     def verdict(bp: tuple[str, float], bc: tuple[str, float]) -> str:
         gain = 100 * (1 - bp[1] / bc[1]) if bc[1] == bc[1] and bc[1] > 0 else float("nan")
@@ -316,6 +353,9 @@ def main() -> int:
         + ("Rows named `_hint<M>`: the same fits meshed at resolution hint M m (`--extra-hint`). "
            if args.extra_hint else "")
         + (f"Boxes fitted with `--box-init {args.box_init}`. " if args.box_init else "")
+        + ("Rows `bound_hull` (the reference mesh's exact convex hull, one piece, with the candidates' material) and "
+           f"`bound_mesh` (the reference mesh {100 * BOUND_SCALE:g} % larger, rigid) are not fits but bounds "
+           "(`--bounds`): no headline line counts them. " if args.bounds else "")
         + (f"Primitives fitted with contact-aware weighting, gain {args.contact_weight:g} "
            f"(`FitConfig.contact_weight`, band {FitConfig().contact_band:g}). " if args.contact_weight else "")
         + f"Assets built in {build_s / 60:.1f} min, sweep {eval_s / 60:.1f} min "
