@@ -70,11 +70,11 @@ def _urdf_stiffness(path) -> list[float]:
     return [float(e.get("value")) for e in root.iter() if e.tag.endswith("point_contact_stiffness")]
 
 
-def test_written_urdf_carries_the_share_when_asked(tmp_path):
+def test_written_urdf_carries_the_share_by_default(tmp_path):
     four, props = _columns(2), _props()
-    write_representation(tmp_path / "split", four, props, ContactProperties(point_stiffness_per_piece=True),
+    write_representation(tmp_path / "split", four, props, ContactProperties(), formats=("urdf",))
+    write_representation(tmp_path / "same", four, props, ContactProperties(point_stiffness_per_piece=False),
                          formats=("urdf",))
-    write_representation(tmp_path / "same", four, props, ContactProperties(), formats=("urdf",))
     share = 1.0e4 / touching_pieces(four)
     assert _urdf_stiffness(tmp_path / "split" / "model.urdf") == pytest.approx([share] * 4)
     assert _urdf_stiffness(tmp_path / "same" / "model.urdf") == pytest.approx([1.0e4] * 4)
@@ -91,8 +91,8 @@ def test_a_union_rests_about_as_deep_as_the_object_in_one_piece(tmp_path):
     mesh.export(tmp_path / "visual" / "model.obj")
     depth = {}
     for name, geometry, contact in (("one", _columns(1), ContactProperties()),
-                                    ("split", _columns(2), ContactProperties(point_stiffness_per_piece=True)),
-                                    ("same", _columns(2), ContactProperties())):
+                                    ("split", _columns(2), ContactProperties()),
+                                    ("same", _columns(2), ContactProperties(point_stiffness_per_piece=False))):
         write_representation(tmp_path / name, geometry, props, contact, formats=("urdf",))
         drop = simulate_drop(tmp_path / name / "model.urdf", RestObject(name, mesh, props, geometry), "point")
         rotation = drop.pose.rotation().matrix()
@@ -101,3 +101,22 @@ def test_a_union_rests_about_as_deep_as_the_object_in_one_piece(tmp_path):
     assert depth["one"] == pytest.approx(expected_m, rel=0.15), depth
     assert depth["same"] < 0.4 * depth["one"], depth
     assert depth["one"] / 1.6 < depth["split"] < depth["one"] * 1.6, depth
+
+
+def test_an_asset_config_from_before_the_share_reads_as_unshared(tmp_path):
+    """asset_config.json files written before ``point_stiffness_per_piece`` existed were built with the
+    whole stiffness on every piece; reading one back must say so, not take today's default."""
+    import dataclasses
+    import json
+
+    from real2sim.formats.asset_config import read_asset_contact
+
+    old = dataclasses.asdict(ContactProperties())
+    del old["point_stiffness_per_piece"]
+    (tmp_path / "asset_config.json").write_text(json.dumps({"contact": old}))
+    assert read_asset_contact(tmp_path).point_stiffness_per_piece is False
+    (tmp_path / "asset_config.json").write_text(json.dumps({"contact": dataclasses.asdict(ContactProperties())}))
+    assert read_asset_contact(tmp_path).point_stiffness_per_piece is True
+    (tmp_path / "asset_config.json").write_text(json.dumps({"contact": [1, 2]}))
+    with pytest.raises(Exception, match="no readable contact properties"):
+        read_asset_contact(tmp_path)

@@ -98,6 +98,7 @@ CONTACT = ContactProperties(
     hydroelastic_modulus_pa=3.5e6,
     hunt_crossley_dissipation_s_per_m=2.5,
     point_contact_stiffness_n_per_m=2.0e4,
+    point_stiffness_per_piece=False,  # each piece reads back the stiffness as given (the share: test_point_contact)
     mu_static=0.7,
     mu_dynamic=0.45,
     resolution_hint_m=0.004,

@@ -176,10 +176,10 @@ def test_rewrite_models_changes_contact_without_refitting(tmp_path, can_obj, cap
 
     out = tmp_path / "can_asset"
     assert run_cli(capsys, "asset", can_obj, "--mass", "0.35", "--out", out, "--collision", "mesh",
-                   "--point-dissipation", "0", "--split-point-stiffness")[0] == 0
+                   "--point-dissipation", "0", "--no-split-point-stiffness")[0] == 0
     assert not (out / "mesh" / "model_point.urdf").exists()  # --point-dissipation 0: no point-contact model
     recorded = json.loads((out / "asset_config.json").read_text())["contact"]
-    assert recorded["point_dissipation_s_per_m"] is None and recorded["point_stiffness_per_piece"] is True
+    assert recorded["point_dissipation_s_per_m"] is None and recorded["point_stiffness_per_piece"] is False
     assert 'point_contact_stiffness value="10000.0"' in (out / "mesh" / "model.urdf").read_text()  # one piece
     before = (out / "mesh" / "collision.json").read_text()
     [urdf] = rewrite_models(out, ContactProperties(mu_static=0.9, mu_dynamic=0.8, point_contact_stiffness_n_per_m=5e4))

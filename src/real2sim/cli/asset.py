@@ -21,10 +21,11 @@ def add_contact_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--point-stiffness", type=positive(1.0e9), default=1.0e4, metavar="N_PER_M",
                    help="point-contact stiffness, N/m (default 1e4), of every collision piece (see "
                         "--split-point-stiffness)")
-    g.add_argument("--split-point-stiffness", action="store_true",
+    g.add_argument("--split-point-stiffness", action=argparse.BooleanOptionalAction, default=True,
                    help="make --point-stiffness the body's: each piece gets it divided by the mean number of "
                         "pieces that touch a plane laid on the hull, so a union of primitives rests as stiffly "
-                        "as one piece (off by default: docs/benchmarks/point_contact.md)")
+                        "as one piece (default on; --no-split-point-stiffness gives every piece all of it: "
+                        "docs/benchmarks/point_contact_split20_idle.md)")
     g.add_argument("--dissipation", type=positive(100.0), default=1.0, metavar="S_PER_M",
                    help="Hunt-Crossley dissipation, s/m (default 1.0)")
     g.add_argument("--point-dissipation", type=number(0.0, 100.0), default=20.0, metavar="S_PER_M",

@@ -43,6 +43,8 @@ def read_asset_contact(asset_dir: Path | str) -> ContactProperties | None:
         return None
     try:
         contact = json.loads(path.read_text())["contact"]
+        # Written before the field existed, when every piece got the whole stiffness.
+        contact.setdefault("point_stiffness_per_piece", False)
         return ContactProperties(**contact)
-    except (ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise UserInputError(f"{path} has no readable contact properties: {exc}") from None
