@@ -38,11 +38,20 @@ HEADER = ["object", "representation", "contact", "hint m", "task", "ms per step"
           "polygons", "polygons max"]
 
 
+CYLINDER_SECTIONS = 72  # as the bundled can's own mesh: flats 0.03 mm deep on its 34 mm radius
+
+
 def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
     """``out_dir``: representation ``rep_dir`` again with each ellipsoid a compliant convex piece, its
-    portable polytope (:func:`real2sim.asset.round_pieces.round_polytope`, under ``polytopes/``), written
-    with ``contact``; every other shape and the mass properties the same."""
+    portable polytope (:func:`real2sim.asset.round_pieces.round_polytope`), and each cylinder a
+    ``CYLINDER_SECTIONS``-gon prism of the cylinder's volume, under ``polytopes/``, written with
+    ``contact``; every other shape and the mass properties the same. Drake's own compliant shapes
+    are meshed at the resolution hint with a pressure field of their own; a convex piece gets one
+    from its centroid."""
+    import math
     from dataclasses import replace
+
+    import trimesh
 
     from real2sim.asset.round_pieces import round_polytope
     from real2sim.asset.writers import write_representation
@@ -53,9 +62,15 @@ def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
     (out_dir / "polytopes").mkdir(parents=True, exist_ok=True)
     shapes = []
     for k, shape in enumerate(geometry.shapes):
-        if shape.kind == "ellipsoid":
-            relpath = f"polytopes/ellipsoid_{k:03d}.obj"
-            round_polytope(shape).export(out_dir / relpath, include_normals=False)
+        if shape.kind in ("ellipsoid", "cylinder"):
+            relpath = f"polytopes/{shape.kind}_{k:03d}.obj"
+            if shape.kind == "ellipsoid":
+                piece = round_polytope(shape)
+            else:
+                radius, length = shape.size_m
+                piece = trimesh.creation.cylinder(radius=radius, height=length, sections=CYLINDER_SECTIONS)
+                piece.apply_scale((math.pi * radius**2 * length / piece.volume) ** (1.0 / 3.0))
+            piece.export(out_dir / relpath, include_normals=False)
             shape = CollisionShape("convex", (), shape.position_m, shape.quaternion_wxyz, relpath)
         shapes.append(shape)
     geometry = replace(geometry, shapes=tuple(shapes))

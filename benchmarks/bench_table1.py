@@ -241,6 +241,9 @@ def main() -> int:
     parser.add_argument("--contact-weight", type=float, default=None, metavar="GAIN",
                         help="FitConfig.contact_weight of the primitive fits (contact-aware fitting; default: "
                         "FitConfig's). Use a --work folder of its own")
+    parser.add_argument("--polytopes", action="store_true",
+                        help="each representation with ellipsoids or cylinders also as <name>_polytopes, those pieces "
+                        "written as compliant convex polytopes (bench_contact_cost.polytope_representation)")
     parser.add_argument("--bounds", action="store_true",
                         help="also simulate bound_hull (the reference's exact convex hull, one compliant piece) and "
                         "bound_mesh (the reference mesh 0.1 %% larger, rigid): what a perfect fit could reach")
@@ -271,10 +274,19 @@ def main() -> int:
     fit_config = FitConfig(**fit_settings) if fit_settings else None
     asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config, objects, tuple(args.extra_hint))
     for asset in asset_dirs:
-        for stale in asset.glob("bound_*"):
+        for stale in [*asset.glob("bound_*"), *asset.glob("*_polytopes")]:
             shutil.rmtree(stale)
         if args.bounds:
             bound_representations(asset, contact)
+        if args.polytopes:
+            from bench_contact_cost import polytope_representation
+            from real2sim.formats.collision import read_collision_json
+
+            for collision_json in sorted(asset.glob("*/collision.json")):
+                kinds = {s.kind for s in read_collision_json(collision_json).shapes}
+                if kinds & {"ellipsoid", "cylinder"}:
+                    polytope_representation(collision_json.parent, asset / f"{collision_json.parent.name}_polytopes",
+                                            contact)
     build_s = time.perf_counter() - start
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=tuple(args.contact), runs=runs,
                               seed=args.seed, **({"jobs": args.jobs} if args.jobs else {}))
@@ -356,6 +368,8 @@ def main() -> int:
         + ("Rows `bound_hull` (the reference mesh's exact convex hull, one piece, with the candidates' material) and "
            f"`bound_mesh` (the reference mesh {100 * BOUND_SCALE:g} % larger, rigid) are not fits but bounds "
            "(`--bounds`): no headline line counts them. " if args.bounds else "")
+        + ("Rows named `_polytopes`: the same fits with each ellipsoid and cylinder written as a compliant convex "
+           "polytope instead of Drake's own shape (`--polytopes`). " if args.polytopes else "")
         + (f"Primitives fitted with contact-aware weighting, gain {args.contact_weight:g} "
            f"(`FitConfig.contact_weight`, band {FitConfig().contact_band:g}). " if args.contact_weight else "")
         + f"Assets built in {build_s / 60:.1f} min, sweep {eval_s / 60:.1f} min "
