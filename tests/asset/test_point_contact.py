@@ -110,6 +110,7 @@ def test_an_asset_config_from_before_the_share_reads_as_unshared(tmp_path):
     import json
 
     from real2sim.formats.asset_config import read_asset_contact
+    from real2sim.formats.errors import UserInputError
 
     old = dataclasses.asdict(ContactProperties())
     del old["point_stiffness_per_piece"]
@@ -118,5 +119,5 @@ def test_an_asset_config_from_before_the_share_reads_as_unshared(tmp_path):
     (tmp_path / "asset_config.json").write_text(json.dumps({"contact": dataclasses.asdict(ContactProperties())}))
     assert read_asset_contact(tmp_path).point_stiffness_per_piece is True
     (tmp_path / "asset_config.json").write_text(json.dumps({"contact": [1, 2]}))
-    with pytest.raises(Exception, match="no readable contact properties"):
+    with pytest.raises(UserInputError, match="no readable contact properties"):
         read_asset_contact(tmp_path)

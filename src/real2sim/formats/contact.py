@@ -36,9 +36,10 @@ class ContactProperties:
         each piece gets it divided by the mean number of pieces that touch a plane laid on the hull
         (:mod:`real2sim.asset.point_contact`), so every representation rests as stiffly as the object
         in one piece. False: every piece gets all of it, and a union of N pieces resting on all N is
-        N times stiffer. Shared, every primitive point row of Table I moved closer to the reference
-        (10 of 10 on the bundled bottle and can, e.g. ellipsoids_64 0.0171 -> 0.0139 m OCAE) and
-        CoACD's one- or two-piece hulls stayed as they were (docs/benchmarks/point_contact_split20_idle.md).
+        N times stiffer. Shared, every multi-piece primitive point row measured moved closer to the
+        reference (ten on the bundled bottle and can, e.g. ellipsoids_64 0.0171 -> 0.0139 m OCAE;
+        five on a carton and a mug on its side) and CoACD's one- or two-piece hulls stayed as they
+        were (docs/benchmarks/point_contact_split20_idle.md, point_contact_split20_shapes.md).
     hunt_crossley_dissipation_s_per_m: Hunt-Crossley dissipation, s/m.
     point_dissipation_s_per_m: None, or the Hunt-Crossley dissipation of the representations'
         point-contact models, s/m: each representation then also gets ``model_point.urdf``, the
