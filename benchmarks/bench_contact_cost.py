@@ -38,47 +38,6 @@ HEADER = ["object", "representation", "contact", "hint m", "task", "ms per step"
           "polygons", "polygons max"]
 
 
-CYLINDER_SECTIONS = 72  # as the bundled can's own mesh: flats 0.03 mm deep on its 34 mm radius
-
-
-def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
-    """``out_dir``: representation ``rep_dir`` again with each ellipsoid a compliant convex piece, its
-    portable polytope (:func:`real2sim.asset.round_pieces.round_polytope`), and each cylinder a
-    ``CYLINDER_SECTIONS``-gon prism of the cylinder's volume, under ``polytopes/``, written with
-    ``contact``; every other shape and the mass properties the same. Drake's own compliant shapes
-    are meshed at the resolution hint with a pressure field of their own; a convex piece gets one
-    from its centroid."""
-    import math
-    from dataclasses import replace
-
-    import trimesh
-
-    from real2sim.asset.round_pieces import round_polytope
-    from real2sim.asset.writers import write_representation
-    from real2sim.formats.collision import CollisionShape, read_collision_json, write_collision_json
-    from real2sim.formats.physical import read_physical_properties
-
-    geometry = read_collision_json(rep_dir / "collision.json")
-    (out_dir / "polytopes").mkdir(parents=True, exist_ok=True)
-    shapes = []
-    for k, shape in enumerate(geometry.shapes):
-        if shape.kind in ("ellipsoid", "cylinder"):
-            relpath = f"polytopes/{shape.kind}_{k:03d}.obj"
-            if shape.kind == "ellipsoid":
-                piece = round_polytope(shape)
-            else:
-                radius, length = shape.size_m
-                piece = trimesh.creation.cylinder(radius=radius, height=length, sections=CYLINDER_SECTIONS)
-                piece.apply_scale((math.pi * radius**2 * length / piece.volume) ** (1.0 / 3.0))
-            piece.export(out_dir / relpath, include_normals=False)
-            shape = CollisionShape("convex", (), shape.position_m, shape.quaternion_wxyz, relpath)
-        shapes.append(shape)
-    geometry = replace(geometry, shapes=tuple(shapes))
-    write_collision_json(geometry, out_dir / "collision.json")
-    write_representation(out_dir, geometry, read_physical_properties(rep_dir.parent / "physical_properties.json"),
-                         contact, visual_mesh_relpath="../visual/model.obj", model_name=out_dir.name)
-
-
 def one_sphere_representation(rep_dir: Path, out_dir: Path, contact) -> None:
     """``out_dir``: the body of ``rep_dir`` (same mass properties) whose only collision is one sphere, its
     radius a quarter of the smallest horizontal extent of ``rep_dir``'s pieces, resting where their lowest
@@ -86,20 +45,16 @@ def one_sphere_representation(rep_dir: Path, out_dir: Path, contact) -> None:
     representation of the object can undercut by much."""
     from dataclasses import replace
 
-    from real2sim.asset.writers import write_representation
+    from bench_table1 import write_variant
+
     from real2sim.geometry.collision_mesh import union_mesh
-    from real2sim.formats.collision import CollisionShape, read_collision_json, write_collision_json
-    from real2sim.formats.physical import read_physical_properties
+    from real2sim.formats.collision import CollisionShape, read_collision_json
 
     geometry = read_collision_json(rep_dir / "collision.json")
     lo, hi = union_mesh(geometry, rep_dir).bounds
     radius = 0.25 * float(min(hi[:2] - lo[:2]))
     centre = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), float(lo[2]) + radius)
-    geometry = replace(geometry, shapes=(CollisionShape("sphere", (radius,), centre),))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_collision_json(geometry, out_dir / "collision.json")
-    write_representation(out_dir, geometry, read_physical_properties(rep_dir.parent / "physical_properties.json"),
-                         contact, visual_mesh_relpath="../visual/model.obj", model_name=out_dir.name)
+    write_variant(out_dir, replace(geometry, shapes=(CollisionShape("sphere", (radius,), centre),)), contact)
 
 
 def step_cost(asset: Path, rep: str, contact: str, task: str) -> list:
@@ -146,7 +101,7 @@ def main() -> int:
     parser.add_argument("--tag", default=None)
     args = parser.parse_args()
 
-    from bench_table1 import build_assets
+    from bench_table1 import build_assets, polytope_representation
 
     from real2sim.asset.build import rewrite_models
     from real2sim.formats.contact import ContactProperties

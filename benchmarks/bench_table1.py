@@ -120,16 +120,26 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
     return assets
 
 
+def write_variant(rep_dir: Path, geometry, contact) -> None:
+    """``geometry`` (asset frame, m) as representation folder ``rep_dir`` of the asset ``rep_dir.parent``:
+    its collision.json and models written with ``contact``, the asset's mass properties and visual mesh.
+    Every variant this benchmark and bench_contact_cost.py add beside the fits is written through here."""
+    from real2sim.asset.build import VISUAL_RELPATH
+    from real2sim.asset.writers import write_representation
+    from real2sim.formats.collision import write_collision_json
+    from real2sim.formats.physical import read_physical_properties
+
+    rep_dir.mkdir(parents=True, exist_ok=True)
+    write_collision_json(geometry, rep_dir / "collision.json")
+    write_representation(rep_dir, geometry, read_physical_properties(rep_dir.parent / "physical_properties.json"),
+                         contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}", model_name=rep_dir.name)
+
+
 def hinted_copies(asset: Path, contact) -> None:
     """Copy each representation of ``asset`` holding compliant round shapes to ``<name>_hint<M>``, written with
     ``contact`` (whose ``resolution_hint_m`` is M)."""
-    import shutil
-
-    from real2sim.asset.writers import write_representation
     from real2sim.formats.collision import read_collision_json
-    from real2sim.formats.physical import read_physical_properties
 
-    props = read_physical_properties(asset / "physical_properties.json")
     for collision_json in sorted(asset.glob("*/collision.json")):
         rep_dir = collision_json.parent
         geometry = read_collision_json(collision_json)
@@ -137,8 +147,43 @@ def hinted_copies(asset: Path, contact) -> None:
             continue
         copy = asset / f"{rep_dir.name}_hint{contact.resolution_hint_m:g}"
         shutil.copytree(rep_dir, copy)
-        write_representation(copy, geometry, props, contact, visual_mesh_relpath="../visual/model.obj",
-                             model_name=copy.name)
+        write_variant(copy, geometry, contact)
+
+
+CYLINDER_SECTIONS = 72  # as the bundled can's own mesh: flats 0.03 mm deep on its 34 mm radius
+
+
+def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
+    """``out_dir``: representation ``rep_dir`` again with each ellipsoid a compliant convex piece, its
+    portable polytope (:func:`real2sim.asset.round_pieces.round_polytope`), and each cylinder a
+    ``CYLINDER_SECTIONS``-gon prism of the cylinder's volume, under ``polytopes/``, written with
+    ``contact``; every other shape and the mass properties the same. Drake's own compliant shapes
+    are meshed at the resolution hint with a pressure field of their own; a convex piece gets one
+    from its centroid."""
+    import math
+    from dataclasses import replace
+
+    import trimesh
+
+    from real2sim.asset.round_pieces import round_polytope
+    from real2sim.formats.collision import CollisionShape, read_collision_json
+
+    geometry = read_collision_json(rep_dir / "collision.json")
+    (out_dir / "polytopes").mkdir(parents=True, exist_ok=True)
+    shapes = []
+    for k, shape in enumerate(geometry.shapes):
+        if shape.kind in ("ellipsoid", "cylinder"):
+            relpath = f"polytopes/{shape.kind}_{k:03d}.obj"
+            if shape.kind == "ellipsoid":
+                piece = round_polytope(shape)
+            else:
+                radius, length = shape.size_m
+                piece = trimesh.creation.cylinder(radius=radius, height=length, sections=CYLINDER_SECTIONS)
+                piece.apply_scale((math.pi * radius**2 * length / piece.volume) ** (1.0 / 3.0))
+            piece.export(out_dir / relpath, include_normals=False)
+            shape = CollisionShape("convex", (), shape.position_m, shape.quaternion_wxyz, relpath)
+        shapes.append(shape)
+    write_variant(out_dir, replace(geometry, shapes=tuple(shapes)), contact)
 
 
 BOUND_SCALE = 0.001
@@ -152,11 +197,8 @@ def bound_representations(asset: Path, contact) -> None:
     protocol's sensitivity to a 0.1 % change of the true shape)."""
     import trimesh
 
-    from real2sim.asset.writers import write_representation
-    from real2sim.formats.collision import CollisionGeometry, CollisionShape, write_collision_json
-    from real2sim.formats.physical import read_physical_properties
+    from real2sim.formats.collision import CollisionGeometry, CollisionShape
 
-    props = read_physical_properties(asset / "physical_properties.json")
     reference = trimesh.load(asset / "visual" / "collision_reference.obj", force="mesh")
     scaled = reference.copy()
     scaled.vertices = reference.centroid + (1.0 + BOUND_SCALE) * (reference.vertices - reference.centroid)
@@ -164,9 +206,8 @@ def bound_representations(asset: Path, contact) -> None:
         rep = asset / name
         (rep / "pieces").mkdir(parents=True, exist_ok=True)
         mesh.export(rep / "pieces" / "piece_000.obj")
-        geometry = CollisionGeometry(name, name, (CollisionShape(kind, (), mesh_file="pieces/piece_000.obj"),))
-        write_collision_json(geometry, rep / "collision.json")
-        write_representation(rep, geometry, props, contact, visual_mesh_relpath="../visual/model.obj", model_name=name)
+        write_variant(rep, CollisionGeometry(name, name, (CollisionShape(kind, (), mesh_file="pieces/piece_000.obj"),)),
+                      contact)
 
 
 def fit_table(work: Path, specs: tuple[str, ...], objects: tuple[str, ...] = OBJECTS) -> list[list]:
@@ -243,7 +284,7 @@ def main() -> int:
                         "FitConfig's). Use a --work folder of its own")
     parser.add_argument("--polytopes", action="store_true",
                         help="each representation with ellipsoids or cylinders also as <name>_polytopes, those pieces "
-                        "written as compliant convex polytopes (bench_contact_cost.polytope_representation)")
+                        "written as compliant convex polytopes (polytope_representation)")
     parser.add_argument("--bounds", action="store_true",
                         help="also simulate bound_hull (the reference's exact convex hull, one compliant piece) and "
                         "bound_mesh (the reference mesh 0.1 %% larger, rigid): what a perfect fit could reach")
@@ -279,7 +320,6 @@ def main() -> int:
         if args.bounds:
             bound_representations(asset, contact)
         if args.polytopes:
-            from bench_contact_cost import polytope_representation
             from real2sim.formats.collision import read_collision_json
 
             for collision_json in sorted(asset.glob("*/collision.json")):
