@@ -325,6 +325,9 @@ def main() -> int:
     parser.add_argument("--contact-weight", type=float, default=None, metavar="GAIN",
                         help="FitConfig.contact_weight of the primitive fits (contact-aware fitting; default: "
                         "FitConfig's). Use a --work folder of its own")
+    parser.add_argument("--protrusion-weight", type=float, default=None, metavar="W",
+                        help="FitConfig.protrusion_weight of the primitive fits (outside samples the union reaches "
+                        "past weigh 1 + W; default: FitConfig's). Use a --work folder of its own")
     parser.add_argument("--polytopes", action="store_true",
                         help="each representation with ellipsoids or cylinders also as <name>_polytopes, those pieces "
                         "written as compliant convex polytopes (polytope_representation)")
@@ -355,7 +358,8 @@ def main() -> int:
     from real2sim.collision.fit.config import FitConfig
 
     fit_settings = {**({} if args.box_init is None else {"box_init": args.box_init}),
-                    **({} if args.contact_weight is None else {"contact_weight": args.contact_weight})}
+                    **({} if args.contact_weight is None else {"contact_weight": args.contact_weight}),
+                    **({} if args.protrusion_weight is None else {"protrusion_weight": args.protrusion_weight})}
     fit_config = FitConfig(**fit_settings) if fit_settings else None
     asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config, objects, tuple(args.extra_hint))
     for asset in asset_dirs:
@@ -458,6 +462,8 @@ def main() -> int:
            "line counts them. " if args.bounds else "")
         + ("Rows named `_polytopes`: the same fits with each ellipsoid and cylinder written as a compliant convex "
            "polytope instead of Drake's own shape (`--polytopes`). " if args.polytopes else "")
+        + (f"Primitives fitted with protrusion weight {args.protrusion_weight:g} (`FitConfig.protrusion_weight`: "
+           "outside samples the union reaches past weigh 1 + W in eq. 9). " if args.protrusion_weight is not None else "")
         + (f"Primitives fitted with contact-aware weighting, gain {args.contact_weight:g} "
            f"(`FitConfig.contact_weight`, band {FitConfig().contact_band:g}). " if args.contact_weight else "")
         + f"Assets built in {build_s / 60:.1f} min, sweep {eval_s / 60:.1f} min "

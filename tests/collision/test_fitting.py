@@ -14,7 +14,7 @@ from real2sim.geometry.collision_mesh import inside_collision
 from real2sim.collision.fit.config import FitConfig, FitResult
 from real2sim.collision.fit.convert import result_sdf, to_collision_geometry
 from real2sim.collision.fit.loop import fit_primitives
-from real2sim.collision.fit.losses import rotation_penalty
+from real2sim.collision.fit.losses import rotation_penalty, sdf_loss
 
 # Small and fast: few samples, small batches, few iterations; direct parameters unless tested.
 FAST = FitConfig(parameterization="direct", batch_size=2048, max_iterations=250, min_iterations=250, revive_dead=False)
@@ -272,6 +272,43 @@ def test_fit_leaves_torch_global_state_as_found(box_samples):
     assert torch.equal(torch.get_rng_state(), rng_before)
     if cuda_before is not None:
         assert all(torch.equal(a, b) for a, b in zip(torch.cuda.get_rng_state_all(), cuda_before))
+
+
+def test_protrusion_weight_scales_only_outside_samples_the_union_reaches_past():
+    predicted = torch.tensor([0.05, 0.15, -0.02, 0.30, 0.10])
+    target = torch.tensor([0.10, 0.10, -0.05, -0.10, 0.10])  # too near, too far, inside x2, exact
+    plain = sdf_loss(predicted, target, "squared")
+    # 0 is eq. 9 as before the option, bit for bit
+    assert torch.equal(sdf_loss(predicted, target, "squared", 0.0), plain)
+    weighted = sdf_loss(predicted, target, "squared", 4.0)
+    assert weighted[0] == pytest.approx(5.0 * float(plain[0]))  # the union reaches past the surface
+    assert torch.equal(weighted[1:], plain[1:])  # inset, inside and exact samples keep their loss
+    with pytest.raises(ValueError):
+        FitConfig(protrusion_weight=-1.0)
+
+
+def _reach_past_cylinder(result, c, r: float, h: float) -> float:
+    """How far (unit lengths) the fitted union reaches outside the capped cylinder: the largest
+    cylinder signed distance among grid points inside the union."""
+    g = np.linspace(-1.0, 1.0, 61)
+    pts = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    inside = pts[result_sdf(result, pts) < 0]
+    q = inside - c
+    dr, dz = np.hypot(q[:, 0], q[:, 1]) - r, np.abs(q[:, 2]) - h
+    return float((np.hypot(np.maximum(dr, 0), np.maximum(dz, 0)) + np.minimum(np.maximum(dr, dz), 0)).max())
+
+
+def test_protrusion_weight_keeps_the_union_inside_the_object():
+    # One ellipsoid cannot be a cylinder: eq. 9's symmetric square lets it bulge past the side
+    # where the cylinder's corners pull it out; weighted, it stays nearer inside.
+    c, r, h = np.zeros(3), 0.4, 0.6
+    pts, target = cylinder_samples(c, r, h)
+    reach = {}
+    for w in (0.0, 16.0):
+        result = fit_primitives(pts, target, (("ellipsoids", 1),), dataclasses.replace(FAST, protrusion_weight=w))
+        reach[w] = _reach_past_cylinder(result, c, r, h)
+    assert reach[0.0] > 0.02, reach  # the symmetric fit does reach past the side
+    assert reach[16.0] < 0.5 * reach[0.0], reach
 
 
 def test_bad_config_rejected():

@@ -40,6 +40,10 @@ Beyond the paper (each is a switch in :class:`FitConfig`, measured in
   all on the hull: the bottom the object stands on (the support plane is a hull face), the sides
   it rolls on, the edges it tips over; a concave pocket or waist touches no floor or wall.
   ``final_loss`` stays the unweighted eq. 9;
+* ``protrusion_weight`` (off by default, measured worse): outside samples the union reaches past
+  weigh ``1 + protrusion_weight`` in eq. 9's outside square, so that the pieces stand less proud of
+  the object; in the Table I protocol the fits lost volume and accuracy
+  (docs/benchmarks/table1_pw8.md);
 * superquadrics (``superquadrics:N``): two shape exponents per piece, fitted like
   the sizes (bounded to the convex range by a sigmoid); their distance is a
   first-order estimate, so samples they are closest to compare distances clamped at

@@ -65,6 +65,11 @@ class FitConfig:
     # (:meth:`contact_gain`).
     contact_weight: float | None = None
     contact_band: float = 0.02
+    # Outside samples the union reaches past (it comes nearer them than the true surface) weigh
+    # 1 + protrusion_weight in eq. 9's outside square (losses.sdf_loss); 0: the paper's symmetric
+    # square. A piece standing proud of the object is what a reset to the object's pose presses
+    # into a stiff support.
+    protrusion_weight: float = 0.0
     revive_dead: bool = True  # re-seed dead primitives during the fit (beyond the paper)
     revive_every: int = 200
     remove_dead: bool = True  # drop primitives that are still dead at the end
@@ -88,6 +93,8 @@ class FitConfig:
             raise ValueError("superquadric_truncation and superquadric_exponent_gain must be positive")
         if (self.contact_weight is not None and not self.contact_weight >= 0) or not self.contact_band > 0:
             raise ValueError("contact_weight must be >= 0 and contact_band > 0")
+        if not self.protrusion_weight >= 0:
+            raise ValueError(f"protrusion_weight must be >= 0, got {self.protrusion_weight}")
         lo, hi = SUPERQUADRIC_EXPONENT_RANGE
         if not lo < self.superquadric_init_exponent < hi:
             raise ValueError(f"superquadric_init_exponent must lie in ({lo}, {hi})")

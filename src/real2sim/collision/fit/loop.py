@@ -166,7 +166,7 @@ def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: _
         d = _paired_distance(layout, packed, x, arg)
         if "superquadric" in layout.kinds:
             d, s = _truncate_estimates(layout, arg, d, s, config.superquadric_truncation)
-        per_sample = sdf_loss(d, s, config.inside_loss)
+        per_sample = sdf_loss(d, s, config.inside_loss, config.protrusion_weight)
         if weight is None:
             data_loss = per_sample.mean()
         else:

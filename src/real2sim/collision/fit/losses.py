@@ -11,14 +11,21 @@ from real2sim.collision.fit.config import FitConfig
 from real2sim.collision.fit.params import _Layout
 
 
-def sdf_loss(predicted: torch.Tensor, target: torch.Tensor, inside: str = "hinge") -> torch.Tensor:
+def sdf_loss(predicted: torch.Tensor, target: torch.Tensor, inside: str = "hinge",
+             protrusion_weight: float = 0.0) -> torch.Tensor:
     """Eq. 9 per sample: squared error where the target is outside (>= 0), hinge max(d, 0) inside.
 
     ``inside="squared"`` uses max(d, 0)^2 instead (beyond the paper): the linear hinge is much
     steeper than the squared outside term near zero error, which biases the union to bulge out.
+    ``protrusion_weight`` w (beyond the paper) multiplies the outside error by 1 + w where the union
+    comes nearer the sample than the true surface does (predicted < target: the union reaches
+    past the object there); 0 is eq. 9's symmetric square, bit for bit.
     """
     hinge = torch.clamp(predicted, min=0.0)
-    return torch.where(target >= 0, (predicted - target) ** 2, hinge * hinge if inside == "squared" else hinge)
+    outside = (predicted - target) ** 2
+    if protrusion_weight:
+        outside = outside * (1.0 + protrusion_weight * (predicted < target).to(outside.dtype))
+    return torch.where(target >= 0, outside, hinge * hinge if inside == "squared" else hinge)
 
 
 def centre_penalty(centres: torch.Tensor) -> torch.Tensor:
