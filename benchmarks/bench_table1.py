@@ -65,7 +65,8 @@ def generated_shape(name: str):
 
 
 def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fit_config=None,
-                 objects: tuple[str, ...] = OBJECTS, extra_hints: tuple[float, ...] = ()) -> list[Path]:
+                 objects: tuple[str, ...] = OBJECTS, extra_hints: tuple[float, ...] = (),
+                 fill_cavities_m: float | None = None) -> list[Path]:
     """One asset folder per object holding every SPEC.
 
     Each SPEC is built alone into work/build/<object>/<SPEC> (so an interrupted run
@@ -78,7 +79,8 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
     ``objects``: bundled objects, or the shapes of :func:`generated_shape`, built with their +z kept up.
     ``extra_hints``: each representation with compliant round shapes (spheres, cylinders, ellipsoids) also
     as ``<representation>_hint<M>``, the same fit written with Drake's resolution hint M (m), so that one
-    sweep, on one set of references, compares the hints.
+    sweep, on one set of references, compares the hints. ``fill_cavities_m``: ``AssetConfig.fill_cavities_m`` of
+    every build (use a work folder of its own).
     """
     import dataclasses
     import shutil
@@ -106,7 +108,8 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
             if not (build / spec.name / "model.urdf").exists():
                 start = time.perf_counter()
                 build_asset(mesh, build, AssetConfig(mass_kg=mass_kg, specs=(spec,), seed=seed, keep_up=generated,
-                                                     fit_config=fit_config), overwrite=True)
+                                                     fit_config=fit_config, fill_cavities_m=fill_cavities_m),
+                            overwrite=True)
                 print(f"built {name} {spec_text} in {time.perf_counter() - start:.1f} s", flush=True)
             if not asset.exists():
                 shutil.copytree(build, asset, ignore=shutil.ignore_patterns(spec.name))
@@ -328,6 +331,9 @@ def main() -> int:
     parser.add_argument("--protrusion-weight", type=float, default=None, metavar="W",
                         help="FitConfig.protrusion_weight of the primitive fits (outside samples the union reaches "
                         "past weigh 1 + W; default: FitConfig's). Use a --work folder of its own")
+    parser.add_argument("--fill-cavities", type=float, default=None, metavar="M",
+                        help="AssetConfig.fill_cavities_m of every build (asset --fill-cavities: fit the solid with "
+                        "its cavities narrower than a ball of M metres filled). Use a --work folder of its own")
     parser.add_argument("--polytopes", action="store_true",
                         help="each representation with ellipsoids or cylinders also as <name>_polytopes, those pieces "
                         "written as compliant convex polytopes (polytope_representation)")
@@ -361,7 +367,8 @@ def main() -> int:
                     **({} if args.contact_weight is None else {"contact_weight": args.contact_weight}),
                     **({} if args.protrusion_weight is None else {"protrusion_weight": args.protrusion_weight})}
     fit_config = FitConfig(**fit_settings) if fit_settings else None
-    asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config, objects, tuple(args.extra_hint))
+    asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config, objects, tuple(args.extra_hint),
+                              args.fill_cavities)
     for asset in asset_dirs:
         for stale in [*asset.glob("bound_*"), *asset.glob("*_polytopes")]:
             shutil.rmtree(stale)
@@ -462,6 +469,9 @@ def main() -> int:
            "line counts them. " if args.bounds else "")
         + ("Rows named `_polytopes`: the same fits with each ellipsoid and cylinder written as a compliant convex "
            "polytope instead of Drake's own shape (`--polytopes`). " if args.polytopes else "")
+        + (f"Every representation fitted to the solid with its cavities narrower than a {args.fill_cavities:g} m "
+           "ball filled (`--fill-cavities`; judged, as always, against the true object). "
+           if args.fill_cavities is not None else "")
         + (f"Primitives fitted with protrusion weight {args.protrusion_weight:g} (`FitConfig.protrusion_weight`: "
            "outside samples the union reaches past weigh 1 + W in eq. 9). " if args.protrusion_weight is not None else "")
         + (f"Primitives fitted with contact-aware weighting, gain {args.contact_weight:g} "

@@ -56,12 +56,15 @@ def bad_cases(tmp_path: Path, can_obj: Path):
         "output exists": [can_obj, "--mass", "0.3", "--out", exists, "--collision", "mesh"],
         "zero flat depth": [can_obj, "--mass", "0.3", "--out", tmp_path / "o14", "--cylinder-flat-depth", "0"],
         "negative contact weight": [can_obj, "--mass", "0.3", "--out", tmp_path / "o15", "--contact-weight", "-1"],
+        "fill ball larger than the object": [can_obj, "--mass", "0.3", "--out", tmp_path / "o16", "--collision",
+                                             "spheres:2", "--fill-cavities", "0.5"],
+        "fill ball of no size": [can_obj, "--mass", "0.3", "--out", tmp_path / "o17", "--fill-cavities", "0"],
     }
 
 
 CASES = ["missing file", "not a mesh", "not a mesh suffix", "empty mesh", "zero mass", "negative mass", "nan mass",
          "inf mass", "word mass", "unknown spec", "zero count", "too many", "malformed mix", "output exists",
-         "zero flat depth", "negative contact weight"]
+         "zero flat depth", "negative contact weight", "fill ball larger than the object", "fill ball of no size"]
 
 
 @pytest.mark.parametrize("case", CASES)

@@ -70,6 +70,11 @@ class AssetConfig:
     sdf_cache_dir: where signed-distance samples are cached across builds ("auto":
         $REAL2SIM_CACHE or ~/.cache/real2sim); None caches them for this build only,
         so several primitive SPECs of one build sample the mesh once.
+    fill_cavities_m: None, or the radius (m) of a ball the collision fits see the solid closed with
+        (:func:`real2sim.geometry.envelope.filled_envelope`): a cup's cavity or a handle's hole
+        narrower than the ball is filled before any SPEC is fitted or decomposed. For pushing,
+        tilting and placing, where nothing enters them; not for grasping by a rim. Mass
+        properties, the visual and the fidelity reference stay those of the true solid.
     """
 
     mass_kg: float
@@ -89,6 +94,7 @@ class AssetConfig:
     given_properties: PhysicalProperties | None = None
     given_properties_frame: str = "asset"
     given_properties_source: str = ""
+    fill_cavities_m: float | None = None
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.mass_kg) and self.mass_kg > 0):
@@ -99,6 +105,8 @@ class AssetConfig:
                                                                 rtol=1e-9, atol=0.0):
             raise UserInputError(f"--mass {self.mass_kg} kg disagrees with the properties' mass "
                                  f"{self.given_properties.mass_kg} kg: give one of them")
+        if self.fill_cavities_m is not None and not (np.isfinite(self.fill_cavities_m) and self.fill_cavities_m > 0):
+            raise UserInputError(f"--fill-cavities must be a radius > 0 m, got {self.fill_cavities_m}")
         names = [s.name for s in self.specs]
         if len(set(names)) != len(names):
             raise UserInputError(f"a collision SPEC is given twice: {names}")
@@ -156,6 +164,7 @@ def config_record(config: AssetConfig) -> dict:
         "device": config.device,
         "contact": config.contact,
         "fit_config": config.fit_config or FitConfig(),
+        "fill_cavities_m": config.fill_cavities_m,
         "coacd_config": config.coacd_config or CoacdConfig(),
         "vhacd_config": config.vhacd_config or VhacdConfig(),
         "properties": ({"source": config.given_properties_source, "frame": config.given_properties_frame,
@@ -195,6 +204,14 @@ def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str
                              f"--resolution-hint {hint:g} m = {MAX_EXTENT_PER_RESOLUTION_HINT * hint:.4g} m: Drake would "
                              f"mesh its shapes with millions of elements; use --resolution-hint "
                              f">= {extent / MAX_EXTENT_PER_RESOLUTION_HINT:.3g}")
+    if config.fill_cavities_m is not None:
+        from real2sim.geometry.envelope import ENVELOPE_VOXELS
+
+        least_m = 2.0 * extent / ENVELOPE_VOXELS
+        if not least_m <= config.fill_cavities_m <= extent:
+            raise UserInputError(f"--fill-cavities {config.fill_cavities_m:g} m: must lie between {least_m:.3g} m "
+                                 f"(two voxels of the {ENVELOPE_VOXELS} across {label}) and its longest side, "
+                                 f"{extent:.3g} m")
     if config.flat_bottom:
         height = config.support_height_m
         bottom, top = float(lo[2]), float(hi[2])
@@ -356,6 +373,16 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
     results = []
     build_cache = tmp / ".sdf_cache"
     sdf_cache = config.sdf_cache_dir if config.sdf_cache_dir is not None else build_cache
+    fitted_solid, filled = solid, None
+    if config.fill_cavities_m is not None and any(spec.text not in (reusable or {}) for spec in config.specs):
+        from real2sim.geometry.envelope import filled_envelope
+
+        say(f"filling cavities narrower than a {config.fill_cavities_m:g} m ball for the collision fits", 0, 0)
+        fitted_solid = filled_envelope(solid, config.fill_cavities_m)
+        filled = {"fitted_to": f"the solid closed by a {config.fill_cavities_m:g} m ball (--fill-cavities)",
+                  "filled_volume_m3": float(fitted_solid.volume - solid.volume)}
+        say(f"filled {1e6 * filled['filled_volume_m3']:.1f} cm^3 ({100 * filled['filled_volume_m3'] / solid.volume:.0f} % "
+            "of the solid)", 0, 0)
     for spec in config.specs:
         rep_dir = tmp / spec.name
         rep_dir.mkdir()
@@ -364,8 +391,9 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
             geometry, report = reuse_collision(reusable[spec.text], rep_dir)
         else:
             say(f"collision {spec.text}: fitting", 0, 0)
-            geometry, report = build_collision(solid, spec, rep_dir, config, sdf_cache,
+            geometry, report = build_collision(fitted_solid, spec, rep_dir, config, sdf_cache,
                                                progress=prefixed(say, f"collision {spec.text}"))
+            report = {**report, **(filled or {})}
             write_collision_json(geometry, rep_dir / "collision.json")
         write_representation(
             rep_dir, geometry, props, config.contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}",
@@ -373,6 +401,9 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
         )
         if "reused" not in report:
             fidelity = measure_fidelity(solid, geometry, rep_dir, seed=config.seed)
+            if filled is not None:  # how well it fits what it was fitted to, beside the true solid
+                to_filled = measure_fidelity(fitted_solid, geometry, rep_dir, seed=config.seed)
+                fidelity["filled_solid"] = {"iou": to_filled["iou"], "chamfer_mm": to_filled["chamfer_mm"]}
             report = {
                 "spec": spec.text,
                 "num_primitives": len(geometry.shapes),
@@ -391,7 +422,10 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
         took = "fitted by an earlier build" if "reused" in report else f"{report['fit_seconds']:.1f} s"
         say(
             f"collision {spec.text}: {len(geometry.shapes)} pieces, IoU {report.get('iou', float('nan')):.3f}, "
-            f"Chamfer {report.get('chamfer_mm', float('nan')):.2f} mm, {took}", 0, 0
+            f"Chamfer {report.get('chamfer_mm', float('nan')):.2f} mm"
+            + (f" (filled solid: IoU {report['filled_solid']['iou']:.3f}, Chamfer "
+               f"{report['filled_solid']['chamfer_mm']:.2f} mm)" if "filled_solid" in report else "")
+            + f", {took}", 0, 0
         )
         results.append(RepresentationResult(spec.name, out_dir / spec.name / "model.urdf", report))
     shutil.rmtree(build_cache, ignore_errors=True)

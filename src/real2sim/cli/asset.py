@@ -93,6 +93,11 @@ def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX)
                    help="weight 1 + GAIN for the signed-distance samples near the convex hull (the surfaces the "
                    "object stands, rolls and tips on); 0 is the paper's plain fit (default: 5 for cylinders and "
                    "ellipsoids alone, 0 for the other families, as measured in docs/benchmarks/table1.md)")
+    g.add_argument("--fill-cavities", type=number(1e-4, 10.0), default=None, metavar="M",
+                   help="fit every collision SPEC (CoACD's included) to the solid with its cavities and holes "
+                   "narrower than a ball of radius M metres filled: a cup's inside, a handle's hole. For "
+                   "pushing, tilting and placing, where nothing enters them; not for grasping by a rim. Mass "
+                   "properties and the visual stay those of the true object (default: off)")
     g.add_argument("--sdf-cache", type=cache_dir, default=None, metavar="DIR",
                    help="cache signed-distance samples across runs in DIR ('auto': $REAL2SIM_CACHE or "
                    "~/.cache/real2sim); default: within this build only")
@@ -207,6 +212,7 @@ def config_from_args(args: argparse.Namespace):
         coacd_config=coacd_config,
         vhacd_config=vhacd_config,
         sdf_cache_dir=args.sdf_cache,
+        fill_cavities_m=getattr(args, "fill_cavities", None),
     )
 
 
