@@ -219,11 +219,13 @@ def revolution_profile(mesh) -> tuple[np.ndarray, int] | None:
     if sections < 3 or not all(graph.has_node(p) for p in poles) or not nx.has_path(graph, *poles):
         return None
     path = nx.shortest_path(graph, *poles)
+    if len(path) != len(section):  # some of the sector's vertices lie off the path from pole to pole
+        return None
     profile = np.c_[radius[path], v[path, 2]]
     again = trimesh.creation.revolve(profile, sections=sections)
     again.apply_transform(trimesh.transformations.rotation_matrix(first, [0, 0, 1]))
     gap_m = trimesh.proximity.ProximityQuery(again).vertex(v)[0]
-    return (profile, sections) if len(path) == len(section) and gap_m.max() < 1e-6 else None
+    return (profile, sections) if gap_m.max() < 1e-6 else None
 
 
 def bound_representations(asset: Path, contact) -> None:

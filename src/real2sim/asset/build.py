@@ -205,13 +205,9 @@ def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str
                              f"mesh its shapes with millions of elements; use --resolution-hint "
                              f">= {extent / MAX_EXTENT_PER_RESOLUTION_HINT:.3g}")
     if config.fill_cavities_m is not None:
-        from real2sim.geometry.envelope import ENVELOPE_VOXELS
+        from real2sim.geometry.envelope import check_fill_radius
 
-        least_m = 2.0 * extent / ENVELOPE_VOXELS
-        if not least_m <= config.fill_cavities_m <= extent:
-            raise UserInputError(f"--fill-cavities {config.fill_cavities_m:g} m: must lie between {least_m:.3g} m "
-                                 f"(two voxels of the {ENVELOPE_VOXELS} across {label}) and its longest side, "
-                                 f"{extent:.3g} m")
+        check_fill_radius(config.fill_cavities_m, extent, label)
     if config.flat_bottom:
         height = config.support_height_m
         bottom, top = float(lo[2]), float(hi[2])

@@ -29,13 +29,22 @@ from real2sim.formats.errors import UserInputError
 ENVELOPE_VOXELS = 128
 
 
+def check_fill_radius(radius_m: float, extent_m: float, label: str = "the object",
+                      voxels: int = ENVELOPE_VOXELS) -> None:
+    """UserInputError (one line) unless a ball of ``radius_m`` can close an object ``extent_m`` across
+    (its longest side) on a grid of ``voxels``: at least two voxels, at most the object's longest side
+    (a ball that large fills like the convex hull; use a convex representation instead)."""
+    least_m = 2.0 * extent_m / voxels
+    if not (math.isfinite(radius_m) and least_m <= radius_m <= extent_m):
+        raise UserInputError(f"--fill-cavities {radius_m:g} m: must lie between {least_m:.3g} m (two voxels of the "
+                             f"{voxels} across {label}) and its longest side, {extent_m:.3g} m")
+
+
 def filled_envelope(solid: trimesh.Trimesh, radius_m: float, voxels: int = ENVELOPE_VOXELS) -> trimesh.Trimesh:
     """``solid`` (closed, m) closed by a ball of ``radius_m``: a watertight mesh holding the solid,
     with every cavity, hole and notch narrower than the ball filled (same frame, m).
 
-    UserInputError when ``radius_m`` is not positive or is larger than the solid's longest side (a ball
-    that large fills like the convex hull; use a convex representation instead), or when it is under
-    two voxels (the grid could not tell an opening that narrow from the wall).
+    UserInputError when :func:`check_fill_radius` refuses ``radius_m`` for this solid.
     """
     from scipy import ndimage
     from skimage.measure import marching_cubes
@@ -44,10 +53,8 @@ def filled_envelope(solid: trimesh.Trimesh, radius_m: float, voxels: int = ENVEL
 
     lo, hi = np.asarray(solid.bounds, dtype=float)
     extent = float((hi - lo).max())
+    check_fill_radius(radius_m, extent, voxels=voxels)
     pitch = extent / voxels
-    if not (math.isfinite(radius_m) and 2 * pitch <= radius_m <= extent):
-        raise UserInputError(f"cavity-filling radius {radius_m:g} m: must lie between {2 * pitch:.3g} m (two voxels "
-                             f"of {voxels} across the object) and the object's longest side, {extent:.3g} m")
     pad = int(math.ceil(radius_m / pitch)) + 3
     shape = np.ceil((hi - lo) / pitch).astype(int) + 1
     axes = [lo[k] + pitch * np.arange(shape[k]) for k in range(3)]
