@@ -21,6 +21,7 @@ from real2sim import __version__
 from real2sim.cli import options
 from real2sim.cli.options import integer
 from real2sim.formats.errors import UserInputError
+from real2sim.formats.inputs import check_outputs_spare_inputs
 from real2sim.formats.outputs import public_paths
 
 #: --threads: torch CPU threads; the environment variable that gives the default.
@@ -90,6 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     if keeper is not None:
         sys.meta_path.insert(0, keeper)
     try:
+        # every output against every input the verb declared, before any import or work (docs/reliability.md)
+        check_outputs_spare_inputs(options.declared_paths(args, "writes"), options.declared_paths(args, "reads"))
         set_torch_threads(args.threads)
         with warnings.catch_warnings():  # the filters and the display are put back when the command ends
             warnings.showwarning = _plain_warning

@@ -57,7 +57,9 @@ def add_mesh_units_argument(p: argparse.ArgumentParser) -> None:
 
 def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX) -> None:
     """Flags shared by `asset` and verbs that build assets (demo, run); ``seed_max``: the largest --seed."""
-    p.add_argument("--mass", type=positive(1000.0), metavar="KG",
+    from real2sim.formats.physical import MAX_MASS_KG  # one mass range for --mass and properties files
+
+    p.add_argument("--mass", type=positive(MAX_MASS_KG), metavar="KG",
                    help="measured mass of the object, kg (required unless --properties gives it)")
     p.add_argument("--properties", type=Path, metavar="FILE",
                    help="mass, centre of mass and inertia measured rather than assumed: the props.json of "
@@ -124,6 +126,7 @@ def register(sub) -> None:
     add_mesh_units_argument(p)
     add_asset_arguments(p)
     options.finish(p)
+    options.declare_paths(p, reads=("mesh", "properties"), writes=("out",), cache=("sdf_cache",))
     p.set_defaults(func=run)
 
 

@@ -68,6 +68,8 @@ def register(sub) -> None:
         if action.dest not in _NOT_FORWARDED:
             g._add_action(action)  # argparse's own way of sharing actions between parsers (parents=)
     options.finish(p)
+    options.declare_paths(p, reads=("datasets", "masses", "mask_weights", "properties"), writes=("out",),
+                          cache=("sdf_cache",))
     p.set_defaults(func=run)
 
 

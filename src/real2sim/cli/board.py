@@ -43,6 +43,7 @@ def register(sub) -> None:
                    "fits the paper); markers are 3/4 of it")
     p.add_argument("--overwrite", action="store_true", help="replace the PDF and PNG if they exist")
     options.finish(p)
+    options.declare_paths(p, writes=("out",))
     p.set_defaults(func=run_board)
 
 
@@ -64,8 +65,17 @@ def run_board(args: argparse.Namespace) -> int:
         check_replaceable(path, what="board")
     cols, rows = args.squares or (DEFAULT_BOARD.squares_x, DEFAULT_BOARD.squares_y)
     spec = board_spec_for_paper(args.paper, cols, rows, None if args.square_mm is None else args.square_mm / 1000.0)
+    made = [folder for folder in (pdf.parent, *pdf.parent.parents) if not folder.exists()]
     pdf.parent.mkdir(parents=True, exist_ok=True)
-    write_board(pdf, png, spec, paper=args.paper)
+    try:
+        write_board(pdf, png, spec, paper=args.paper)
+    except BaseException:
+        for folder in made:  # deepest first: only the folders this command made, and only while empty
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
     print(f"board: {pdf} and {png} ({spec.describe()}, {args.paper}); print at 100 %, then check that a square "
           f"measures {1000 * spec.square_m:g} mm")
     return 0

@@ -60,6 +60,7 @@ def register(sub) -> None:
     _add_hard_rig_arguments(p)
     _add_handheld_arguments(p)
     options.finish(p)
+    options.declare_paths(p, reads=("mesh",), writes=("out",))
     p.set_defaults(func=run_capture)
 
     p = sub.add_parser(
@@ -85,6 +86,7 @@ def register(sub) -> None:
                    help="RMS orientation noise of the given poses, degrees (default: from transforms.json, else 1)")
     p.add_argument("--seed", type=seed(COLMAP_SEED_MAX), default=0, help="COLMAP random seed (default 0)")
     options.finish(p)
+    options.declare_paths(p, in_place=("dataset",))
     p.set_defaults(func=run_refine)
 
     p = sub.add_parser(
@@ -119,6 +121,7 @@ def register(sub) -> None:
     p.add_argument("--maskrcnn-max-instances", type=integer(1, 1000), default=100, metavar="N",
                    help="detections kept per image before choosing the object (default 100)")
     options.finish(p)
+    options.declare_paths(p, in_place=("dataset",), reads=("weights",))
     p.set_defaults(func=run_mask)
 
 
@@ -165,7 +168,7 @@ def _add_handheld_arguments(p: argparse.ArgumentParser) -> None:
                    "table under the object; its frame is the world frame")
     g.add_argument("--video", action="store_true",
                    help="with --handheld: write DATASET/clip.mp4 (H.264) of --views frames at --fps instead of photos")
-    g.add_argument("--fps", type=FPS, default=30.0, help="with --video: frames per second (default 30)")
+    g.add_argument("--fps", type=FPS, default=None, help="with --video: frames per second (default 30)")
     g.add_argument("--distortion-k1", type=DISTORTION, default=0.0, metavar="K1",
                    help="with --handheld: the lens's radial distortion, OpenCV's k1 (default 0: phones correct it; "
                    "-0.1 is a visible barrel), stated in ground_truth/")
@@ -176,6 +179,8 @@ def _add_handheld_arguments(p: argparse.ArgumentParser) -> None:
 
 #: --fps of a handheld video; --distortion-k1 of its lens.
 FPS = number(1.0, 240.0)
+#: --video without --fps.
+DEFAULT_FPS = 30.0
 DISTORTION = number(-0.5, 0.5)
 
 
@@ -210,6 +215,14 @@ def run_capture(args: argparse.Namespace) -> int:
     from real2sim.cli.progress import progress_display
     from real2sim.formats.errors import UserInputError
 
+    # Checked in every mode, before any work: each would otherwise be ignored without a word.
+    if args.jpeg and args.video:
+        raise UserInputError("--jpeg and --video do not go together: a video has no JPEG images (drop --jpeg)")
+    if args.fps is not None and not args.video:
+        raise UserInputError("--fps needs --video")
+    if args.ring_elevation_deg is not None and args.ring_elevation_deg < 0 and not args.no_table:
+        raise UserInputError(f"--ring-elevation-deg {args.ring_elevation_deg:g} (from below) needs --no-table: "
+                             "with a table, use 0 or more")
     if args.handheld:
         return _run_handheld(args)
     for flag in ("board", "video"):
@@ -302,11 +315,10 @@ def _run_handheld(args: argparse.Namespace) -> int:
     for name, default in _NOT_HANDHELD.items():
         if getattr(args, name) != default:
             raise UserInputError(f"--{name.replace('_', '-')} is not a handheld capture's setting (drop it or --handheld)")
-    if args.fps != 30.0 and not args.video:
-        raise UserInputError("--fps needs --video")
     cfg = HandheldConfig(views=60 if args.views is None else args.views, width=args.width, height=args.height,
                          fov_deg=65.0 if args.fov_deg is None else args.fov_deg, seed=args.seed,
-                         board=DEFAULT_BOARD if args.board else None, video=args.video, fps=args.fps,
+                         board=DEFAULT_BOARD if args.board else None, video=args.video,
+                         fps=DEFAULT_FPS if args.fps is None else args.fps,
                          video_rotation_deg=int(args.video_rotation_deg), distortion_k1=args.distortion_k1,
                          jpeg_quality=args.jpeg_quality or DEFAULT_JPEG_QUALITY)
     cfg.validate()

@@ -92,6 +92,7 @@ def register(sub) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace the output folder if it exists")
     p.add_argument("--jobs", type=options.jobs, default=None, help="parallel simulations (default: CPU cores)")
     options.finish(p)
+    options.declare_paths(p, writes=("out",))
     p.set_defaults(func=run)
 
 

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 # Light modules (numpy at most): the vocabulary of --tasks and --contact, defined once.
-from real2sim.cli.options import finish, integer, jobs, positive, seed
+from real2sim.cli.options import declare_paths, finish, integer, jobs, positive, seed
 from real2sim.evaluate.tasks import TASKS
 from real2sim.formats.contact import CONTACT_MODELS
 
@@ -74,6 +74,7 @@ def register(sub) -> None:
                    "replaced; never an input)")
     p.set_defaults(func=run)
     finish(p)
+    declare_paths(p, reads=("assets", "reference"), writes=("out",))
 
     r = sub.add_parser(
         "report",
@@ -84,6 +85,7 @@ def register(sub) -> None:
     r.add_argument("results", type=Path, metavar="RESULTS", help="results folder written by `real2sim evaluate`")
     r.set_defaults(func=run_report)
     finish(r)
+    declare_paths(r, in_place=("results",))
 
 
 def config_from_args(args: argparse.Namespace):

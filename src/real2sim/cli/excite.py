@@ -7,8 +7,9 @@ from pathlib import Path
 
 from real2sim.cli import options
 from real2sim.cli.options import nonnegative, number, positive, seed
+from real2sim.formats.physical import MAX_MASS_KG
 
-MASS_KG = positive(1000.0)
+MASS_KG = positive(MAX_MASS_KG)
 POSITION_M = number(-10.0, 10.0)
 
 
@@ -41,6 +42,7 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="LOG", help="output log folder")
     p.add_argument("--overwrite", action="store_true", help="replace LOG if it is an earlier real2sim output")
     options.finish(p)
+    options.declare_paths(p, reads=("object", "robot"), writes=("out",))
     p.set_defaults(func=run)
 
 
@@ -56,9 +58,10 @@ def run(args: argparse.Namespace) -> int:
     if args.object in OBJECTS:
         mesh = make_object(args.object)
     else:
-        from real2sim.formats.mesh_io import load_mesh
+        from real2sim.formats.mesh_io import check_object_size, load_mesh
 
         mesh = load_mesh(args.object, args.mesh_units)
+        check_object_size(mesh, args.object, args.mesh_units)
     if args.extra_mass_at is not None and args.extra_mass == 0:
         raise UserInputError("--extra-mass-at needs --extra-mass KG")
     config = ExciteConfig(mass_kg=args.mass, extra_mass_kg=args.extra_mass,

@@ -28,6 +28,7 @@ def register(sub) -> None:
     p.add_argument("--solver", choices=("clarabel", "scs"), default="clarabel", help="SDP solver (default clarabel)")
     p.add_argument("--overwrite", action="store_true", help="replace FILE if it exists")
     options.finish(p)
+    options.declare_paths(p, reads=("log", "shape"), writes=("out",))
     p.set_defaults(func=run)
 
 
@@ -35,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from real2sim.formats.errors import UserInputError
-    from real2sim.formats.outputs import check_output_path, write_text_atomic
+    from real2sim.formats.outputs import check_output_path, check_replaceable, write_text_atomic
     from real2sim.identify.stage import errors_against_truth, read_truth, run_identify
 
     out = check_output_path(args.out, what="--out")
@@ -43,14 +44,16 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError(f"{out} exists; pass --overwrite to replace it")
     if out.is_dir():
         raise UserInputError(f"{out} is a folder; --out names a JSON file")
+    check_replaceable(out, what="--out")
     if args.shape is not None and not Path(args.shape).is_dir():
         raise UserInputError(f"--shape {args.shape} is not an asset folder")
+    # Everything identify reads is checked before the solve, so that a bad input never leaves --out written.
+    truth = read_truth(args.log)
     result, props = run_identify(args.log, shape_dir=args.shape, solver=args.solver)
     write_text_atomic(out, json.dumps(props, indent=1))
     se = result.standard_errors
     print(f"mass {props['mass_kg']:.4f} +- {se[0]:.4f} kg, CoM {', '.join(f'{v:.4f}' for v in props['com_m'])} m "
           f"(mesh frame), residual {max(result.residual_rms_n_m):.3g} N m rms, condition {result.condition_number:.2f}")
-    truth = read_truth(args.log)
     if truth is not None:
         err = errors_against_truth(props, truth)
         print(f"against LOG/truth.json: mass {100 * err['mass_rel']:.2f} %, CoM {1000 * err['com_m']:.2f} mm, "

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from real2sim.cli import options
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -19,6 +21,7 @@ def register(sub) -> None:
     p.add_argument("path", nargs="?", type=Path, help="output .obj path")
     p.add_argument("--overwrite", action="store_true", help="replace an existing file")
     p.set_defaults(func=run)
+    options.declare_paths(p, writes=("path",))
 
 
 def run(args: argparse.Namespace) -> int:

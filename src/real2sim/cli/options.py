@@ -278,3 +278,46 @@ def numeric_actions(parser: argparse.ArgumentParser) -> list[argparse.Action]:
                             (numeric_default and action.option_strings)):
             out.append(action)
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# what a verb does with each path it takes (docs/reliability.md, "What --overwrite never removes")
+
+#: The roles of :func:`declare_paths`. ``reads``: an input, never written, never removed.
+#: ``writes``: an output, replaced whole by ``--overwrite``. ``in_place``: a folder the verb edits
+#: (its own files only). ``cache``: a folder of reusable results, never replaced.
+PATH_ROLES = ("reads", "writes", "in_place", "cache")
+
+
+def declare_paths(parser: argparse.ArgumentParser, *, reads: tuple[str, ...] = (), writes: tuple[str, ...] = (),
+                  in_place: tuple[str, ...] = (), cache: tuple[str, ...] = ()) -> argparse.ArgumentParser:
+    """Record, by argparse ``dest``, what ``parser``'s verb does with each path option, so that
+    before any work the CLI refuses an output that is, contains or lies inside an input
+    (:func:`real2sim.formats.outputs.check_outputs_spare_inputs`). ``tests/cli/test_path_roles.py``
+    fails when a path option of any verb is left out."""
+    actions = {action.dest: action for action in parser._actions}
+    roles = {"reads": reads, "writes": writes, "in_place": in_place, "cache": cache}
+    table: dict[str, tuple[str, str]] = {}
+    for role, dests in roles.items():
+        for dest in dests:
+            action = actions.get(dest)
+            if action is None:
+                raise ValueError(f"{parser.prog}: declare_paths names {dest!r}, which is no option of it")
+            label = action.option_strings[-1] if action.option_strings else str(action.metavar or dest.upper())
+            table[dest] = (role, label)
+    parser.set_defaults(path_roles=table)
+    return parser
+
+
+def declared_paths(args: argparse.Namespace, role: str) -> list[tuple[str, Path]]:
+    """The ``(option, path)`` pairs of the parsed ``args`` that its verb declared with ``role``
+    (see :func:`declare_paths`); options not given are left out, lists give one pair per path."""
+    table: dict[str, tuple[str, str]] = getattr(args, "path_roles", None) or {}
+    out: list[tuple[str, Path]] = []
+    for dest, (its_role, label) in table.items():
+        if its_role != role:
+            continue
+        value = getattr(args, dest, None)
+        values = value if isinstance(value, (list, tuple)) else [value]
+        out.extend((label, Path(v)) for v in values if v is not None and str(v) != "")
+    return out

@@ -55,6 +55,7 @@ def register(sub) -> None:
     p.add_argument("--dataparser-transforms", type=existing_file, default=None, metavar="JSON",
                    help="nerfstudio's dataparser_transforms.json for --from-mesh")
     options.finish(p)
+    options.declare_paths(p, reads=("dataset", "from_mesh", "dataparser_transforms"), writes=("out",))
     p.set_defaults(func=run_reconstruct)
 
 

@@ -109,6 +109,8 @@ def register(sub) -> None:
     e.add_argument("--duration-scale", type=DURATION_SCALE, default=1.0, metavar="K",
                    help="multiply the tasks' durations by K (default 1)")
     options.finish(p)
+    options.declare_paths(p, reads=("dataset", "board", "mask_weights", "properties"), writes=("out",),
+                          cache=("sdf_cache",))
     p.set_defaults(func=run)
 
 

@@ -26,6 +26,7 @@ def register(sub) -> None:
     p.add_argument("--seconds", type=options.nonnegative(1.0e6), default=None, metavar="S",
                    help="serve this long then exit, s (default: until Ctrl-C)")
     options.finish(p)
+    options.declare_paths(p, reads=("asset",))
     p.set_defaults(func=run)
 
 

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from real2sim.formats.errors import UserInputError
+from real2sim.formats.inputs import check_outputs_spare_inputs, resolve_path
 
 #: File inside every output folder real2sim makes; ``--overwrite`` replaces only folders that hold it.
 MARKER_NAME = ".real2sim"
@@ -82,15 +83,6 @@ def _probe_writable(folder: Path) -> str | None:
     return None
 
 
-def resolve_path(path: Path | str, *, what: str = "path") -> Path:
-    """``path`` absolute with symbolic links resolved; UserInputError (one line) for a link loop,
-    which ``Path.resolve`` reports as a RuntimeError (Python 3.11) or an OSError."""
-    try:
-        return Path(path).expanduser().resolve()
-    except (RuntimeError, OSError):
-        raise UserInputError(f"{what} {path}: a symbolic link loop (a link that points back to itself)") from None
-
-
 def check_output_path(target: Path | str, *, what: str = "output") -> Path:
     """Check that ``target`` can be created: not empty, every name short enough, no regular file or
     link loop on the way, a folder to create it in where something can really be made (tried, not
@@ -99,6 +91,9 @@ def check_output_path(target: Path | str, *, what: str = "output") -> Path:
         raise UserInputError(f"{what} path is empty")
     target = Path(os.path.abspath(Path(target).expanduser()))
     resolve_path(target, what=f"{what} path")
+    if os.path.islink(target) and not target.exists():  # writing through it would replace the link itself
+        raise UserInputError(f"{what} path {target} is a symbolic link to {os.readlink(target)}, which does not "
+                             "exist; remove the link or name another path")
     anchor = _first_existing(target.parent)
     try:
         name_max = os.pathconf(anchor if anchor.is_dir() else anchor.parent, "PC_NAME_MAX")
@@ -137,10 +132,6 @@ def check_replaceable(path: Path | str, *, what: str = "file") -> None:
     os.close(fd)
 
 
-def _is_within(child: Path, parent: Path) -> bool:
-    return child == parent or parent in child.parents
-
-
 def _is_real2sim_output(folder: Path) -> bool:
     return (folder / MARKER_NAME).is_file() or not any(folder.iterdir())
 
@@ -156,14 +147,7 @@ def check_output_dir(target: Path | str, overwrite: bool, *, inputs: Iterable[Pa
     existing real2sim output is refused unless ``overwrite``.
     """
     target = check_output_path(target, what=what)
-    cwd = Path.cwd().resolve()
-    if _is_within(cwd, target):
-        raise UserInputError(f"{what} {target} is or contains the working folder; choose a new folder")
-    for item in inputs:
-        source = resolve_path(item, what="input")
-        if _is_within(source, target) or _is_within(target, source):
-            relation = "is" if source == target else ("contains" if _is_within(source, target) else "lies inside")
-            raise UserInputError(f"{what} {target} {relation} the input {source}; choose another folder")
+    check_outputs_spare_inputs([(what, target)], [("input", Path(item)) for item in inputs], skip_missing=False)
     if target.exists():
         if not target.is_dir():
             raise UserInputError(f"{what} {target} exists and is not a folder")
@@ -172,7 +156,56 @@ def check_output_dir(target: Path | str, overwrite: bool, *, inputs: Iterable[Pa
                                  f"(no {MARKER_NAME} file); refusing to replace it even with --overwrite")
         if not overwrite:
             raise UserInputError(f"{what} {target} exists; pass --overwrite to replace it")
+        blocker = replace_blocker(target)
+        if blocker:
+            raise UserInputError(f"{what} {target} cannot be replaced ({blocker}); make it replaceable first")
     return target
+
+
+#: Linux inode flags (``chattr``) that stop a rename or removal: immutable, append-only.
+_FS_IOC_GETFLAGS = 0x80086601
+_UNREPLACEABLE_FLAGS = {0x10: "immutable", 0x20: "append-only"}
+
+
+def _inode_flags(path: Path) -> int:
+    """The ``chattr`` flags of ``path`` (0 where the file system or platform has none)."""
+    import array
+
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError:
+        return 0
+    try:
+        buf = array.array("l", [0])
+        fcntl.ioctl(fd, _FS_IOC_GETFLAGS, buf, True)
+        return int(buf[0])
+    except OSError:
+        return 0
+    finally:
+        os.close(fd)
+
+
+def replace_blocker(folder: Path) -> str | None:
+    """Why the existing output folder ``folder`` could not be renamed aside and removed at the end
+    of the work (then the work would be lost), or None. Read, never tried: ``chattr`` flags on it or
+    on an entry in it, a mount point, a read-only file system, or a folder whose entries may not be
+    removed."""
+    folder = Path(folder)
+    if os.path.ismount(folder):
+        return "it is a mount point"
+    try:
+        if os.statvfs(folder).f_flag & os.ST_RDONLY:
+            return "read-only file system"
+    except OSError:
+        pass
+    for path in (folder, *sorted(folder.iterdir())[:10000]):
+        flags = _inode_flags(path)
+        for bit, name in _UNREPLACEABLE_FLAGS.items():
+            if flags & bit:
+                return f"{path} is {name} (chattr +{'i' if bit == 0x10 else 'a'})"
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return "permission denied"
+    return None
 
 
 def write_marker(folder: Path, made_by: str = "real2sim") -> None:
