@@ -49,9 +49,22 @@ class PayloadTruth:
                 "inertia_kg_m2": np.asarray(self.inertia_kg_m2).tolist(), "frame": "the object's mesh frame"}
 
 
+def closed_solid(mesh):
+    """A copy of ``mesh`` (trimesh) as bare geometry with coincident vertices merged whatever their texture
+    coordinates and normals: OBJ files split vertices at UV seams and STL files share none, which leaves
+    a closed surface open to trimesh's watertightness test. The vertices keep their coordinates."""
+    import trimesh
+
+    solid = trimesh.Trimesh(np.asarray(mesh.vertices, dtype=float).copy(), np.asarray(mesh.faces).copy(),
+                            process=False)
+    solid.merge_vertices(merge_tex=True, merge_norm=True)
+    return solid
+
+
 def payload_truth(mesh, mass_kg: float, extra_mass_kg: float = 0.0, extra_at_m=None) -> PayloadTruth:
     """A body of ``mass_kg`` at uniform density over the closed ``mesh`` (trimesh, metres), plus a point
     mass ``extra_mass_kg`` at ``extra_at_m`` (mesh frame)."""
+    mesh = closed_solid(mesh)
     volume = float(mesh.volume)
     if not (mesh.is_watertight and volume > 0):
         raise ValueError("the payload's mesh must be a closed solid")

@@ -56,8 +56,9 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
     not at all). Returns the truth written to ``truth.json``."""
     from real2sim.formats.outputs import atomic_output_dir
     from real2sim.identify.excitation import cached_excitation
-    from real2sim.identify.excite import Measurement, payload_truth, simulate_excitation
+    from real2sim.identify.excite import Measurement, closed_solid, payload_truth, simulate_excitation
 
+    mesh = closed_solid(mesh)
     if config.extra_mass_kg > 0:
         if config.extra_at_m is None:
             raise UserInputError("--extra-mass needs --extra-mass-at X Y Z (metres, the mesh's frame)")
@@ -132,6 +133,31 @@ def errors_against_truth(props: dict, truth: dict) -> dict:
 
 
 def read_truth(log_dir: Path) -> dict | None:
+    """``LOG/truth.json`` (None when the log has none), checked so that :func:`errors_against_truth` can use
+    it: UserInputError (one line, naming the file) unless it is JSON with a finite mass > 0, a finite CoM
+    of 3 values and a finite 3x3 inertia with positive principal moments."""
     path = Path(log_dir) / TRUTH_FILE
-    return json.loads(path.read_text()) if path.is_file() else None
+    if not path.is_file():
+        return None
+    try:
+        truth = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise UserInputError(f"{path} is not readable JSON ({' '.join(str(exc).split())}); fix or remove it") from None
+    if not isinstance(truth, dict):
+        raise UserInputError(f"{path} must hold a JSON object with mass_kg, com_m and inertia_kg_m2")
+    try:
+        mass = float(truth["mass_kg"])
+        com = np.asarray(truth["com_m"], dtype=float)
+        inertia = np.asarray(truth["inertia_kg_m2"], dtype=float)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise UserInputError(f"{path} needs numbers mass_kg, com_m [x, y, z] and inertia_kg_m2 (3x3): "
+                             f"{type(exc).__name__} {' '.join(str(exc).split())}") from None
+    if not (np.isfinite(mass) and mass > 0):
+        raise UserInputError(f"{path}: mass_kg must be a finite number > 0 (got {truth['mass_kg']!r})")
+    if com.shape != (3,) or not np.all(np.isfinite(com)):
+        raise UserInputError(f"{path}: com_m must be 3 finite numbers (got {truth['com_m']!r})")
+    if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)) or \
+            not np.all(np.linalg.eigvalsh(0.5 * (inertia + inertia.T)) > 0):
+        raise UserInputError(f"{path}: inertia_kg_m2 must be a finite 3x3 matrix with positive principal moments")
+    return truth
 
