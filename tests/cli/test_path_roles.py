@@ -177,3 +177,22 @@ def test_a_bundled_name_is_no_path(tmp_path, monkeypatch):
     """`excite can --out can`: the object is the bundled can, not a folder named can."""
     monkeypatch.chdir(tmp_path)
     check_outputs_spare_inputs([("--out", Path("can"))], [("OBJECT|MESH", Path("can"))])
+
+
+def roles_table() -> list[str]:
+    """The rows of docs/reliability.md's path-role table, as the parser declares them."""
+    rows = []
+    for verb, parser in verb_parsers().items():
+        roles = roles_of(parser)
+        cells = [", ".join(f"`{label}`".replace("|", "\\|") for _, (r, label) in roles.items() if r == role)
+                 for role in options.PATH_ROLES]
+        rows.append(f"| `{verb}` | " + " | ".join(cells) + " |")
+    return rows
+
+
+def test_the_reliability_page_lists_every_verbs_paths():
+    text = (Path(__file__).parents[2] / "docs" / "reliability.md").read_text()
+    start = text.index("<!-- path roles")
+    end = text.index("<!-- end of path roles -->")
+    documented = [line for line in text[start:end].splitlines() if line.startswith("| `")]
+    assert documented == roles_table(), "regenerate the table: " + "\n".join(roles_table())
