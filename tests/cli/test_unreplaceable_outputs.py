@@ -82,3 +82,22 @@ def test_board_onto_a_dangling_link_keeps_the_link(tmp_path, monkeypatch, capsys
     code, _, err = run_cli(capsys, "board", "--out", "b.pdf")
     assert code == 2 and "symbolic link" in err and "does not exist" in err
     assert os.path.islink(tmp_path / "b.pdf") and not (tmp_path / "b.png").exists()
+
+
+def test_an_output_made_unreplaceable_during_the_work_keeps_the_work(tmp_path):
+    from real2sim.formats.errors import UserInputError
+    from real2sim.formats.outputs import atomic_output_dir
+
+    target = tmp_path / "earlier"
+    target.mkdir()
+    (target / MARKER_NAME).write_text("{}")
+    with pytest.raises(UserInputError, match="kept in") as caught:
+        with atomic_output_dir(target, overwrite=True) as tmp:
+            (tmp / "result.txt").write_text("minutes of work")
+            if not chattr("+i", target):
+                pytest.skip("chattr +i is not available on this file system")
+    try:
+        kept = Path(str(caught.value).rsplit("kept in ", 1)[1])
+        assert (kept / "result.txt").read_text() == "minutes of work"
+    finally:
+        chattr("-i", target)

@@ -69,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
                           torque_noise_n_m=args.torque_noise, seed=args.seed, robot_urdf=args.robot,
                           periods=periods_for(args.duration if args.duration is not None else DEFAULT_DURATION_S))
     with progress_display() as progress:
-        truth = run_excite(mesh, config, Path(args.out), overwrite=args.overwrite, progress=progress)
+        truth = run_excite(mesh, config, Path(args.out), overwrite=args.overwrite, progress=progress,
+                           inputs=() if args.object in OBJECTS else (Path(args.object),))
     print(f"wrote {args.out} (payload {truth['mass_kg']:.4g} kg, CoM {', '.join(f'{v:.4f}' for v in truth['com_m'])} m "
           f"in the mesh frame); next: real2sim identify {args.out} --out props.json")
     return 0

@@ -348,7 +348,11 @@ def publish_dir(finished: Path, target: Path, made_by: str = "real2sim") -> None
             raise UserInputError(f"{target} appeared while real2sim was working and is not a real2sim "
                                  f"output; the finished result is kept in {finished}")
         old = target.with_name(f".{target.name}.old-{finished.name[-8:]}-{os.getpid()}")
-        target.rename(old)
+        try:
+            target.rename(old)
+        except OSError as exc:  # made unreplaceable while the work ran: keep the work, say where
+            raise UserInputError(f"{target} cannot be replaced ({os.strerror(exc.errno).lower()}); the finished "
+                                 f"result is kept in {finished}") from None
         finished.rename(target)
         shutil.rmtree(old, ignore_errors=True)
     else:

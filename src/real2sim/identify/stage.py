@@ -50,10 +50,11 @@ def excitation_cache_dir() -> Path:
     return (Path(root) if root else Path.home() / ".cache" / "real2sim") / "excitation"
 
 
-def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = False, say=print,
+def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = False, inputs: tuple = (), say=print,
                progress: ProgressFn | None = None) -> dict:
     """Simulate the arm holding ``mesh`` (closed, metres) and write the log into ``out_dir`` (whole or
-    not at all). Returns the truth written to ``truth.json``."""
+    not at all). ``inputs``: the files the mesh was read from; the log may not overlap them, nor
+    ``config.robot_urdf``. Returns the truth written to ``truth.json``."""
     from real2sim.formats.outputs import atomic_output_dir
     from real2sim.identify.excitation import cached_excitation
     from real2sim.identify.excite import Measurement, closed_solid, payload_truth, simulate_excitation
@@ -88,7 +89,8 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
               "torque_noise_n_m": config.torque_noise_n_m, "seed": config.seed,
               "trajectory": traj.to_json(), "condition_number": quality.condition_number,
               "predicted_inertia_standard_error_kg_m2_at_0_05_n_m": quality.inertia_standard_error_kg_m2}
-    with atomic_output_dir(out_dir, overwrite=overwrite, made_by="real2sim excite") as tmp:
+    read = [*inputs, *([config.robot_urdf] if config.robot_urdf else [])]  # never inside the log it replaces
+    with atomic_output_dir(out_dir, overwrite=overwrite, inputs=read, made_by="real2sim excite") as tmp:
         write_joint_log(tmp, log, urdf_text, truth=record)
     return record
 
