@@ -19,7 +19,7 @@ stored in both files' metadata (:func:`read_board_spec`).
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -51,13 +51,16 @@ MAX_REPROJECTION_PX = 3.0
 class BoardSpec:
     """A ChArUco board: ``squares_x`` x ``squares_y`` chessboard squares of ``square_m`` (metres),
     ArUco markers of ``marker_m`` from OpenCV's predefined ``dictionary`` (its name, e.g.
-    ``"DICT_4X4_50"``) in the white squares. ``squares_x >= squares_y``: x is the long side."""
+    ``"DICT_4X4_50"``) in the white squares. ``squares_x >= squares_y``: x is the long side. ``source``: the
+    file it was read from (:func:`read_board_spec`), for messages only: not part of the layout, its
+    equality or its JSON."""
 
     squares_x: int = 7
     squares_y: int = 5
     square_m: float = 0.032
     marker_m: float = 0.024
     dictionary: str = "DICT_4X4_50"
+    source: str | None = field(default=None, compare=False, repr=False)
 
     def validate(self) -> None:
         if not (2 <= self.squares_y <= self.squares_x <= 40):
@@ -86,10 +89,10 @@ class BoardSpec:
     def with_square_m(self, square_m: float) -> "BoardSpec":
         """The same board printed at another scale (``--board-square-mm``): markers keep their ratio."""
         return BoardSpec(self.squares_x, self.squares_y, float(square_m), float(square_m) * self.marker_m / self.square_m,
-                         self.dictionary)
+                         self.dictionary, self.source)
 
     def to_json(self) -> dict:
-        return asdict(self)
+        return {k: v for k, v in asdict(self).items() if k != "source"}
 
     @staticmethod
     def from_json(data: dict) -> "BoardSpec":
@@ -104,6 +107,11 @@ class BoardSpec:
     def describe(self) -> str:
         return (f"{self.squares_x}x{self.squares_y} ChArUco board, squares {1000 * self.square_m:g} mm, "
                 f"markers {1000 * self.marker_m:g} mm, {self.dictionary}")
+
+    def label(self) -> str:
+        """How a message names the board: its layout and, when it was read from one, its file."""
+        layout = f"{self.squares_x}x{self.squares_y}, {1000 * self.square_m:g} mm squares"
+        return layout + (f", from {self.source}" if self.source else "")
 
 
 #: The board `real2sim board` prints by default, on A4 and on US letter alike (same squares).
@@ -278,7 +286,7 @@ def read_board_spec(path: Path | str) -> BoardSpec:
         data = json.loads(text[len(METADATA_KEY) + 1:])
     except json.JSONDecodeError:
         raise UserInputError(f"{path}: its {METADATA_KEY} metadata is not JSON") from None
-    return BoardSpec.from_json(data)
+    return replace(BoardSpec.from_json(data), source=str(path))
 
 
 # ----------------------------------------------------------------------------- detection

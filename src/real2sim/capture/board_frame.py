@@ -138,7 +138,7 @@ def world_from_board_views(sfm_camera_to_world: dict[str, np.ndarray], board_vie
     names = sorted(n for n in board_views if n in sfm_camera_to_world and board_views[n] is not None)
     if len(names) < MIN_BOARD_VIEWS:
         raise UserInputError(
-            f"the board ({spec.squares_x}x{spec.squares_y}, {1000 * spec.square_m:g} mm squares) was found in "
+            f"the board ({spec.label()}) was found in "
             f"{len(names)} of {len(sfm_camera_to_world)} registered views; at least {MIN_BOARD_VIEWS} are needed: "
             "lay it flat and keep it in view, or give --object-height-m")
     c2w = np.stack([np.asarray(sfm_camera_to_world[n], dtype=float) for n in names])
@@ -155,8 +155,9 @@ def world_from_board_views(sfm_camera_to_world: dict[str, np.ndarray], board_vie
         res = np.linalg.norm(s * y + t - b, axis=1)
         keep = keep & (res <= max(CENTRE_OUTLIER_M, 4 * float(np.median(res[keep]))))
     if keep.sum() < MIN_BOARD_VIEWS:
-        raise UserInputError(f"the board's poses agree in only {int(keep.sum())} of {len(names)} views "
-                             f"(at least {MIN_BOARD_VIEWS} needed): the detections or the SfM poses are wrong")
+        raise UserInputError(f"the poses of the board ({spec.label()}) agree in only {int(keep.sum())} of {len(names)} "
+                             f"views (at least {MIN_BOARD_VIEWS} needed): the detections or the SfM poses are wrong, "
+                             "or the board is not the one in the photos")
     spread = np.linalg.norm(y[keep] - y[keep].mean(0), axis=1).max()
     if not spread > 0:
         raise UserInputError("the cameras that see the board all stand in one place: no scale can be measured")

@@ -26,7 +26,8 @@ Ctrl-C or a killed process leaves the finished stages recorded and nothing else.
 
 Warnings: a stage's entry lists, under ``warnings``, every Python warning shown while it ran (a
 fallback, pose refinement that kept the given poses, ...), one plain sentence each, so that a run
-that skips the stage as unchanged still repeats them (:func:`recorded_warnings`).
+that skips the stage as unchanged still repeats them (:func:`recorded_warnings`); a path in one names the
+stage's output, not the temporary name it was built under (:func:`final_names`).
 
 Ownership: ``owned`` maps each entry of ASSETDIR that `run` wrote (outside ``.run/``) to the
 stage that wrote it and, for a folder, the files in it as written. A rerun replaces or removes
@@ -41,13 +42,14 @@ import dataclasses
 import hashlib
 import json
 import os
+import re
 import resource
 import sys
 import time
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 from real2sim.formats.dataset import write_json_atomic as _write_json_atomic
 from real2sim.formats.outputs import file_sha256  # noqa: F401 (public here)
@@ -284,10 +286,27 @@ def plain_warning_text(message: Warning | str) -> str:
     return " ".join(str(message).split())
 
 
+def final_names(outputs: Iterable[str]) -> Callable[[str], str]:
+    """A text rewrite that names each of a stage's ``outputs`` (paths relative to ASSETDIR) where a
+    message names its temporary name (``.NAME.tmp-XXXXXXXX``, :func:`tempfile.mkdtemp`'s, with a file's
+    suffix again): ``ASSETDIR/.run/.masked.tmp-1a2b3c4d/x`` -> ``ASSETDIR/.run/masked/x``. Only the names
+    of these outputs and their folders, only right after a path separator, a space or a quote: a stage
+    knows what it is about to rename, so this holds whether or not the temporary still exists."""
+    names = sorted({part for out in outputs for part in Path(out).parts if part not in ("", ".", "..")},
+                   key=len, reverse=True)
+    if not names:
+        return lambda text: text
+    pattern = re.compile(r"(?:^|(?<=[/\s'\"(]))\.(" + "|".join(map(re.escape, names))
+                         + r")\.tmp-[a-z0-9_]{8}(?:\.[A-Za-z0-9]{1,8})?(?=$|[/\s'\":,;)])")
+    return lambda text: pattern.sub(r"\1", text)
+
+
 @contextmanager
-def recorded_warnings() -> Iterator[list[str]]:
+def recorded_warnings(rewrite: Callable[[str], str] | None = None) -> Iterator[list[str]]:
     """``with recorded_warnings() as raised: ...``: every Python warning shown while the block runs
     is also appended to ``raised`` (as :func:`plain_warning_text`, each text once, in order).
+    ``rewrite``: applied to each warning's text before it is shown and recorded (a stage's temporary
+    output names -> the outputs', :func:`final_names`).
 
     It is shown as before, by whatever displays warnings now (the command line's plain ``WARNING:``
     line): recording is added to the display, not put in its place, so the warning appears when it
@@ -300,9 +319,21 @@ def recorded_warnings() -> Iterator[list[str]]:
 
         def record(message, category, filename, lineno, file=None, line=None):
             text = plain_warning_text(message)
+            if rewrite is not None and rewrite(text) != text:
+                text = rewrite(text)
+                message = _same_kind(message, category, text)
             if text not in raised:
                 raised.append(text)
             show(message, category, filename, lineno, file, line)
 
         warnings.showwarning = record
         yield raised
+
+
+def _same_kind(message: Warning | str, category: type, text: str) -> Warning | str:
+    """A warning of ``message``'s category saying ``text`` (the text alone where the category cannot be
+    made from one string), for the display: what it shows is what run.json records."""
+    try:
+        return category(text) if isinstance(message, Warning) else text
+    except Exception:  # noqa: BLE001 -- a warning class with its own constructor: its text still shows
+        return text

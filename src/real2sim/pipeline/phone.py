@@ -218,7 +218,7 @@ def board_spec(config: PhoneConfig):
 def run_board_frame(source: Path, target: Path, config: PhoneConfig, progress: ProgressFn | None = None) -> dict:
     """Stage 2 (module docstring): the sfm stage's COLMAP dataset ``source`` -> the metric dataset ``target``."""
     from real2sim.capture.board import detect_board
-    from real2sim.capture.board_frame import world_from_board_views
+    from real2sim.capture.board_frame import MIN_BOARD_VIEWS, world_from_board_views
     from real2sim.formats.colmap_model import read_colmap_model
     from real2sim.formats.dataset import load_image_rgb
     from real2sim.pipeline import robot_frame as rf
@@ -233,11 +233,14 @@ def run_board_frame(source: Path, target: Path, config: PhoneConfig, progress: P
         views[frame.file_path] = detect_board(load_image_rgb(source / frame.file_path), spec, ds.intrinsics.matrix())
         progress("looking for the board", i + 1, len(ds.frames))
     found = sum(v is not None for v in views.values())
-    if found == 0:
-        raise UserInputError(f"the printed board ({spec.squares_x}x{spec.squares_y}, {1000 * spec.square_m:g} mm "
-                             f"squares) was not found in any of the {len(views)} registered views: lay it flat under "
-                             "the object (`real2sim board` prints one), or pass --object-height-m H (the object's "
-                             "height, m) or --scale S")
+    if found < MIN_BOARD_VIEWS:  # here, naming the board: the world frame below cannot rest on fewer
+        seen = "was not found in any" if found == 0 else f"was found in only {found}"
+        fix = ("check that --board is the file `real2sim board` wrote for the board in the photos"
+               if spec.source else "lay it flat under the object and keep it in view (`real2sim board` prints one; "
+               "--board FILE for another layout)")
+        raise UserInputError(f"the printed board ({spec.label()}) {seen} of the {len(views)} registered views; at "
+                             f"least {MIN_BOARD_VIEWS} are needed for its world frame: {fix}, or pass "
+                             "--object-height-m H (the object's height, m) or --scale S")
     frame = world_from_board_views(c2w_cv, views, spec)
     sim = rf.Similarity.from_matrix(frame.board_from_sfm)
     record = {"board": spec.to_json(), "found_in": found, "registered": len(views), "scale_m_per_unit": frame.scale,

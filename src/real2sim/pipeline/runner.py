@@ -77,7 +77,9 @@ class Runner:
         self.progress.stage(name, self.index, self.count, "running")
         self.manifest.forget(name)
         measured = mf.reset_stage_peak()
-        with mf.timed() as clock, mf.recorded_warnings() as raised:  # shown now, recorded for the summary
+        # a warning raised while the stage builds its output under a temporary name names the output
+        final = mf.final_names(outputs or [])
+        with mf.timed() as clock, mf.recorded_warnings(final) as raised:  # shown now, recorded for the summary
             try:
                 extra = work() or {}
             except (KeyboardInterrupt, StageFailed):
@@ -86,7 +88,9 @@ class Runner:
                 raise UserInputError(f"stage {name}: {exc}") from exc
             except Exception as exc:  # noqa: BLE001 -- one line naming the stage; the traceback is chained
                 raise StageFailed(name, exc) from exc
-        outputs = outputs if outputs is not None else extra.pop("outputs")
+        if outputs is None:  # known only now: the warnings shown already keep their names, run.json's do not
+            outputs = extra.pop("outputs")
+            raised = list(dict.fromkeys(map(mf.final_names(outputs), raised)))
         if raised:  # kept in run.json, so that a resumed run that skips the stage still repeats them
             extra["warnings"] = raised
         self.manifest.record(name, key=key, inputs=inputs, settings=settings, outputs=outputs,
