@@ -29,7 +29,7 @@ from real2sim.formats.contact import ContactProperties
 from real2sim.formats.errors import UserInputError
 from real2sim.formats.mesh_io import MAX_EXTENT_M, check_object_size, export_textured_mesh, load_mesh, validate_mesh  # noqa: F401
 from real2sim.formats.outputs import atomic_output_dir, file_sha256
-from real2sim.formats.physical import PhysicalProperties, write_physical_properties
+from real2sim.formats.physical import MESH_FRAME, PhysicalProperties, write_physical_properties
 from real2sim.formats.progress import ProgressFn, null_progress, prefixed
 from real2sim.formats.spec import CollisionSpec
 
@@ -42,6 +42,43 @@ MAX_EXTENT_PER_RESOLUTION_HINT = 300.0
 #: How far below the mesh the support plane may lie, as a fraction of the mesh's height:
 #: a reconstruction's bottom may stop a little above the table.
 SUPPORT_BELOW_TOLERANCE = 0.05
+#: How far outside the object's axis-aligned bounds a given centre of mass may lie, as a fraction of
+#: the object's largest extent: room for a reconstruction that misses a little of the object and an
+#: identified CoM's millimetres of error; a file in another frame or unit lies far further out.
+COM_MARGIN_FRACTION = 0.1
+#: Relative tolerance of ``--mass`` against a properties file's mass when the file gives no standard
+#: error of it (or a smaller one): the rounding of a mass typed to three or four digits.
+MASS_AGREEMENT_RTOL = 1e-3
+
+
+def mass_agreement_kg(given: PhysicalProperties) -> float:
+    """How far ``--mass`` may lie from ``given.mass_kg`` and still agree with it: the larger of 3 x the
+    file's standard error of the mass (when it gives one) and :data:`MASS_AGREEMENT_RTOL` of the mass."""
+    return max(3.0 * (given.mass_standard_error_kg or 0.0), MASS_AGREEMENT_RTOL * given.mass_kg)
+
+
+def check_given_com(config: AssetConfig, vertices: np.ndarray, label: str) -> None:
+    """Refuse given properties whose centre of mass lies outside the object: beyond the axis-aligned
+    bounds of ``vertices`` (the object in the frame the properties are given in, m) grown on every side by
+    :data:`COM_MARGIN_FRACTION` of the bounds' largest side. UserInputError naming ``--properties``."""
+    if config.given_properties is None:
+        return
+    vertices = np.asarray(vertices, dtype=float)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    margin = COM_MARGIN_FRACTION * float((hi - lo).max())
+    com = np.asarray(config.given_properties.com_m, dtype=float)
+    if np.all(com >= lo - margin) and np.all(com <= hi + margin):
+        return
+    frame = "the mesh's frame" if config.given_properties_frame == MESH_FRAME else "the asset frame"
+
+    def shown(v: np.ndarray) -> str:
+        return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
+
+    raise UserInputError(
+        f"--properties {config.given_properties_source or '(given properties)'}: the centre of mass "
+        f"{shown(com)} m ({frame}) lies outside {label}, whose bounds {shown(lo)} .. {shown(hi)} m grown by "
+        f"{100 * COM_MARGIN_FRACTION:g} % of its largest extent ({margin:.3g} m) must hold it: a file in another "
+        "frame or unit?")
 
 
 def support_below_mesh(bottom_m: float, top_m: float, support_m: float) -> bool:
@@ -66,7 +103,8 @@ class AssetConfig:
         (the paper's settings, documented in those modules).
     given_properties: mass, CoM and inertia measured rather than assumed (`real2sim identify`,
         ``--properties``), in the input mesh's frame when ``given_properties_frame`` is "mesh", else
-        in the asset frame; ``mass_kg`` must be their mass. None: uniform density.
+        in the asset frame; ``mass_kg`` must agree with their mass within :func:`mass_agreement_kg`, and
+        their CoM lie inside the object (:func:`check_given_com`). None: uniform density.
     sdf_cache_dir: where signed-distance samples are cached across builds ("auto":
         $REAL2SIM_CACHE or ~/.cache/real2sim); None caches them for this build only,
         so several primitive SPECs of one build sample the mesh once.
@@ -101,10 +139,14 @@ class AssetConfig:
             raise UserInputError(f"mass must be a finite number > 0 kg, got {self.mass_kg}")
         if not self.specs:
             raise UserInputError("no collision SPEC given (e.g. --collision cylinders:10)")
-        if self.given_properties is not None and not np.isclose(self.given_properties.mass_kg, self.mass_kg,
-                                                                rtol=1e-9, atol=0.0):
-            raise UserInputError(f"--mass {self.mass_kg} kg disagrees with the properties' mass "
-                                 f"{self.given_properties.mass_kg} kg: give one of them")
+        given = self.given_properties
+        if given is not None and abs(self.mass_kg - given.mass_kg) > mass_agreement_kg(given):
+            se = given.mass_standard_error_kg
+            raise UserInputError(
+                f"--mass {self.mass_kg:g} kg disagrees with the properties' mass {given.mass_kg:g} kg: they differ by "
+                f"{abs(self.mass_kg - given.mass_kg):.3g} kg, more than {mass_agreement_kg(given):.3g} kg (the larger of "
+                f"3 x its standard error, {'%.3g kg' % se if se is not None else 'none given'}, and "
+                f"{100 * MASS_AGREEMENT_RTOL:g} % of it); give one of them")
         if self.fill_cavities_m is not None and not (np.isfinite(self.fill_cavities_m) and self.fill_cavities_m > 0):
             raise UserInputError(f"--fill-cavities must be a radius > 0 m, got {self.fill_cavities_m}")
         names = [s.name for s in self.specs]
@@ -175,7 +217,7 @@ def config_record(config: AssetConfig) -> dict:
 
 def given_in_asset_frame(config: AssetConfig, transform: np.ndarray) -> PhysicalProperties:
     """``config.given_properties`` in the asset frame (``transform``: asset from input mesh)."""
-    from real2sim.formats.physical import MESH_FRAME, moved_properties
+    from real2sim.formats.physical import moved_properties
 
     given = config.given_properties
     method = f"{given.method} [given: {config.given_properties_source or 'properties'}]"
@@ -306,6 +348,8 @@ def build_asset(
     solid = geometry_only(mesh)
     validate_mesh(solid, str(mesh_path))
     check_mesh_for_config(solid, config, str(mesh_path))
+    if config.given_properties_frame == MESH_FRAME:
+        check_given_com(config, solid.vertices, str(mesh_path))
 
     from real2sim.asset.canonical import canonical_transform
     from real2sim.asset.inertia import estimate_physical_properties
@@ -330,6 +374,8 @@ def build_asset(
         transform = canonical_transform(solid, up_axis=(0.0, 0.0, 1.0) if config.keep_up else None)
         solid = solid.copy()
         solid.apply_transform(transform)
+        if config.given_properties_frame != MESH_FRAME:
+            check_given_com(config, solid.vertices, f"{mesh_path} in the asset frame")
         visual = mesh.copy()
         visual.apply_transform(transform)
         (tmp / "canonical_transform.json").write_text(

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from real2sim.formats.errors import UserInputError
+from real2sim.formats.physical import parse_properties
 from real2sim.identify.arm import phi_from_properties
 from real2sim.identify.solve import ShapePrior
 
@@ -33,7 +34,7 @@ def shape_prior_from_asset(asset_dir: Path) -> ShapePrior:
     asset_dir = Path(asset_dir)
     try:
         transform = np.asarray(json.loads((asset_dir / "canonical_transform.json").read_text())["T_asset_from_input"])
-        props = json.loads((asset_dir / "physical_properties.json").read_text())
+        props, _ = parse_properties(asset_dir / "physical_properties.json", "--shape ")
         solid = trimesh.load(asset_dir / "visual" / "collision_reference.obj", force="mesh", process=False)
     except (OSError, ValueError, KeyError) as exc:
         raise UserInputError(f"--shape {asset_dir} is not an asset folder of real2sim asset ({exc})") from None
@@ -41,7 +42,7 @@ def shape_prior_from_asset(asset_dir: Path) -> ShapePrior:
     solid.apply_transform(np.linalg.inv(transform))
     if not (solid.is_watertight and float(solid.volume) > 0):
         raise UserInputError(f"--shape {asset_dir}: its collision_reference.obj is not a closed solid")
-    return shape_prior_from_mesh(solid, float(props["mass_kg"]))
+    return shape_prior_from_mesh(solid, props.mass_kg)
 
 
 def shape_prior_from_mesh(solid, mass_kg: float) -> ShapePrior:
