@@ -196,3 +196,26 @@ def test_the_reliability_page_lists_every_verbs_paths():
     end = text.index("<!-- end of path roles -->")
     documented = [line for line in text[start:end].splitlines() if line.startswith("| `")]
     assert documented == roles_table(), "regenerate the table: " + "\n".join(roles_table())
+
+
+def test_the_library_refuses_too(tmp_path, monkeypatch, capsys):
+    """build_asset, called from Python, keeps the same rule for the properties file it reads."""
+    from real2sim.asset.build import AssetConfig, build_asset
+    from real2sim.formats.physical import read_given_properties
+    from real2sim.formats.spec import parse_spec
+
+    monkeypatch.chdir(tmp_path)
+    assert run_cli(capsys, "objects", "export", "can", tmp_path / "can.obj")[0] == 0
+    out = tmp_path / "asset"
+    out.mkdir()
+    (out / MARKER_NAME).write_text("{}")
+    props = out / "props.json"
+    props.write_text('{"mass_kg": 0.4, "com_m": [0, 0, 0.05], "inertia_kg_m2": [[1e-3, 0, 0], [0, 1e-3, 0], '
+                     '[0, 0, 1e-3]]}')
+    given, frame = read_given_properties(props)
+    config = AssetConfig(mass_kg=0.4, specs=(parse_spec("spheres:4"),), given_properties=given,
+                         given_properties_frame=frame,
+                         given_properties_source=str(props))
+    with pytest.raises(UserInputError, match="contains the input"):
+        build_asset(tmp_path / "can.obj", out, config, overwrite=True)
+    assert props.exists()

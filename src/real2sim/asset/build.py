@@ -354,7 +354,8 @@ def build_asset(
     from real2sim.asset.canonical import canonical_transform
     from real2sim.asset.inertia import estimate_physical_properties
 
-    with atomic_output_dir(out_dir, overwrite=overwrite, inputs=[mesh_path], made_by="real2sim asset") as tmp:
+    read = [mesh_path, *([config.given_properties_source] if config.given_properties_source else [])]
+    with atomic_output_dir(out_dir, overwrite=overwrite, inputs=read, made_by="real2sim asset") as tmp:
         write_asset_config({**config_record(config), "input_mesh_sha256": file_sha256(Path(mesh_path))},
                            tmp / ASSET_CONFIG_NAME)
         reusable = reusable_representations(reuse_from, tmp / ASSET_CONFIG_NAME) if reuse_from else {}

@@ -166,7 +166,11 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m, keep_up=not config.pca_up)
     # A run resumes in place, so an existing ASSETDIR passes the "exists" rule; every other rule of
     # the output helper (inputs, working folder, foreign folders) holds even for a resume.
-    asset_dir = check_output_dir(asset_dir, overwrite=True, inputs=[dataset], what="ASSETDIR")
+    read = [dataset, *([config.asset.given_properties_source] if config.asset.given_properties_source else []),
+            *([config.mask.weights] if config.mask is not None and config.mask.weights else []),
+            *([config.phone.board.source] if config.phone is not None and config.phone.board is not None
+              and config.phone.board.source else [])]
+    asset_dir = check_output_dir(asset_dir, overwrite=True, inputs=read, what="ASSETDIR")
     with output_lock(asset_dir):
         manifest, created = prepare_asset_dir(asset_dir, dataset, overwrite)
         if overwrite and asset_dir.exists():
