@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import json
 import math
@@ -81,14 +82,22 @@ def read_masses(path: Path) -> dict[str, float]:
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
             reader = csv.DictReader(f)
-            rows = list(reader)
+            rows = [(reader.line_num, row) for row in reader]  # the line a row ends on: blank lines are skipped
             columns = reader.fieldnames or []
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise UserInputError(f"cannot read masses file {path}: {exc}") from None
     if "name" not in columns or "mass_kg" not in columns:
         raise UserInputError(f"masses file {path} needs the columns name,mass_kg (has {','.join(columns) or 'none'})")
+    others = [column for column in columns if column not in ("name", "mass_kg")]
+    if others or len(columns) != 2:  # a third column (or a second mass_kg) would be a setting silently ignored
+        extra = ", ".join(repr(c) for c in others) if others else "a column twice"
+        raise UserInputError(f"masses file {path}, line 1: the columns are name,mass_kg and nothing else "
+                             f"(has {extra})")
     masses: dict[str, float] = {}
-    for line, row in enumerate(rows, start=2):
+    for line, row in rows:
+        if None in row:  # csv.DictReader's key for the fields past the header's
+            raise UserInputError(f"masses file {path}, line {line}: {len(columns) + len(row[None])} fields, the "
+                                 f"header has {len(columns)} (name,mass_kg)")
         name, text = (row.get("name") or "").strip(), (row.get("mass_kg") or "").strip()
         if not name:
             raise UserInputError(f"masses file {path}, line {line}: no name")
@@ -117,24 +126,31 @@ def _mass_of(name: str, dataset: Path, args: argparse.Namespace, table: dict[str
     if args.mass_from is not None:
         path = dataset / args.mass_from
         try:
-            mass = float(json.loads(path.read_text()).get("mass_kg"))
+            value = json.loads(path.read_text()).get("mass_kg")
         except FileNotFoundError:
             return None, f"no mass: the dataset has no {args.mass_from}"
-        except (OSError, ValueError, TypeError, AttributeError):
+        except (OSError, ValueError, AttributeError):
             return None, f"no mass: {args.mass_from} holds no number mass_kg"
+        # float() would take true as 1 kg and "0.3" as a number: only a JSON number is a mass
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            got = json.dumps(value)
+            got = got if len(got) <= 40 else got[:40] + "..."
+            return None, f"no mass: mass_kg in {args.mass_from} is {got}, not a number"
+        try:
+            mass = float(value)
+        except OverflowError:  # an integer past float's range
+            mass = math.inf
         if not (math.isfinite(mass) and 0 < mass <= 1000.0):
             return None, f"no mass: mass_kg in {args.mass_from} must be > 0 and <= 1000 (got {mass:g})"
         return mass, ""
     return None, "no mass: give --mass, --masses or --mass-from"
 
 
-def plan(args: argparse.Namespace):
-    """The objects' jobs and the batch's settings; UserInputError for bad input, before anything is written."""
-    from dataclasses import replace
-
-    from real2sim.cli.run import config_from_args
+def check_first(args: argparse.Namespace) -> tuple[list[str], dict[str, float], Path]:
+    """The checks that read no dataset: the options, the objects' names, the masses file and CATALOGUE;
+    returns (names, masses, CATALOGUE resolved). UserInputError for bad input."""
     from real2sim.formats.errors import UserInputError
-    from real2sim.pipeline.batch import BatchConfig, ObjectJob, check_catalogue, check_names, cpu_count, dataset_folder
+    from real2sim.pipeline.batch import check_catalogue, check_names
 
     if args.address is not None and args.executor != "ray":
         raise UserInputError("--address is for --executor ray")
@@ -142,7 +158,19 @@ def plan(args: argparse.Namespace):
         raise UserInputError(f"--mass-from names a file inside each dataset, not a path (got {args.mass_from!r})")
     names = check_names(args.datasets)
     table = read_masses(args.masses) if args.masses is not None else {}
-    out = check_catalogue(args.out, args.datasets)
+    return names, table, check_catalogue(args.out, args.datasets)
+
+
+def plan(args: argparse.Namespace, first: tuple[list[str], dict[str, float], Path] | None = None):
+    """The objects' jobs and the batch's settings; UserInputError for bad input, before anything is written.
+    ``first``: what :func:`check_first` returned for ``args``, when it was called already."""
+    from dataclasses import replace
+
+    from real2sim.cli.run import config_from_args
+    from real2sim.formats.errors import UserInputError
+    from real2sim.pipeline.batch import BatchConfig, ObjectJob, cpu_count, dataset_folder
+
+    names, table, out = first or check_first(args)
     batch = BatchConfig(executor=args.executor, address=args.address, workers=args.workers,
                         timeout_s=args.ray_timeout_s)
     workers = max(1, min(args.workers or cpu_count(), len(names)))
@@ -166,10 +194,28 @@ def plan(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from real2sim.formats.outputs import output_lock
+
+    first = check_first(args)
+    out = first[2]
+    made = [folder for folder in (out.parent, *out.parent.parents) if not folder.exists()]  # deepest first
+    try:
+        # before the datasets are read (seconds, torch's import): a second batch on CATALOGUE is refused at once
+        with output_lock(out):  # held to the end; run_batch's own lock re-enters it
+            return _run_locked(args, first)
+    finally:
+        if not out.exists():  # refused before anything was written: the folders made for the lock file go too
+            for folder in made:
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
+
+
+def _run_locked(args: argparse.Namespace, first) -> int:
+    from real2sim.cli import Terminated
     from real2sim.cli.progress import progress_display
     from real2sim.pipeline.batch import run_batch
 
-    jobs, out, batch = plan(args)
+    jobs, out, batch = plan(args, first)
 
     def echo(line: str) -> None:
         print(line, flush=True)
@@ -177,10 +223,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         with progress_display(echo=echo) as progress:  # the batch's count; one line per finished object
             result = run_batch(jobs, out, batch, progress=progress, echo=progress_line(progress))
-    except KeyboardInterrupt:
-        print(f"real2sim batch: interrupted; the finished objects are kept in {out}: run the same command "
+    except KeyboardInterrupt as exc:
+        word, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
+        print(f"real2sim batch: {word}; the finished objects are kept in {out}: run the same command "
               "again to resume", file=sys.stderr)
-        return 130
+        return code
     print(f"catalogue: {out / 'index.html'} ({len(jobs) - len(result.failed)} of {len(jobs)} objects done"
           + (f", {len(result.skipped)} finished before" if result.skipped else "") + ")")
     for name in result.failed:

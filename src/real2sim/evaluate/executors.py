@@ -220,6 +220,60 @@ def _probe_address(address: str, timeout_s: float) -> None:
                              "raise --ray-timeout-s") from None
 
 
+def keeping_sigterm(call: Callable[[], Any]) -> Any:
+    """``call()`` (``ray.init``, ``ray.shutdown``, a wait for either), then SIGTERM given back to the
+    handler Python had on record before it.
+
+    ``ray.init`` installs two handlers of its own (Ray 2.60): in Python, ``sys.exit(15)`` (main thread
+    only), and through its C++ core worker, in any thread and behind Python's back, a native one that
+    prints a stack dump twice; ``ray.shutdown`` then leaves SIGTERM at the kernel's default (death, no
+    clean-up). Importing ray installs nothing. A SIGTERM that Ray's Python handler caught during the
+    call (a ``SystemExit(15)``) is handed on to the handler we had.
+    """
+    import threading
+
+    before = signal.getsignal(signal.SIGTERM) if threading.current_thread() is threading.main_thread() else None
+    if before is None:  # not the main thread, or a handler set outside Python: nothing we could put back
+        return call()
+    try:
+        return call()
+    except SystemExit as exc:
+        if exc.code != signal.SIGTERM or not callable(before):
+            raise
+        signal.signal(signal.SIGTERM, before)
+        before(signal.SIGTERM, None)  # ours raises (the command line's Terminated); if not, Ray's exit stands
+        raise
+    finally:
+        signal.signal(signal.SIGTERM, before)  # sets the native handler too, whatever Ray left there
+
+
+def sigterm_through_ray(call: Callable[[], Any]) -> Any:
+    """``call()``, a Ray call that blocks (``ray.wait``, ``ray.get``), with a SIGTERM during it still raising
+    what our handler raises: Ray runs the handler inside, catches the exception and raises a plain
+    KeyboardInterrupt instead, so the command line would say "interrupted" (exit 143 all the same)."""
+    import threading
+
+    ours = signal.getsignal(signal.SIGTERM) if threading.current_thread() is threading.main_thread() else None
+    if not callable(ours):
+        return call()
+    seen: list[int] = []
+
+    def recording(signum, frame) -> None:
+        seen.append(signum)
+        ours(signum, frame)
+
+    signal.signal(signal.SIGTERM, recording)
+    try:
+        return call()
+    except KeyboardInterrupt:
+        if not seen:
+            raise
+        ours(signal.SIGTERM, None)  # raises ours again, outside Ray; if it does not, Ray's stands
+        raise
+    finally:
+        signal.signal(signal.SIGTERM, ours)
+
+
 def _init_ray_bounded(ray, address: str | None, kwargs: dict, timeout_s: float) -> None:
     """``ray.init`` with a wall-clock bound: it retries an unreachable address for minutes.
 
@@ -237,7 +291,7 @@ def _init_ray_bounded(ray, address: str | None, kwargs: dict, timeout_s: float) 
 
     thread = threading.Thread(target=start, daemon=True, name="ray-init")
     thread.start()
-    thread.join(timeout_s)
+    keeping_sigterm(lambda: thread.join(timeout_s))  # Ray's native handler, installed from the thread
     where = address or "a local Ray"
     if thread.is_alive():
         error = UserInputError(f"could not start or reach Ray at {where} within {timeout_s:g} s; check --ray-address "
@@ -274,7 +328,7 @@ class _RayExecutor:
                 # thread that starts them (they get a parent-death signal), so a helper thread's
                 # exit would take the cluster down a minute into the sweep.
                 kwargs["num_cpus"] = jobs
-                ray.init(**kwargs)
+                keeping_sigterm(lambda: ray.init(**kwargs))
             else:
                 _probe_address(address, timeout_s)
                 _init_ray_bounded(ray, address, kwargs, timeout_s)
@@ -297,13 +351,13 @@ class _RayExecutor:
 
     def wait(self, handles: set) -> set:
         by_ref = {self._refs[h][0]: h for h in handles}
-        done, _ = self._ray.wait(list(by_ref), num_returns=1)
+        done, _ = sigterm_through_ray(lambda: self._ray.wait(list(by_ref), num_returns=1))
         return {by_ref[r] for r in done}
 
     def result(self, handle: int) -> Any:
         ref, fn, arg = self._refs.pop(handle)
         try:
-            return self._ray.get(ref)
+            return sigterm_through_ray(lambda: self._ray.get(ref))
         except Exception as exc:  # the worker died (our functions catch their own errors)
             return _failed_result(fn, arg, f"ray task failed: {_one_line(exc)}")
 
@@ -316,7 +370,7 @@ class _RayExecutor:
                     pass
             self._refs.clear()
         if self._owns_ray:
-            self._ray.shutdown()
+            keeping_sigterm(self._ray.shutdown)
 
 
 @dataclass(frozen=True)

@@ -225,7 +225,7 @@ class RayObjects:
 
         import ray
 
-        from real2sim.evaluate.executors import _init_ray_bounded, _probe_address
+        from real2sim.evaluate.executors import _init_ray_bounded, _probe_address, keeping_sigterm
 
         self._ray = ray
         kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.ERROR}
@@ -245,12 +245,14 @@ class RayObjects:
                 if address is not None:
                     _init_ray_bounded(ray, address, kwargs, timeout_s)
                 else:  # in this thread: Ray's processes die with the thread that started them (PR_SET_PDEATHSIG)
-                    ray.init(**kwargs)
-            except UserInputError:
+                    keeping_sigterm(lambda: ray.init(**kwargs))
+            except BaseException as exc:  # SIGTERM and Ctrl-C too: what Ray started so far is stopped
+                if address is None:
+                    with contextlib.suppress(Exception):
+                        keeping_sigterm(ray.shutdown)
                 self._remove_temp_dir()
-                raise
-            except Exception as exc:
-                self._remove_temp_dir()
+                if isinstance(exc, UserInputError) or not isinstance(exc, Exception):
+                    raise
                 raise UserInputError(f"could not start a local Ray: {str(exc).splitlines()[0] if str(exc) else exc!r}")
         self.gpus = float(ray.cluster_resources().get("GPU", 0.0))
         self._remote: dict[Callable, Any] = {}
@@ -267,13 +269,18 @@ class RayObjects:
         return self._next
 
     def wait(self, handles: set) -> set:
+        from real2sim.evaluate.executors import sigterm_through_ray
+
         by_ref = {self._refs[h]: h for h in handles}
-        done, _ = self._ray.wait(list(by_ref), num_returns=1)
+        done, _ = sigterm_through_ray(lambda: self._ray.wait(list(by_ref), num_returns=1))
         return {by_ref[r] for r in done}
 
     def result(self, handle: int) -> Any:
+        from real2sim.evaluate.executors import sigterm_through_ray
+
+        ref = self._refs.pop(handle)
         try:
-            return self._ray.get(self._refs.pop(handle))
+            return sigterm_through_ray(lambda: self._ray.get(ref))
         except Exception:  # noqa: BLE001 -- the worker died twice (run_object catches the object's errors)
             return {"error": WORKER_DIED}
 
@@ -284,7 +291,9 @@ class RayObjects:
                     self._ray.cancel(ref, force=True)
             self._refs.clear()
         if self._owns:
-            self._ray.shutdown()
+            from real2sim.evaluate.executors import keeping_sigterm
+
+            keeping_sigterm(self._ray.shutdown)  # Ray leaves SIGTERM at the default: death without clean-up
         self._remove_temp_dir()
 
     def _remove_temp_dir(self) -> None:
@@ -361,8 +370,35 @@ def run_batch(jobs: list[ObjectJob], out: Path, config: BatchConfig, progress: P
         finally:
             if executor is not None:
                 executor.shutdown(abort=len(result.outcomes) < len(jobs))
+                release_stale_locks([j for j in todo if j.name in result.outcomes], wait_s=0.0)  # their workers ended
+                release_stale_locks([j for j in todo if j.name not in result.outcomes])  # in flight: may be dying
             write_catalogue(out, jobs, result.outcomes)
     return result
+
+
+def release_stale_locks(jobs: list[ObjectJob], wait_s: float = 5.0) -> list[str]:
+    """Remove the lock files (and run's temporary folders) that the objects' workers left, once the executor
+    is shut down: a pool worker ended by SIGTERM, or a Ray worker killed, never ran its own clean-up. Only a
+    lock no live process holds is removed (its flock is taken first): one still held, by a worker still dying
+    (waited for up to ``wait_s``) or by a `real2sim run` of the user's on that folder, is kept. Returns the
+    names whose lock is still held."""
+    from real2sim.pipeline.run_folder import remove_stale_temporaries
+
+    left = [job for job in jobs if job.asset_dir.with_name(f".{job.asset_dir.name}.lock").exists()]
+    deadline = time.monotonic() + wait_s
+    while True:
+        held = []
+        for job in left:
+            try:
+                with output_lock(job.asset_dir):  # taken: nobody holds it; its release removes the file
+                    if job.asset_dir.is_dir():
+                        remove_stale_temporaries(job.asset_dir)
+            except UserInputError:
+                held.append(job)
+        left = held
+        if not left or time.monotonic() >= deadline:
+            return [job.name for job in left]
+        time.sleep(0.1)
 
 
 def _schedule(executor, todo: list[ObjectJob], keys: dict, out: Path, result: BatchResult, progress: ProgressFn,
