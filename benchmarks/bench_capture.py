@@ -54,10 +54,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.views, args.width, args.height = 40, 320, 240
 
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
-    from real2sim.capture.masking import compute_masks
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.masks.methods import compute_masks
     from real2sim.geometry.objects import make_textured_object
-    from real2sim.capture.pose_refinement import RefineConfig, refine_poses
+    from real2sim.capture.poses.refinement import RefineConfig, refine_poses
 
     load_before = os.getloadavg()
     rows_capture, rows_refine, rows_mask = [], [], []

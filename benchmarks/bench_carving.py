@@ -37,10 +37,10 @@ def carve_both(dataset: Path, device: str, methods: tuple[str, ...]) -> list[lis
     """The rows of one dataset: ``train.hull_density`` with each visibility test."""
     import torch
 
-    from real2sim.reconstruct.hull import object_region
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
-    from real2sim.reconstruct.train import FieldConfig, hull_density
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.hull import object_region
+    from real2sim.multiview.voxel_grid import VoxelGrid
+    from real2sim.reconstruct.field.train import FieldConfig, hull_density
+    from real2sim.multiview.views import load_views
 
     views = load_views(dataset)
     config = FieldConfig()
@@ -91,9 +91,9 @@ def timed_reconstructions(dataset: Path, device: str, configs) -> Iterator[tuple
 def reconstruct_both(dataset: Path, device: str, methods: tuple[str, ...]) -> list[list]:
     """The rows of one dataset: the whole field reconstruction (``reconstruct``'s defaults, judged
     against the dataset's ground truth) with each visibility test, in one process."""
-    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.carving.photo import CarvingConfig
     from real2sim.reconstruct.stage import ReconstructConfig
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.reconstruct.field.train import FieldConfig
 
     configs = [ReconstructConfig(field=FieldConfig(carving=CarvingConfig(visibility=method))) for method in methods]
     rows = []
@@ -114,7 +114,7 @@ def parse_ratios(text: str) -> tuple[tuple[float, float, float], ...]:
     """``"1.5,1.25:2,1.0:3:0"`` -> ((1.5, W, D), (1.25, 2.0, D), (1.0, 3.0, 0.0)): the hollow prior's
     ``min_spread_to_contrast``, after a colon its ``min_wall_voxels`` and after a second its
     ``depth_test_voxels`` (each by default CarvingConfig's: W 2, D 2; a D of 0 turns the depth test off)."""
-    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.carving.photo import CarvingConfig
 
     default = CarvingConfig()
     settings = []
@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             dataset = args.datasets / name if args.datasets else Path(tmp) / name
             if args.datasets is None:
-                from real2sim.capture.wrist_camera import CaptureConfig, capture
+                from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
                 from real2sim.geometry.objects import make_textured_object
 
                 capture(make_textured_object(name), dataset, CaptureConfig(views=100, width=320, height=240,

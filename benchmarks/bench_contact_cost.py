@@ -59,10 +59,10 @@ def one_sphere_representation(rep_dir: Path, out_dir: Path, contact) -> None:
 
 def step_cost(asset: Path, rep: str, contact: str, task: str) -> list:
     """(ms per step, mean pieces touching, mean polygons, max polygons) of run 0 of ``task``."""
-    from real2sim.evaluate.scene_config import SceneConfig
+    from real2sim.evaluate.scene.scene_config import SceneConfig
     from real2sim.evaluate.simulate import _advance, _started, candidate_initial_state
-    from real2sim.evaluate.tasks import make_run_specs
-    from real2sim.evaluate.world import build_scene, urdf_object_adder
+    from real2sim.evaluate.scene.tasks import make_run_specs
+    from real2sim.evaluate.scene.world import build_scene, urdf_object_adder
 
     cfg = SceneConfig()
     spec = make_run_specs(task, 1, 0)[0]

@@ -152,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     from dataclasses import replace
 
     from real2sim.reconstruct.stage import ReconstructConfig
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.reconstruct.field.train import FieldConfig
 
     cfg = ReconstructConfig()
     try:

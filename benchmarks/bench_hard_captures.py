@@ -170,10 +170,10 @@ def frame_bound(dataset: Path, noise: tuple[float, float], trials: int = 200) ->
 
     import numpy as np
 
-    from real2sim.capture.wrist_camera import perturb_poses
+    from real2sim.capture.sim.wrist_camera import perturb_poses
     from real2sim.formats.dataset import read_ground_truth
-    from real2sim.reconstruct.silhouette_poses import common_point, mask_centres
-    from real2sim.reconstruct.views import load_views
+    from real2sim.reconstruct.poses.silhouette import common_point, mask_centres
+    from real2sim.multiview.views import load_views
 
     views = load_views(dataset)
     truth = read_ground_truth(dataset)

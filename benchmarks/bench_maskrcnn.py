@@ -34,11 +34,11 @@ def main() -> int:
     import torch
     from PIL import Image
 
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.formats.dataset import read_dataset
-    from real2sim.capture.masking import MaskConfig, load_maskrcnn, maskrcnn_mask
+    from real2sim.capture.masks.methods import MaskConfig, load_maskrcnn, maskrcnn_mask
     from real2sim.geometry.objects import make_textured_object
-    from real2sim.capture.torchvision_compat import compiled_ops_loaded, import_maskrcnn_builder
+    from real2sim.capture.masks.torchvision_compat import compiled_ops_loaded, import_maskrcnn_builder
 
     work = Path(tempfile.mkdtemp(prefix="bench_maskrcnn-"))
     root = work / "can"
@@ -72,7 +72,7 @@ def main() -> int:
         f"images of the bundled can per resize, after one warm-up image (its time is the first column). "
         f"torch threads: {torch.get_num_threads()}. torchvision compiled ops loaded: "
         f"{compiled_ops_loaded()} (False: our NMS and roi_align by grid_sample, see "
-        "real2sim.capture.torchvision_compat). Random weights keep few detections, so the heads run on few "
+        "real2sim.capture.masks.torchvision_compat). Random weights keep few detections, so the heads run on few "
         "instances: real COCO weights on a cluttered image cost more.\n\n"
         + markdown_table(["short side px", "first image s", "mean s / image", "max s / image"], rows)
     )

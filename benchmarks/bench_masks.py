@@ -43,7 +43,7 @@ def _object(name: str):
 
 
 def _mask_ious(ds: Path) -> np.ndarray:
-    from real2sim.capture.masking import iou
+    from real2sim.capture.masks.methods import iou
     from real2sim.formats.dataset import load_mask, read_dataset
 
     data = read_dataset(ds)
@@ -62,9 +62,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tag", default="", help="write docs/benchmarks/masks_TAG.md instead")
     args = ap.parse_args(argv)
 
-    from real2sim.capture.pose_refinement import RefineConfig, refine_poses
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
-    from real2sim.pipeline.masks import make_masks
+    from real2sim.capture.poses.refinement import RefineConfig, refine_poses
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.masks.stage import make_masks
     from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
 
     backends = ["hull"] + (["field"] if args.field else [])

@@ -54,7 +54,7 @@ def mujoco_rates(model_xml: Path, pusher_radius_m: float, pusher_speed_m_per_s: 
     """Wall seconds per simulated second resting (1 s) and pushed (``push_s``), and the push's travel."""
     import mujoco
 
-    from real2sim.asset.mjcf import lowest_collision_z
+    from real2sim.asset.export.mjcf import lowest_collision_z
 
     def scene(with_pusher: bool):
         spec = mujoco.MjSpec.from_file(str(model_xml))
@@ -89,9 +89,9 @@ def mujoco_rates(model_xml: Path, pusher_radius_m: float, pusher_speed_m_per_s: 
 
 
 def drake_push_rate(urdf: Path) -> float:
-    from real2sim.evaluate.scene_config import SceneConfig
+    from real2sim.evaluate.scene.scene_config import SceneConfig
     from real2sim.evaluate.simulate import simulate_candidate
-    from real2sim.evaluate.tasks import make_run_specs
+    from real2sim.evaluate.scene.tasks import make_run_specs
 
     cfg = SceneConfig()
     run = make_run_specs("push", 1, 0)[0]
@@ -103,7 +103,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--asset", type=Path, default=None, help="an asset folder built with --format mjcf")
     args = parser.parse_args()
-    from real2sim.evaluate.scene_config import SceneConfig
+    from real2sim.evaluate.scene.scene_config import SceneConfig
 
     cfg = SceneConfig()
     with tempfile.TemporaryDirectory() as tmp:

@@ -58,8 +58,8 @@ SFM_SCALE, SFM_EULER_DEG, SFM_SHIFT = 3.7, (40.0, -70.0, 15.0), (1.0, 2.0, -0.5)
 def render_capture(name: str, out: Path, views: int, width: int, height: int, seed: int = 0,
                    video: bool = False) -> float:
     """``capture NAME --handheld --board`` into ``out``; wall seconds."""
-    from real2sim.capture.board import DEFAULT_BOARD
-    from real2sim.capture.handheld import HandheldConfig, capture_handheld
+    from real2sim.capture.phone.board import DEFAULT_BOARD
+    from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld
     from real2sim.geometry.objects import make_textured_object
 
     start = time.perf_counter()
@@ -96,8 +96,8 @@ def _noisy(c2w_cv: np.ndarray, noise_mm: float, noise_deg: float, rng: np.random
 
 
 def board_rows(name: str, root: Path, noise: tuple[float, float]) -> list[list]:
-    from real2sim.capture.board import DEFAULT_BOARD, detect_board
-    from real2sim.capture.board_frame import world_from_board_views
+    from real2sim.capture.phone.board import DEFAULT_BOARD, detect_board
+    from real2sim.capture.phone.board_frame import world_from_board_views
     from real2sim.formats.dataset import CV_FROM_GL, load_image_rgb, read_ground_truth
 
     gt = read_ground_truth(root)
@@ -160,7 +160,7 @@ def masks_against_truth(dataset: Path) -> tuple[float, float]:
     """The median over views of the IoU of ``dataset``'s masks with the true object's silhouettes (its
     ``ground_truth/`` mesh ray cast into the same cameras), and the share (%) of the true silhouettes'
     pixels, over all views, that the masks miss."""
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     views = load_views(dataset)
     iou, missed, _ = mask_errors(views.mask > 0.5, true_silhouettes(dataset, views))
@@ -169,7 +169,7 @@ def masks_against_truth(dataset: Path) -> tuple[float, float]:
 
 def true_silhouettes(dataset: Path, views) -> np.ndarray:
     """(N, H, W) bool: ``dataset``'s true object (its ``ground_truth/`` mesh) ray cast into ``views``' cameras."""
-    from real2sim.reconstruct.parallax_masks import render_silhouettes
+    from real2sim.capture.masks.parallax import render_silhouettes
     from real2sim.reconstruct.truth import load_truth
 
     return render_silhouettes(load_truth(dataset), views.intrinsics, views.c2w_cv)
@@ -224,8 +224,8 @@ OBJECT_HEIGHT_M = {"bottle": 0.19, "mug": 0.095, "can": 0.10}
 
 
 def run_main(args, argv) -> int:
-    from real2sim.capture.board import DEFAULT_BOARD
-    from real2sim.capture.handheld import HandheldConfig, capture_handheld
+    from real2sim.capture.phone.board import DEFAULT_BOARD
+    from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld
     from real2sim.geometry.objects import make_textured_object
 
     rows = []
@@ -295,7 +295,7 @@ def true_masks_main(args, argv) -> int:
 
     from PIL import Image
 
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     if not kept_runs_ok(args.true_masks):
         return 2
@@ -326,9 +326,9 @@ def remask_main(args, argv) -> int:
     does: the masks against the truth, and the Chamfer distance, beside the run's own."""
     import json
 
-    from real2sim.pipeline.masks import PARALLAX, make_masks
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig
-    from real2sim.reconstruct.views import load_views
+    from real2sim.capture.masks.stage import PARALLAX, make_masks
+    from real2sim.capture.masks.parallax import ParallaxConfig
+    from real2sim.multiview.views import load_views
 
     try:
         settings = dataclass_settings(ParallaxConfig, args.parallax, "--parallax")

@@ -41,14 +41,14 @@ GROUPS = (("on the true surface (< 1 voxel)", 0.0, 1.0), ("1-4 voxels off", 1.0,
 
 def measure(name: str, work: Path, views_count: int, width: int, height: int, seed: int) -> tuple[list[list], dict]:
     """Rows (group, voxels, spread quantiles, hue quantiles) and carving facts for one object."""
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.fidelity import surface_distance_m
     from real2sim.geometry.objects import make_textured_object
-    from real2sim.reconstruct.hull import carve, object_region
-    from real2sim.reconstruct.voxel_grid import VoxelGrid, surface_from_grid, voxel_footprint_px
-    from real2sim.reconstruct.photo_carving import CarvingConfig, _blurred, _spread, _surface, photo_carve
+    from real2sim.multiview.hull import carve, object_region
+    from real2sim.multiview.voxel_grid import VoxelGrid, surface_from_grid, voxel_footprint_px
+    from real2sim.reconstruct.carving.photo import CarvingConfig, _blurred, _spread, _surface, photo_carve
     from real2sim.reconstruct.truth import load_truth
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     dataset = work / name
     capture(make_textured_object(name), dataset, CaptureConfig(views=views_count, width=width, height=height,

@@ -35,7 +35,7 @@ def copy_assets(work: Path, dst: Path, specs: list[str], contact) -> list[Path]:
     """Copies of work/assets/<object> holding ``specs`` only, each representation's models written with
     ``contact``; asset_config.json is copied as it is, so the reference keeps the asset's material."""
     from real2sim.asset.build import VISUAL_RELPATH
-    from real2sim.asset.writers import write_representation
+    from real2sim.asset.export.writers import write_representation
     from real2sim.formats.collision import read_collision_json
     from real2sim.formats.physical import read_physical_properties
 
@@ -63,7 +63,7 @@ def seed_reference_cache(work: Path, results: Path) -> None:
     partial = results.with_name(f".{results.name}.partial")
     if not cache.is_dir() or results.exists() or partial.exists():
         return
-    from real2sim.formats.outputs import write_marker
+    from real2sim.plumbing.outputs import write_marker
     from real2sim.formats.results import RUN_COLUMNS
 
     partial.mkdir(parents=True)
@@ -120,7 +120,7 @@ def main() -> int:
         f"{base.hunt_crossley_dissipation_s_per_m:g} s/m). Setting = the candidates' point-contact stiffness "
         "(N/m) : Hunt-Crossley dissipation (s/m), written into each representation's model.urdf (no "
         "model_point.urdf here); `split@` divides the stiffness among the pieces that touch a "
-        "plane together (`real2sim.asset.point_contact`). Sweep time "
+        "plane together (`real2sim.asset.export.point_contact`). Sweep time "
         f"{(time.perf_counter() - start) / 60:.1f} min. ST is mean wall seconds per simulation: compare within "
         "one setting (a setting's sweep runs its rows side by side).\n\n"
         + markdown_table(["setting", "representation", "OCAE m", "ATE m", "CPD m/s", "cpd_paper m/sample", "ST s"],

@@ -38,8 +38,8 @@ def main() -> int:
     from real2sim.evaluate.metrics import cpd_m_per_s, ocae_m
     from real2sim.geometry.objects import OBJECTS, export_object
     from real2sim.formats.physical import read_physical_properties
-    from real2sim.evaluate.scene_config import SceneConfig
-    from real2sim.evaluate.tasks import make_run_specs
+    from real2sim.evaluate.scene.scene_config import SceneConfig
+    from real2sim.evaluate.scene.tasks import make_run_specs
     from real2sim.evaluate.simulate import simulate_candidate, simulate_reference
     from real2sim.formats.spec import parse_spec
 

@@ -43,10 +43,10 @@ def _cpu_s() -> float:
 
 def _tsdf_row(name: str, ds: Path, field, cfg, seed: int) -> list:
     """The same trained field's surface by the paper's TSDF fusion, measured against the truth."""
-    from real2sim.reconstruct.extract import tsdf_mesh
-    from real2sim.reconstruct.voxel_grid import largest_parts, simplified
+    from real2sim.reconstruct.field.extract import tsdf_mesh
+    from real2sim.multiview.voxel_grid import largest_parts, simplified
     from real2sim.reconstruct.truth import compare_to_truth, load_truth
-    from real2sim.reconstruct.views import held_out_split, load_views
+    from real2sim.multiview.views import held_out_split, load_views
 
     views = load_views(ds)
     train = views.subset(held_out_split(views.count, cfg.held_out_every)[0])
@@ -69,8 +69,8 @@ def _captured_and_refined(name: str, ds: Path, args) -> list:
     """Capture the bundled object into ``ds``, refine its poses; the pose-refinement table's row."""
     import warnings
 
-    from real2sim.capture.pose_refinement import RefineConfig, refine_poses
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.poses.refinement import RefineConfig, refine_poses
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     capture(make_textured_object(name), ds, CaptureConfig(views=args.views, width=args.width,
@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     from dataclasses import replace
 
     from real2sim.reconstruct.stage import ReconstructConfig, reconstruct
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.reconstruct.field.train import FieldConfig
 
     field_cfg = FieldConfig()
     if args.quick:

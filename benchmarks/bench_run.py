@@ -44,7 +44,7 @@ def run_object(name: str, work: Path, quick: bool, runs: int | None = None,
     """(run.json, truth.json, wall seconds) of one object's capture + run (``rolling_sagitta_m``:
     see ``make_object``, None: the bundled object; ``cylinder_flat_depth_m``: see
     ``ContactProperties``)."""
-    from real2sim.capture.wrist_camera import capture
+    from real2sim.capture.sim.wrist_camera import capture
     from real2sim.cli.demo import FULL, QUICK, capture_config, run_config
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.geometry.objects import OBJECTS, make_textured_object

@@ -80,8 +80,8 @@ def make_shape(name: str):
 def run_shape(name: str, work: Path, quick: bool) -> dict:
     """One shape's capture + run; the row's numbers."""
     from real2sim.asset.build import AssetConfig
-    from real2sim.capture.pose_refinement import RefineConfig
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.poses.refinement import RefineConfig
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.formats.spec import parse_spec
     from real2sim.pipeline.run import RunConfig, run_pipeline
     from real2sim.reconstruct.stage import ReconstructConfig

@@ -29,15 +29,15 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from real2sim.asset.writers import write_representation
+from real2sim.asset.export.writers import write_representation
 from real2sim.asset.canonical import canonicalize
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
 from real2sim.geometry.inside import inside_mask
 from real2sim.geometry.objects import OBJECTS, make_object
 from real2sim.formats.physical import PhysicalProperties
-from real2sim.evaluate.scene_config import SceneConfig
-from real2sim.evaluate.tasks import make_run_specs
+from real2sim.evaluate.scene.scene_config import SceneConfig
+from real2sim.evaluate.scene.tasks import make_run_specs
 from real2sim.evaluate.simulate import simulate_candidate, simulate_reference
 
 IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)

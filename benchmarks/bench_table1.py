@@ -129,7 +129,7 @@ def write_variant(rep_dir: Path, geometry, contact) -> None:
     its collision.json and models written with ``contact``, the asset's mass properties and visual mesh.
     Every variant this benchmark and bench_contact_cost.py add beside the fits is written through here."""
     from real2sim.asset.build import VISUAL_RELPATH
-    from real2sim.asset.writers import write_representation
+    from real2sim.asset.export.writers import write_representation
     from real2sim.formats.collision import write_collision_json
     from real2sim.formats.physical import read_physical_properties
 
@@ -159,7 +159,7 @@ CYLINDER_SECTIONS = 72  # as the bundled can's own mesh: flats 0.03 mm deep on i
 
 def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
     """``out_dir``: representation ``rep_dir`` again with each ellipsoid a compliant convex piece, its
-    portable polytope (:func:`real2sim.asset.round_pieces.round_polytope`), and each cylinder a
+    portable polytope (:func:`real2sim.asset.export.round_pieces.round_polytope`), and each cylinder a
     ``CYLINDER_SECTIONS``-gon prism of the cylinder's volume, under ``polytopes/``, written with
     ``contact``; every other shape and the mass properties the same. Drake's own compliant shapes
     are meshed at the resolution hint with a pressure field of their own; a convex piece gets one
@@ -169,7 +169,7 @@ def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
 
     import trimesh
 
-    from real2sim.asset.round_pieces import round_polytope
+    from real2sim.asset.export.round_pieces import round_polytope
     from real2sim.formats.collision import CollisionShape, read_collision_json
 
     geometry = read_collision_json(rep_dir / "collision.json")

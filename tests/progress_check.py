@@ -1,4 +1,4 @@
-"""A recording :class:`real2sim.formats.progress.ProgressFn` for the stages' tests."""
+"""A recording :class:`real2sim.plumbing.progress.ProgressFn` for the stages' tests."""
 
 from __future__ import annotations
 

@@ -26,7 +26,7 @@ FAST = [*HULL, "--no-refine-poses"]
 
 
 def _capture(out: Path) -> Path:
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     capture(make_textured_object("can"), out,
@@ -323,7 +323,7 @@ def test_tiny_field_run(can_ds_no_truth, tmp_path):
     from dataclasses import replace
 
     from real2sim.pipeline.run import run_pipeline
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.reconstruct.field.train import FieldConfig
 
     config = _config()
     field = FieldConfig(coarse_voxels=24, fine_voxels=48, coarse_steps=40, fine_steps=80, rays_per_step=1024)
@@ -384,7 +384,7 @@ def test_a_reconstruction_short_of_the_table_is_named_before_the_asset_is_built(
     tolerance (5 % of its height) gets run's own message, not asset's ``--support-height`` one."""
     import trimesh
 
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
     from real2sim.pipeline.stages import check_reaches_table
 
     box = trimesh.creation.box((0.05, 0.05, 0.04))

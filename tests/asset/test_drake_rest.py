@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.asset.writers import LINK_NAME, write_representation
+from real2sim.asset.export.writers import LINK_NAME, write_representation
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
 from real2sim.collision.decomposition import CoacdConfig, decompose

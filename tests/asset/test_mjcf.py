@@ -13,7 +13,7 @@ import pytest
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is a dependency (pip install mujoco)")
 
 from real2sim.asset.build import AssetConfig, build_asset  # noqa: E402
-from real2sim.asset.mjcf import lowest_collision_z, mjcf_size, write_model_mjcf_string  # noqa: E402
+from real2sim.asset.export.mjcf import lowest_collision_z, mjcf_size, write_model_mjcf_string  # noqa: E402
 from real2sim.formats.collision import CollisionGeometry, CollisionShape, read_collision_json  # noqa: E402
 from real2sim.formats.contact import ContactProperties  # noqa: E402
 from real2sim.formats.physical import PhysicalProperties, read_physical_properties  # noqa: E402
@@ -142,7 +142,7 @@ def test_rotated_box_and_cylinder_have_the_same_world_pose_in_mujoco_and_drake(t
     from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
     from pydrake.systems.framework import DiagramBuilder
 
-    from real2sim.asset.writers import write_representation
+    from real2sim.asset.export.writers import write_representation
 
     q_box = np.array([0.9, 0.3, -0.2, 0.25])
     q_cyl = np.array([0.6, -0.1, 0.7, 0.3])

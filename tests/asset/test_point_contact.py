@@ -1,4 +1,4 @@
-"""Point-contact stiffness shared among the pieces that touch a plane together (asset/point_contact.py)."""
+"""Point-contact stiffness shared among the pieces that touch a plane together (asset/export/point_contact.py)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.asset.point_contact import representation_contact, touching_pieces
-from real2sim.asset.writers import write_representation
+from real2sim.asset.export.point_contact import representation_contact, touching_pieces
+from real2sim.asset.export.writers import write_representation
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.physical import PhysicalProperties
@@ -110,7 +110,7 @@ def test_an_asset_config_from_before_the_share_reads_as_unshared(tmp_path):
     import json
 
     from real2sim.formats.asset_config import read_asset_contact
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     old = dataclasses.asdict(ContactProperties())
     del old["point_stiffness_per_piece"]

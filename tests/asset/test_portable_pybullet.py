@@ -26,9 +26,9 @@ import trimesh
 
 pybullet = pytest.importorskip("pybullet", reason="pybullet is a test dependency (pip install pybullet)")
 
-from real2sim.asset.portable_urdf import PORTABLE_ELEMENTS, PORTABLE_URDF_NAME  # noqa: E402
-from real2sim.asset.round_pieces import lowest_point_z_m  # noqa: E402
-from real2sim.asset.writers import LINK_NAME, write_representation  # noqa: E402
+from real2sim.asset.export.portable_urdf import PORTABLE_ELEMENTS, PORTABLE_URDF_NAME  # noqa: E402
+from real2sim.asset.export.round_pieces import lowest_point_z_m  # noqa: E402
+from real2sim.asset.export.writers import LINK_NAME, write_representation  # noqa: E402
 from real2sim.collision.decomposition import CoacdConfig, VhacdConfig, decompose  # noqa: E402
 from real2sim.collision.superquadric import superquadric_hull  # noqa: E402
 from real2sim.formats.collision import CollisionGeometry, CollisionShape, read_collision_json, write_collision_json  # noqa: E402

@@ -15,9 +15,9 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is a dependency (pip install mujoco)")
 
-from real2sim.asset.mjcf import SCENE_NAME  # noqa: E402
-from real2sim.asset.round_pieces import lowest_point_z_m  # noqa: E402
-from real2sim.asset.writers import write_representation  # noqa: E402
+from real2sim.asset.export.mjcf import SCENE_NAME  # noqa: E402
+from real2sim.asset.export.round_pieces import lowest_point_z_m  # noqa: E402
+from real2sim.asset.export.writers import write_representation  # noqa: E402
 from real2sim.formats.collision import CollisionGeometry, CollisionShape  # noqa: E402
 from real2sim.formats.contact import ContactProperties  # noqa: E402
 from real2sim.formats.physical import PhysicalProperties  # noqa: E402

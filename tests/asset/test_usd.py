@@ -15,9 +15,9 @@ pxr = pytest.importorskip("pxr", reason="usd-core is a dependency (pip install u
 
 from pxr import Usd, UsdGeom, UsdPhysics, UsdShade  # noqa: E402
 
-from real2sim.asset.round_pieces import ellipsoid_polytope  # noqa: E402
-from real2sim.asset.usd import USD_NAME  # noqa: E402
-from real2sim.asset.writers import write_representation  # noqa: E402
+from real2sim.asset.export.round_pieces import ellipsoid_polytope  # noqa: E402
+from real2sim.asset.export.usd import USD_NAME  # noqa: E402
+from real2sim.asset.export.writers import write_representation  # noqa: E402
 from real2sim.formats.collision import CollisionGeometry, CollisionShape, read_collision_json, write_collision_json  # noqa: E402
 from real2sim.formats.contact import ContactProperties  # noqa: E402
 from real2sim.formats.physical import PhysicalProperties  # noqa: E402

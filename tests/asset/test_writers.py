@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.asset.writers import LINK_NAME, write_model_urdf_string, write_representation
+from real2sim.asset.export.writers import LINK_NAME, write_model_urdf_string, write_representation
 from real2sim.formats.rotations import quaternion_to_rpy, rpy_to_matrix
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.rotations import quaternion_to_matrix

@@ -9,13 +9,13 @@ import pytest
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
-from real2sim.capture.board import (DEFAULT_BOARD, DOTS_PER_MM, BoardSpec, board_centre_on_page_dots,
+from real2sim.capture.phone.board import (DEFAULT_BOARD, DOTS_PER_MM, BoardSpec, board_centre_on_page_dots,
                                     board_corners_m, board_view_from_corners, detect_board, read_board_spec,
                                     write_board)
-from real2sim.capture.board_frame import world_from_board_views
-from real2sim.capture.wrist_camera import look_at_c2w_gl
+from real2sim.capture.phone.board_frame import world_from_board_views
+from real2sim.capture.sim.wrist_camera import look_at_c2w_gl
 from real2sim.formats.dataset import CV_FROM_GL
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from tests.cli_helpers import run_cli
 
 K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])

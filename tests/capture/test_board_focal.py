@@ -1,4 +1,4 @@
-"""The focal length measured on the printed board (real2sim.capture.board_focal), on board corners
+"""The focal length measured on the printed board (real2sim.capture.phone.board_focal), on board corners
 projected through a known camera: the board's corners (DEFAULT_BOARD) seen from an orbit of tilted
 views, 0.1 px of corner noise, a lens with a little barrel distortion."""
 
@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from real2sim.capture.board import DEFAULT_BOARD, BoardView
-from real2sim.capture.board_focal import MAX_SPLIT_DISAGREEMENT, MIN_VIEWS, focal_from_board
+from real2sim.capture.phone.board import DEFAULT_BOARD, BoardView
+from real2sim.capture.phone.board_focal import MAX_SPLIT_DISAGREEMENT, MIN_VIEWS, focal_from_board
 
 SIZE = (640, 480)
 TRUE_F = 500.0

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from real2sim.capture.wrist_camera import CaptureConfig, capture
-from real2sim.formats.errors import UserInputError
+from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
+from real2sim.plumbing.errors import UserInputError
 from real2sim.geometry.objects import make_object
 from tests.cli_helpers import run_cli
 
@@ -37,7 +37,7 @@ def _whiten(root, count: int) -> list[str]:
 
 
 def test_every_mask_full_is_refused(tiny, tmp_path, capsys):
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     root = tmp_path / "ds"
     shutil.copytree(tiny, root)
@@ -54,7 +54,7 @@ def test_every_mask_full_is_refused(tiny, tmp_path, capsys):
 
 
 def test_some_masks_full_warn(tiny, tmp_path, capsys):
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     root = tmp_path / "ds"
     shutil.copytree(tiny, root)
@@ -80,7 +80,7 @@ def test_silhouettes_pass_quietly(tiny, capsys, tmp_path):
 def test_computed_masks_all_full_publish_nothing(tiny, tmp_path):
     """A method whose every mask is full (here a stand-in for a background difference against the wrong
     empty scene) is refused before masks_<method>/ or transforms.json change."""
-    from real2sim.capture.masking import publish_masks
+    from real2sim.capture.masks.methods import publish_masks
     from real2sim.formats.dataset import read_dataset
 
     root = tmp_path / "ds"

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from PIL import ExifTags, Image
 
-from real2sim.capture.board import DEFAULT_BOARD, detect_board
-from real2sim.capture.board_frame import world_from_board_views
-from real2sim.capture.handheld import HandheldConfig, capture_handheld, handheld_poses
-from real2sim.capture.phone_media import motion_blur
+from real2sim.capture.phone.board import DEFAULT_BOARD, detect_board
+from real2sim.capture.phone.board_frame import world_from_board_views
+from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld, handheld_poses
+from real2sim.capture.phone.media import motion_blur
 from real2sim.formats.dataset import CV_FROM_GL, load_image_rgb, load_mask, read_ground_truth
 from tests.cli_helpers import run_cli
 

@@ -11,11 +11,11 @@ import pytest
 import trimesh
 from PIL import Image
 
-from real2sim.capture.hard_rigs import apply_colour_gains, cut_off_views
-from real2sim.capture.wrist_camera import CaptureConfig, camera_poses, capture, object_frame
+from real2sim.capture.sim.hard_rigs import apply_colour_gains, cut_off_views
+from real2sim.capture.sim.wrist_camera import CaptureConfig, camera_poses, capture, object_frame
 from real2sim.formats.dataset import (CV_FROM_GL, TABLE_PLANE_KEY, has_table_plane, load_mask, read_dataset,
                                       read_ground_truth, stated_support_z_m)
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 W, H = 96, 72
 
@@ -217,7 +217,7 @@ def test_jitter_changes_images_per_view_not_masks(tmp_path):
 
 def test_all_flags_together_jpeg_at_low_resolution_load(tmp_path):
     """Every flag at once, JPEG at 64x48: the files are JPEG, masks PNG, and the reconstruction's reader takes it."""
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     out = tmp_path / "hard"
     cfg = CaptureConfig(views=10, width=64, height=48, ring_elevation_deg=0.0, focal_px=3300.0 / 10,

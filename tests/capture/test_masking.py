@@ -9,10 +9,10 @@ import pytest
 from PIL import Image
 
 from tests.progress_check import Recorder
-from real2sim.capture.wrist_camera import CaptureConfig, capture
+from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
 from real2sim.formats.dataset import load_mask, read_dataset
-from real2sim.formats.errors import UserInputError
-from real2sim.capture.masking import MaskConfig, clean_mask, compute_masks, iou
+from real2sim.plumbing.errors import UserInputError
+from real2sim.capture.masks.methods import MaskConfig, clean_mask, compute_masks, iou
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +124,7 @@ def test_maskrcnn_error_paths(tmp_path, captures):
     weights = tmp_path / "w.pth"
     weights.write_bytes(b"not weights")
     # Not `import torchvision`: on a CPU-only torch that raises RuntimeError until
-    # real2sim.capture.torchvision_compat has defined the ops it needs.
+    # real2sim.capture.masks.torchvision_compat has defined the ops it needs.
     import importlib.util
 
     if importlib.util.find_spec("torchvision") is None:

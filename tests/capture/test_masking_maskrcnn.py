@@ -22,10 +22,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from real2sim.capture.wrist_camera import CaptureConfig, capture
+from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
 from real2sim.formats.dataset import load_mask, read_dataset
-from real2sim.capture.masking import MaskConfig, compute_masks, maskrcnn_mask
-from real2sim.capture.torchvision_compat import ensure_torchvision, greedy_nms, import_maskrcnn_builder
+from real2sim.capture.masks.methods import MaskConfig, compute_masks, maskrcnn_mask
+from real2sim.capture.masks.torchvision_compat import ensure_torchvision, greedy_nms, import_maskrcnn_builder
 
 # Small internal resize and few instances: random weights detect up to 100 "objects".
 SMALL = dict(maskrcnn_min_size_px=96, maskrcnn_max_size_px=128, maskrcnn_max_instances=3)
@@ -88,7 +88,7 @@ def test_greedy_nms_random_float_boxes_and_blocks(monkeypatch):
     assert greedy_nms(b, s, 0.4).tolist() == want
     assert 0 < len(want) < 300
     # Tiny IoU blocks (a few rows at a time) give the same answer.
-    import real2sim.capture.torchvision_compat as compat
+    import real2sim.capture.masks.torchvision_compat as compat
 
     monkeypatch.setattr(compat, "_MAX_BLOCK_ELEMENTS", 700)
     assert greedy_nms(b, s, 0.4).tolist() == want
@@ -117,7 +117,7 @@ def test_compat_is_idempotent_and_keeps_other_ops_checked():
 def test_roi_align_by_grid_sample_equals_torchvisions_own(aligned, sampling_ratio):
     """Boxes inside, across and outside the feature maps' edges, two images, two scales: the same values
     as torchvision's pure-PyTorch roi_align (uncompiled), to float rounding."""
-    from real2sim.capture.torchvision_compat import roi_align_by_grid_sample
+    from real2sim.capture.masks.torchvision_compat import roi_align_by_grid_sample
 
     ensure_torchvision()
     torchvisions = sys.modules["torchvision.ops.roi_align"]._roi_align
@@ -148,7 +148,7 @@ def test_fresh_process_plain_import_then_compat():
     code = (
         "import torch\n"
         "try:\n    import torchvision\n    print('plain ok')\nexcept RuntimeError:\n    print('plain failed')\n"
-        "from real2sim.capture.torchvision_compat import ensure_torchvision, compiled_ops_loaded\n"
+        "from real2sim.capture.masks.torchvision_compat import ensure_torchvision, compiled_ops_loaded\n"
         "tv = ensure_torchvision()\n"
         "print(compiled_ops_loaded())\n"
         "b = torch.tensor([[0., 0, 10, 10], [0, 0, 10, 9], [5, 5, 20, 20]])\n"
@@ -162,7 +162,7 @@ def test_fresh_process_plain_import_then_compat():
 
 
 def test_missing_torchvision_is_a_user_error(monkeypatch):
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     monkeypatch.setitem(sys.modules, "torchvision", None)  # makes `import torchvision` raise ImportError
     with pytest.raises(UserInputError, match=r"pip install -e '\.\[maskrcnn\]'"):
@@ -263,7 +263,7 @@ def test_compute_masks_maskrcnn_end_to_end(weights_file, small_dataset, tmp_path
     assert [f["transform_matrix"] for f in after["frames"]] == [f["transform_matrix"] for f in before["frames"]]
     # The file holds what the model gives for that image (inference is deterministic on CPU).
     from real2sim.formats.dataset import load_image_rgb
-    from real2sim.capture.masking import load_maskrcnn
+    from real2sim.capture.masks.methods import load_maskrcnn
 
     cfg = MaskConfig(weights=weights_file, **SMALL)
     model = load_maskrcnn(weights_file, "cpu", cfg.maskrcnn_min_size_px, cfg.maskrcnn_max_size_px,
@@ -274,8 +274,8 @@ def test_compute_masks_maskrcnn_end_to_end(weights_file, small_dataset, tmp_path
 
 
 def test_load_maskrcnn_applies_resize_and_checkpoint_layout(weights_file, tmp_path):
-    from real2sim.formats.errors import UserInputError
-    from real2sim.capture.masking import load_maskrcnn
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.capture.masks.methods import load_maskrcnn
 
     model = load_maskrcnn(weights_file, "cpu", min_size_px=96, max_size_px=128, score_threshold=0.5, max_instances=7)
     assert not model.training

@@ -13,7 +13,7 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from tests.progress_check import Recorder
-from real2sim.capture.wrist_camera import CaptureConfig, camera_poses, capture, object_frame
+from real2sim.capture.sim.wrist_camera import CaptureConfig, camera_poses, capture, object_frame
 from real2sim.formats.dataset import (
     POSE_REFINED_KEY,
     Dataset,
@@ -24,8 +24,8 @@ from real2sim.formats.dataset import (
     rotation_angle_deg,
     write_transforms,
 )
-from real2sim.formats.errors import UserInputError
-from real2sim.capture.pose_refinement import RefineConfig, refine_poses, robust_umeyama, select_pairs, umeyama
+from real2sim.plumbing.errors import UserInputError
+from real2sim.capture.poses.refinement import RefineConfig, refine_poses, robust_umeyama, select_pairs, umeyama
 
 pytest.importorskip("pycolmap")
 
@@ -187,8 +187,8 @@ def test_align_poses_uses_orientations():
     """Centres + orientations align a perfect reconstruction onto noisy robot poses better than centres alone."""
     import trimesh
 
-    from real2sim.capture.wrist_camera import perturb_poses
-    from real2sim.capture.pose_refinement import align_poses
+    from real2sim.capture.sim.wrist_camera import perturb_poses
+    from real2sim.capture.poses.refinement import align_poses
 
     _, target, radius = object_frame(trimesh.creation.cylinder(radius=0.04, height=0.19))
     truth = camera_poses(CaptureConfig(views=40), target, radius)
@@ -234,7 +234,7 @@ def test_colmap_logging_writes_no_log_file(tmp_path):
     import sys
 
     code = ("import pycolmap\n"
-            "from real2sim.capture.pose_refinement import colmap_logging\n"
+            "from real2sim.capture.poses.refinement import colmap_logging\n"
             "with colmap_logging(quiet=False):\n"
             "    pycolmap.logging.warning('real2sim-test-warning')\n")
     before = set(Path("/tmp").iterdir())

@@ -16,10 +16,10 @@ import warnings
 
 import pytest
 
-from real2sim.capture.pose_refinement import RefineConfig, RefineResult, refine_poses
-from real2sim.capture.refine_quality import (judge_change, refusal_limit, warn_beyond_given_accuracy,
+from real2sim.capture.poses.refinement import RefineConfig, RefineResult, refine_poses
+from real2sim.capture.poses.refine_quality import (judge_change, refusal_limit, warn_beyond_given_accuracy,
                                              warn_if_worse_than_given)
-from real2sim.capture.wrist_camera import CaptureConfig, capture
+from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
 from real2sim.formats.dataset import read_dataset
 
 

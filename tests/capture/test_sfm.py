@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from real2sim.capture.sfm import SfmConfig, camera_groups, list_images, match_pairs, structure_from_motion
+from real2sim.capture.phone.sfm import SfmConfig, camera_groups, list_images, match_pairs, structure_from_motion
 from real2sim.formats.dataset import CV_FROM_GL, read_ground_truth
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 VIEWS = 20
 
@@ -28,7 +28,7 @@ def handheld(tmp_path_factory) -> Path:
 
 def _aligned_errors(est_c2w: np.ndarray, true_c2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Camera-centre errors (m) and rotation errors (deg) after the similarity of the centres."""
-    from real2sim.capture.pose_refinement import umeyama
+    from real2sim.capture.poses.refinement import umeyama
     from real2sim.formats.dataset import rotation_angle_deg
 
     s, r, t = umeyama(est_c2w[:, :3, 3], true_c2w[:, :3, 3])

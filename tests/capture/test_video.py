@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from real2sim.capture.video import decode_frames, laplacian_variance, select_frames, write_frames
-from real2sim.formats.errors import UserInputError
+from real2sim.capture.phone.video import decode_frames, laplacian_variance, select_frames, write_frames
+from real2sim.plumbing.errors import UserInputError
 
 W, H, FRAMES = 96, 64, 30
 BLURRED = {i for i in range(FRAMES) if i % 3 != 1}  # the middle frame of each run of 3 is the sharp one

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.capture.wrist_camera import (
+from real2sim.capture.sim.wrist_camera import (
     CaptureConfig,
     ReachabilityModel,
     camera_poses,
@@ -18,7 +18,7 @@ from real2sim.capture.wrist_camera import (
     perturb_poses,
 )
 from real2sim.formats.dataset import CV_FROM_GL, load_mask, read_dataset, read_ground_truth, rotation_angle_deg
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 W, H = 160, 120
 

@@ -197,7 +197,7 @@ def test_rewrite_models_changes_contact_without_refitting(tmp_path, can_obj, cap
 
 def test_mesh_units_choices_are_the_loaders_units():
     from real2sim.cli.asset import MESH_UNITS
-    from real2sim.formats.mesh_io import MESH_UNITS_M
+    from real2sim.geometry.mesh_io import MESH_UNITS_M
 
     assert set(MESH_UNITS) == set(MESH_UNITS_M)
 
@@ -262,8 +262,8 @@ def test_object_size_limits_in_metres():
     """5 mm to 5 m passes; just outside is refused, and a mesh no unit can fix says so."""
     import trimesh
 
-    from real2sim.formats.errors import UserInputError
-    from real2sim.formats.mesh_io import check_object_size
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.geometry.mesh_io import check_object_size
 
     assert check_object_size(trimesh.creation.box(extents=(0.006, 0.003, 0.003))) == pytest.approx(0.006)
     assert check_object_size(trimesh.creation.box(extents=(4.9, 1.0, 1.0))) == pytest.approx(4.9)

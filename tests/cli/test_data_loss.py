@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from real2sim.cli import main
-from real2sim.formats.outputs import MARKER_NAME
+from real2sim.plumbing.outputs import MARKER_NAME
 from tests.cli_helpers import run_cli
 
 
@@ -111,7 +111,7 @@ def test_full_disk_during_export_leaves_no_truncated_mesh(workdir):
 @pytest.mark.parametrize("umask", [0o022, 0o027])
 def test_outputs_follow_the_umask(tmp_path, umask):
     from real2sim.formats.dataset import write_json_atomic
-    from real2sim.formats.outputs import atomic_output_dir
+    from real2sim.plumbing.outputs import atomic_output_dir
 
     previous = os.umask(umask)
     try:
@@ -129,7 +129,7 @@ def test_outputs_follow_the_umask(tmp_path, umask):
 def test_second_writer_of_one_output_is_refused(workdir, capsys):
     holder = subprocess.Popen(
         [sys.executable, "-c",
-         "import sys\nfrom real2sim.formats.outputs import output_lock\n"
+         "import sys\nfrom real2sim.plumbing.outputs import output_lock\n"
          "with output_lock(sys.argv[1]):\n    print('held', flush=True)\n    sys.stdin.read()\n",
          str(workdir / "asset")],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
@@ -227,7 +227,7 @@ def test_sigterm_during_capture_leaves_no_temporary_folder(tmp_path):
 @pytest.fixture(scope="module")
 def background_ds(tmp_path_factory) -> Path:
     """A tiny capture with the empty scene for --method background (8 views at 64x48, about 2 s)."""
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     out = tmp_path_factory.mktemp("mask_ds") / "ds"

@@ -100,8 +100,8 @@ def test_report_given_a_file(tiny_dataset, capsys):
 
 def test_garbage_weights_file_is_named_plainly(tiny_dataset, tmp_path, capsys):
     """torch's message suggested `torch.load(weights_only=False)`: running the file's code."""
-    from real2sim.capture.torchvision_compat import import_maskrcnn_builder
-    from real2sim.formats.errors import UserInputError
+    from real2sim.capture.masks.torchvision_compat import import_maskrcnn_builder
+    from real2sim.plumbing.errors import UserInputError
 
     try:
         import_maskrcnn_builder()

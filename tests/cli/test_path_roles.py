@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from real2sim.cli import build_parser, options
-from real2sim.formats.inputs import check_outputs_spare_inputs, companion_files
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import MARKER_NAME
+from real2sim.plumbing.inputs import check_outputs_spare_inputs, companion_files
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import MARKER_NAME
 from tests.cli_helpers import run_cli
 
 PATH_TYPES = (options.path, options.existing_file, options.existing_dir, options.cache_dir, Path)

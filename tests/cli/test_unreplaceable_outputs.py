@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from real2sim.formats.outputs import MARKER_NAME, replace_blocker
+from real2sim.plumbing.outputs import MARKER_NAME, replace_blocker
 from tests.cli_helpers import run_cli
 
 
@@ -85,8 +85,8 @@ def test_board_onto_a_dangling_link_keeps_the_link(tmp_path, monkeypatch, capsys
 
 
 def test_an_output_made_unreplaceable_during_the_work_keeps_the_work(tmp_path):
-    from real2sim.formats.errors import UserInputError
-    from real2sim.formats.outputs import atomic_output_dir
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.plumbing.outputs import atomic_output_dir
 
     target = tmp_path / "earlier"
     target.mkdir()

@@ -135,7 +135,7 @@ def test_stalled_resolver_is_bounded_and_sigterm_stops_the_wait(can_asset):
     import threading
 
     from real2sim.cli.view import resolve_host
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     never = threading.Event()
     with pytest.raises(UserInputError, match="did not resolve within 0.2 s"):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.asset.writers import LINK_NAME, write_representation
+from real2sim.asset.export.writers import LINK_NAME, write_representation
 from real2sim.formats.contact import ContactProperties
 from real2sim.collision.decomposition import CoacdConfig, VhacdConfig, decompose
 from real2sim.geometry.inside import inside_mask

@@ -8,7 +8,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from real2sim.formats.collision import read_collision_json, write_collision_json
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.geometry.inside import inside_mask
 from real2sim.collision.particles import COVERING, particle_spheres, particles_for_count, voxel_centres_inside
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.geometry.inside import signed_distance
 from tests.progress_check import Recorder
 from real2sim.collision.sdf_sampling import SdfSamplingConfig, default_cache_dir, sample_sdf, unit_sphere_transform

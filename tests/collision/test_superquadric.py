@@ -174,7 +174,7 @@ def test_a_box_of_two_superquadrics_rests_on_the_floor_in_drake(tmp_path, contac
     pieces' poses and volume-matched polytopes reach the simulator as written."""
     from tests.asset.test_drake_rest import CHATTER_M_PER_S, RestObject, check_rest, simulate_drop
 
-    from real2sim.asset.writers import write_representation
+    from real2sim.asset.export.writers import write_representation
     from real2sim.formats.contact import ContactProperties
     from real2sim.collision.fit.config import FitResult
     from real2sim.formats.physical import PhysicalProperties

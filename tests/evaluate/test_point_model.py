@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from real2sim.asset.writers import write_representation
+from real2sim.asset.export.writers import write_representation
 from real2sim.evaluate.discovery import discover_representations
 from real2sim.evaluate.sweep import EvaluationConfig, evaluate
 from real2sim.formats.collision import CollisionGeometry, CollisionShape

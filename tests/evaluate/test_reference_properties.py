@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from real2sim.evaluate.sweep import EvaluationConfig, evaluate
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.physical import PhysicalProperties, read_physical_properties, write_physical_properties
 from tests.evaluate.test_sweep import SHORT_SCENE, make_box_asset
 

@@ -25,8 +25,8 @@ import pytest
 import trimesh
 
 from real2sim.evaluate.sweep import EvaluationConfig, evaluate
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import MARKER_NAME
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import MARKER_NAME
 from real2sim.formats.results import CHECK_COLUMN, RUN_COLUMNS, load_runs_csv, read_runs_csv, read_summary_csv
 from tests.evaluate.test_sweep import BOX_EXTENTS_M, SHORT_SCENE, make_box_asset
 
@@ -248,7 +248,7 @@ def test_simulation_past_its_time_limit_is_a_timeout_row_and_the_sweep_goes_on(b
 
 def test_candidate_timeout_inside_the_simulation_loop(box):
     from real2sim.evaluate.simulate import SimulationTimeout, simulate_candidate, simulate_reference
-    from real2sim.evaluate.tasks import make_run_specs
+    from real2sim.evaluate.scene.tasks import make_run_specs
     from real2sim.formats.physical import read_physical_properties
 
     spec = make_run_specs("push", 1, 0)[0]
@@ -268,7 +268,7 @@ def _open_half_shell(path: Path) -> Path:
 
 
 def test_open_surface_reference_is_refused_up_front(box, tmp_path):
-    from real2sim.evaluate.placement import stable_rotations
+    from real2sim.evaluate.scene.placement import stable_rotations
 
     shell = _open_half_shell(tmp_path / "shell.obj")
     t0 = time.monotonic()

@@ -10,8 +10,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from real2sim.evaluate.scene_config import SceneConfig
-from real2sim.evaluate.tasks import make_run_specs
+from real2sim.evaluate.scene.scene_config import SceneConfig
+from real2sim.evaluate.scene.tasks import make_run_specs
 from real2sim.evaluate.simulate import SimulationError, simulate_candidate, simulate_reference
 
 from tests.evaluate.test_world import CAN_H, CAN_R, write_can_asset
@@ -273,7 +273,7 @@ def test_a_diverging_run_raises_an_informative_error(can_asset):
 def test_bottle_full_scenes_mesh_candidate_matches_reference(tmp_path, task):
     """End to end at the default scene lengths: the bundled bottle as reference and, as
     candidate, the same mesh (rigid hydroelastic: identical; point contact: close)."""
-    from real2sim.asset.writers import write_representation
+    from real2sim.asset.export.writers import write_representation
     from real2sim.asset.canonical import canonicalize
     from real2sim.formats.collision import CollisionGeometry, CollisionShape
     from real2sim.formats.contact import ContactProperties

@@ -18,17 +18,17 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.asset.writers import write_representation
+from real2sim.asset.export.writers import write_representation
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.evaluate.discovery import discover_representations, place_reference_mesh
 from real2sim.evaluate.scoring import score
 from real2sim.evaluate.sweep import EvaluationConfig, evaluate
 from real2sim.formats.results import CHECK_COLUMN, RUN_COLUMNS, read_runs_csv
 from real2sim.formats.trajectory import load_trajectory, save_trajectory
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
-from real2sim.evaluate.scene_config import SceneConfig
+from real2sim.evaluate.scene.scene_config import SceneConfig
 from tests.progress_check import Recorder
 
 BOX_EXTENTS_M = np.array([0.04, 0.05, 0.08])

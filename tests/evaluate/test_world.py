@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.asset.writers import write_representation
+from real2sim.asset.export.writers import write_representation
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
-from real2sim.evaluate.placement import initial_object_pose
-from real2sim.evaluate.scene_config import SceneConfig
-from real2sim.evaluate.tasks import make_run_specs, tilt_angle_rad
-from real2sim.evaluate.world import build_scene, reference_object_adder, urdf_object_adder
+from real2sim.evaluate.scene.placement import initial_object_pose
+from real2sim.evaluate.scene.scene_config import SceneConfig
+from real2sim.evaluate.scene.tasks import make_run_specs, tilt_angle_rad
+from real2sim.evaluate.scene.world import build_scene, reference_object_adder, urdf_object_adder
 
 CAN_R, CAN_H, CAN_KG = 0.034, 0.10, 0.35
 

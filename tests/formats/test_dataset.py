@@ -20,7 +20,7 @@ from real2sim.formats.dataset import (
     realsense_d435_intrinsics,
     write_transforms,
 )
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 
 def _make_dataset(root, n=4, w=32, h=24, seed=0) -> Dataset:

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.mesh_io import load_mesh
+from real2sim.plumbing.errors import UserInputError
+from real2sim.geometry.mesh_io import load_mesh
 
 
 @pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl", ".glb", ".off"])

@@ -3,8 +3,8 @@ from pathlib import Path
 
 import pytest
 
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import atomic_output_dir, check_output_path
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import atomic_output_dir, check_output_path
 
 
 def test_success_moves_folder_into_place(tmp_path):
@@ -39,7 +39,7 @@ def test_existing_folder_needs_overwrite(tmp_path):
 
 
 def test_overwrite_refuses_inputs_cwd_and_foreign_folders(tmp_path, monkeypatch):
-    from real2sim.formats.outputs import check_output_dir
+    from real2sim.plumbing.outputs import check_output_dir
 
     data = tmp_path / "data"
     (data / "sub").mkdir(parents=True)
@@ -64,7 +64,7 @@ def test_overwrite_refuses_inputs_cwd_and_foreign_folders(tmp_path, monkeypatch)
 
 
 def test_lock_is_reentrant_in_a_process_and_removed_after(tmp_path):
-    from real2sim.formats.outputs import output_lock
+    from real2sim.plumbing.outputs import output_lock
 
     target = tmp_path / "out"
     with output_lock(target):
@@ -75,7 +75,7 @@ def test_lock_is_reentrant_in_a_process_and_removed_after(tmp_path):
 
 
 def test_publish_refuses_a_foreign_folder_that_appeared_meanwhile(tmp_path):
-    from real2sim.formats.outputs import publish_dir
+    from real2sim.plumbing.outputs import publish_dir
 
     finished = tmp_path / ".out.tmp-1"
     finished.mkdir()
@@ -104,7 +104,7 @@ def _nothing_can_be_made_in(folder: Path) -> bool:
 def test_output_under_proc_is_refused_up_front():
     """Issue 33 #7: root "may write" /proc by os.access, so the check passed and the lock failed later
     with an internal FileNotFoundError; the check now tries to make something there."""
-    from real2sim.formats.outputs import check_output_dir, output_lock
+    from real2sim.plumbing.outputs import check_output_dir, output_lock
 
     with pytest.raises(UserInputError, match=r"cannot write in /proc"):
         check_output_path("/proc/real2sim-out")
@@ -124,8 +124,8 @@ def test_probe_leaves_nothing_and_empty_path_is_refused(tmp_path):
 
 def test_symbolic_link_loop_is_named(tmp_path):
     """Issue 33 #10: a link loop was "not found" (or an internal RuntimeError from Path.resolve)."""
-    from real2sim.formats.outputs import check_output_dir, output_lock
-    from real2sim.formats.paths import missing
+    from real2sim.plumbing.outputs import check_output_dir, output_lock
+    from real2sim.plumbing.paths import missing
 
     (tmp_path / "a").symlink_to(tmp_path / "b")
     (tmp_path / "b").symlink_to(tmp_path / "a")
@@ -148,7 +148,7 @@ def test_check_replaceable(tmp_path):
     """Issue 33 #7: refine-poses did all its work before finding that transforms.json could not be replaced."""
     import subprocess
 
-    from real2sim.formats.outputs import check_replaceable
+    from real2sim.plumbing.outputs import check_replaceable
 
     target = tmp_path / "transforms.json"
     check_replaceable(target)  # not there yet: fine
@@ -171,7 +171,7 @@ def test_check_replaceable(tmp_path):
 
 def test_public_paths_name_the_output_not_a_removed_temporary(tmp_path):
     """Issue 33 #10: a failed write named `.out.tmp-abcd1234/mesh.obj`, a folder removed on the way out."""
-    from real2sim.formats.outputs import public_paths
+    from real2sim.plumbing.outputs import public_paths
 
     gone = f"{tmp_path}/.model.tmp-k2j4_x9q/mesh.obj"
     assert public_paths(f"cannot write {gone}: no space") == f"cannot write {tmp_path}/model/mesh.obj: no space"

@@ -1,8 +1,8 @@
-"""The progress protocol's helpers (real2sim.formats.progress)."""
+"""The progress protocol's helpers (real2sim.plumbing.progress)."""
 
 from __future__ import annotations
 
-from real2sim.formats.progress import null_progress, prefixed
+from real2sim.plumbing.progress import null_progress, prefixed
 from tests.progress_check import Recorder
 
 

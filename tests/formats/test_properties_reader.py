@@ -12,7 +12,7 @@ import trimesh
 
 from real2sim.asset.build import (COM_MARGIN_FRACTION, MASS_AGREEMENT_RTOL, AssetConfig, check_given_com,
                                   mass_agreement_kg)
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.physical import (MAX_MASS_KG, PhysicalProperties, read_given_properties,
                                        read_physical_properties, write_physical_properties)
 from real2sim.formats.spec import parse_spec

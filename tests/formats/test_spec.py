@@ -1,6 +1,6 @@
 import pytest
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.spec import MAX_PRIMITIVES, parse_spec
 
 

@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 from real2sim.asset.build import AssetConfig, build_asset
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.physical import read_physical_properties
 from real2sim.formats.spec import parse_spec
 from real2sim.geometry.envelope import filled_envelope

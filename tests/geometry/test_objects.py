@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.geometry.objects import OBJECTS, ROUND_SAGITTA_M, export_object, make_object, make_textured_object
 from real2sim.geometry.tessellation import sections_for
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from real2sim.formats.dataset import CV_FROM_GL, read_dataset, read_ground_truth
-from real2sim.pipeline.robot_frame import Similarity, transform_poses
+from real2sim.capture.phone.robot_frame import Similarity, transform_poses
 
 
 def random_similarity(rng: np.random.Generator, scale_range=(0.1, 10.0)) -> Similarity:
@@ -102,7 +102,7 @@ def make_nerfstudio_capture(src: Path, dst: Path, model_from_world: Similarity, 
     import trimesh
 
     from real2sim.formats.dataset import Dataset, write_transforms
-    from real2sim.pipeline.normalise import read_sparse_points
+    from real2sim.capture.phone.normalise import read_sparse_points
 
     make_colmap_capture(src, dst, model_from_world, seed=seed)
     model = read_dataset(dst)

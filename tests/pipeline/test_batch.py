@@ -23,7 +23,7 @@ FAST = ["--backend", "hull", "--voxels", "48", "--max-faces", "2000", "--texture
 
 
 def capture(out: Path, name: str = "can") -> Path:
-    from real2sim.capture.wrist_camera import CaptureConfig, capture as capture_views
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture as capture_views
     from real2sim.geometry.objects import make_textured_object
 
     capture_views(make_textured_object(name), out, CaptureConfig(views=8, width=64, height=48))
@@ -157,7 +157,7 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(capsys, datasets, tmp_
 def test_a_second_batch_on_the_same_catalogue_is_refused(capsys, datasets, tmp_path):
     out = tmp_path / "cat"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\nfrom real2sim.formats.outputs import output_lock\n"
+        [sys.executable, "-c", "import sys, time\nfrom real2sim.plumbing.outputs import output_lock\n"
          f"with output_lock({str(out)!r}):\n    print('held', flush=True)\n    time.sleep(120)"],
         stdout=subprocess.PIPE, text=True)
     try:

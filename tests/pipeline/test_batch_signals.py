@@ -90,7 +90,7 @@ def test_a_lock_a_live_process_holds_is_never_removed(tmp_path):
     job = ObjectJob(name="can_ds", dataset=tmp_path / "can_ds", asset_dir=out / "can_ds")
     lock = out / ".can_ds.lock"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import time\nfrom real2sim.formats.outputs import output_lock\n"
+        [sys.executable, "-c", "import time\nfrom real2sim.plumbing.outputs import output_lock\n"
          f"with output_lock({str(job.asset_dir)!r}):\n    print('held', flush=True)\n    time.sleep(120)"],
         stdout=subprocess.PIPE, text=True)
     try:
@@ -180,7 +180,7 @@ def test_sigterm_of_a_batch_on_a_private_ray_exits_143_and_removes_rays_session(
 def test_a_second_batch_on_a_held_catalogue_is_refused_at_once(two, tmp_path):
     out = tmp_path / "cat"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import time\nfrom real2sim.formats.outputs import output_lock\n"
+        [sys.executable, "-c", "import time\nfrom real2sim.plumbing.outputs import output_lock\n"
          f"with output_lock({str(out)!r}):\n    print('held', flush=True)\n    time.sleep(120)"],
         stdout=subprocess.PIPE, text=True)
     not_ds = tmp_path / "photos_of_nothing"

@@ -27,7 +27,7 @@ KEPT = "pose refinement kept the given poses"
 
 @pytest.fixture(scope="module")
 def tiny_capture(tmp_path_factory) -> Path:
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     out = tmp_path_factory.mktemp("loud") / "can"

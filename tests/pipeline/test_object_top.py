@@ -1,13 +1,13 @@
 """The object's height for ``--object-height-m``: the visual hull's top, or the sparse points' where the
-hull stands over them as a cap (real2sim.pipeline.object_height.object_top)."""
+hull stands over them as a cap (real2sim.capture.phone.object_height.object_top)."""
 
 import warnings
 
 import numpy as np
 import pytest
 
-from real2sim.pipeline.normalise import NormaliseConfig
-from real2sim.pipeline.object_height import HullMeasure, object_top
+from real2sim.capture.phone.normalise import NormaliseConfig
+from real2sim.capture.phone.object_height import HullMeasure, object_top
 
 VOXEL = 0.005
 

@@ -20,7 +20,7 @@ from tests.pipeline.test_robot_frame import CAN_HEIGHT_M, FAST, HULL
 @pytest.fixture(scope="module")
 def phone_capture(tmp_path_factory) -> Path:
     """The can at 160x120 moved into a random similarity frame as a COLMAP model, its masks deleted."""
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     root = tmp_path_factory.mktemp("parallax_run")
@@ -49,7 +49,7 @@ def test_a_colmap_capture_without_masks_becomes_an_asset_close_to_the_truth(phon
 @pytest.mark.slow
 def test_parallax_masks_of_a_robot_capture_wait_for_refined_poses(tmp_path):
     """With --refine-poses the masks are made on the refined dataset, after refine_poses."""
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.cli import main
     from real2sim.geometry.objects import make_textured_object
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from real2sim.formats.dataset import CV_FROM_GL, read_dataset, read_ground_truth, rotation_angle_deg
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.pipeline.phone import (BOARD_RECORD, SFM_RECORD, PhoneConfig, _write_model, phone_input,
                                      run_board_frame, run_sfm)
 
@@ -51,7 +51,7 @@ def sfm_dir(handheld, tmp_path_factory) -> Path:
 
 
 def test_sfm_stage_writes_a_colmap_dataset_with_its_truth(handheld, sfm_dir):
-    import real2sim.capture.board_focal as board_focal
+    import real2sim.capture.phone.board_focal as board_focal
     from real2sim.formats.colmap_model import read_colmap_model
 
     ds = read_colmap_model(sfm_dir)
@@ -79,7 +79,7 @@ def test_sfm_stage_writes_a_colmap_dataset_with_its_truth(handheld, sfm_dir):
 
 
 def test_a_board_in_too_few_views_leaves_sfms_focal_length_with_a_warning(handheld, tmp_path, monkeypatch):
-    import real2sim.capture.board_focal as board_focal
+    import real2sim.capture.phone.board_focal as board_focal
 
     monkeypatch.setattr(board_focal, "MIN_VIEWS", VIEWS + 1)  # the board in every view, and still too few
     with pytest.warns(RuntimeWarning, match="focal length stays SfM's"):
@@ -121,7 +121,7 @@ def test_board_frame_uses_the_board_file_it_is_given(handheld, sfm_dir, tmp_path
     halve the scene."""
     from dataclasses import replace
 
-    from real2sim.capture.board import DEFAULT_BOARD, read_board_spec
+    from real2sim.capture.phone.board import DEFAULT_BOARD, read_board_spec
 
     spec = read_board_spec(_board_file(tmp_path))
     assert spec == DEFAULT_BOARD
@@ -137,7 +137,7 @@ def test_run_reads_a_custom_board_file_and_refuses_a_wrong_one(tmp_path, capsys)
 
     from PIL import Image
 
-    from real2sim.capture.board import BoardSpec
+    from real2sim.capture.phone.board import BoardSpec
     from real2sim.cli.run import phone_config
 
     (tmp_path / "photos").mkdir()
@@ -193,7 +193,7 @@ def test_model_written_for_the_robot_frame_stage(tmp_path):
     ds = read_colmap_model(tmp_path)
     assert [f.file_path for f in ds.frames] == ["images/a.png", "images/b.png"]
     assert np.allclose(ds.frames[1].transform_matrix @ CV_FROM_GL, c2w[1], atol=1e-9)
-    from real2sim.pipeline.normalise import _colmap_points
+    from real2sim.capture.phone.normalise import _colmap_points
 
     assert len(_colmap_points(tmp_path / "sparse" / "0")) == 2
 
@@ -325,10 +325,10 @@ def test_a_phone_capture_masked_by_parallax_gets_the_objects_second_opinion():
     mm, 2.11 with it): `run` sets both for a phone capture, and leaves a ParallaxConfig the caller gave, and
     robot captures, as they are."""
     from real2sim.asset.build import AssetConfig
-    from real2sim.capture.masking import MaskConfig
+    from real2sim.capture.masks.methods import MaskConfig
     from real2sim.formats.spec import parse_spec
     from real2sim.pipeline.run import RunConfig, phone_mask_config
-    from real2sim.reconstruct.parallax_config import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
+    from real2sim.capture.masks.parallax_config import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
                                                       ParallaxConfig)
 
     asset = AssetConfig(mass_kg=0.35, specs=(parse_spec("boxes:8"),))

@@ -53,7 +53,7 @@ def background_capture(tmp_path_factory) -> Path:
     background mask covers the whole image: the masks stage warns while it works in its temporary copy."""
     from PIL import Image
 
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     out = tmp_path_factory.mktemp("background") / "can"
@@ -92,7 +92,7 @@ def test_a_mask_stage_warning_names_the_masked_folder_not_its_temporary(backgrou
 
 def test_a_board_file_that_is_not_the_board_in_the_photos_stops_at_the_board_frame_stage(photos, tmp_path, capsys):
     """The photos show the default 7x5 board of 32 mm squares; the file is a 9x6 board of 20 mm squares."""
-    from real2sim.capture.board_frame import MIN_BOARD_VIEWS
+    from real2sim.capture.phone.board_frame import MIN_BOARD_VIEWS
 
     code, _, err = run_cli(capsys, "board", "--out", tmp_path / "b.pdf", "--squares", "9x6", "--square-mm", 20)
     assert code == 0, err

@@ -22,7 +22,7 @@ EVALUATE = ["--evaluate", "--tasks", "push", "--contact", "point", "--runs", "1"
 
 
 def _capture(out: Path, ground_truth: bool) -> Path:
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     capture(make_textured_object("can"), out, CaptureConfig(views=8, width=64, height=48))

@@ -1,4 +1,4 @@
-"""Captures without a robot: the robot frame from a COLMAP model (real2sim.pipeline.robot_frame, .normalise).
+"""Captures without a robot: the robot frame from a COLMAP model (real2sim.capture.phone.robot_frame, .normalise).
 
 Unit tests of the plane fit, the similarity and its action on poses; then `run` end to end on a
 small simulated capture of the can (60 views at 120x90 px, no pose noise: with fewer views the
@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from real2sim.formats.errors import UserInputError
-from real2sim.pipeline import robot_frame as rf
+from real2sim.plumbing.errors import UserInputError
+from real2sim.capture.phone import robot_frame as rf
 from tests.pipeline.colmap_capture import make_colmap_capture, make_nerfstudio_capture, random_similarity
 from tests.reconstruct.conftest import raised_dataset
 
@@ -162,7 +162,7 @@ def test_frame_errors_of_a_pure_turn_about_z_are_zero():
 
 def test_projection_matches_the_reconstruction_stage_with_distortion():
     from real2sim.formats.dataset import CameraIntrinsics
-    from real2sim.reconstruct.views import project
+    from real2sim.multiview.views import project
 
     rng = np.random.default_rng(7)
     k = CameraIntrinsics(160, 120, 150.0, 148.0, 81.0, 59.0, k1=-0.1, k2=0.02, p1=1e-3, p2=-2e-3)
@@ -192,7 +192,7 @@ def run_cli(capsys, *args) -> tuple[int, str, str]:
 def captures(tmp_path_factory) -> dict[str, Path]:
     """The can in the robot frame (no ground truth: the comparison is asset to asset), and moved into a
     random similarity frame as a COLMAP model, with and without ground_truth/."""
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     root = tmp_path_factory.mktemp("robot_frame")
@@ -341,7 +341,7 @@ def test_nerfstudio_capture_reads_its_point_cloud_or_else_its_colmap_model(captu
     """ns-process-data's sparse_pc.ply is in the transforms.json frame; without it, colmap/sparse/0 moved by
     applied_transform gives the same points. The normalised copy no longer claims a model frame."""
     from real2sim.formats.dataset import is_model_frame, read_dataset
-    from real2sim.pipeline.normalise import read_sparse_points
+    from real2sim.capture.phone.normalise import read_sparse_points
 
     with_cloud = read_dataset(captures["nerfstudio"])
     without = read_dataset(make_nerfstudio_capture(captures["truth"], tmp_path / "no_cloud", captures["similarity"],
@@ -382,7 +382,7 @@ def test_bad_nerfstudio_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
 
 
 def test_normalise_reports_progress(captures, tmp_path):
-    from real2sim.pipeline.normalise import NormaliseConfig, normalise
+    from real2sim.capture.phone.normalise import NormaliseConfig, normalise
     from tests.progress_check import Recorder
 
     progress = Recorder()

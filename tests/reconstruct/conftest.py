@@ -20,7 +20,7 @@ VIEWS = 60
 
 
 def capture_can(out: Path, views: int = VIEWS) -> Path:
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     capture(make_textured_object("can"), out,
@@ -67,7 +67,7 @@ def hull_result(can_capture, tiny_config):
 def tiny_config():
     """A field and hull small enough for the default suite (field grid 18x18x24 -> 36x36x48)."""
     from real2sim.reconstruct.stage import ReconstructConfig
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.reconstruct.field.train import FieldConfig
 
     field = FieldConfig(coarse_voxels=24, fine_voxels=48, coarse_steps=40, fine_steps=80, rays_per_step=1024)
     # max_faces 4000: xatlas takes ~10 s to unwrap the 28k-face hull surface, ~0.4 s for 4000 faces

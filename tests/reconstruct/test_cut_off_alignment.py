@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from real2sim.reconstruct.views import load_views, project
+from real2sim.multiview.views import load_views, project
 
 
 @pytest.fixture(scope="module")
@@ -25,10 +25,10 @@ def cut_ring(tmp_path_factory):
     quarter of the views turned so the bottle runs off the image."""
     import trimesh
 
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.formats.dataset import read_ground_truth
     from real2sim.geometry.objects import make_textured_object
-    from real2sim.reconstruct.silhouette_poses import mask_centres
+    from real2sim.reconstruct.poses.silhouette import mask_centres
     from real2sim.reconstruct.truth import load_truth
 
     out = tmp_path_factory.mktemp("cut_ring") / "bottle"
@@ -51,8 +51,8 @@ def test_views_cut_by_the_border_are_not_rolled_off(cut_ring):
     others' hull with the weights ``align_all`` uses: the true bottle lands within a few pixels of where the
     true camera sees it. Measured (the worst pixel of each view, 36 fits): p90 3.5 px, max 7.7 px; with
     ``SPILL_WEIGHT`` (0.03) p90 12.6 px, max 22.8 px."""
-    from real2sim.capture.wrist_camera import perturb_poses
-    from real2sim.reconstruct.silhouette_poses import ALL_OUTLIER_FRACTION, ALL_SPILL_WEIGHT, align_view, \
+    from real2sim.capture.sim.wrist_camera import perturb_poses
+    from real2sim.reconstruct.poses.silhouette import ALL_OUTLIER_FRACTION, ALL_SPILL_WEIGHT, align_view, \
         leave_one_out_surfaces
 
     views, cut, points = cut_ring

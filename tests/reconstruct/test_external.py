@@ -13,7 +13,7 @@ import trimesh
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.reconstruct.external import import_nerfstudio_mesh, read_dataparser_transforms, world_from_nerfstudio
 from tests.cli_helpers import run_cli as _run
 
@@ -75,7 +75,7 @@ def test_world_from_nerfstudio_is_the_inverse():
 
 def test_import_keeps_the_texture(tmp_path):
     """A textured nerfstudio export (OBJ + MTL + PNG) comes back textured, its UVs untouched."""
-    from real2sim.formats.mesh_io import export_textured_mesh
+    from real2sim.geometry.mesh_io import export_textured_mesh
     from real2sim.geometry.objects import make_textured_object
 
     can = make_textured_object("can")

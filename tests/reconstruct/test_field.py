@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from real2sim.reconstruct.field import VoxelRadianceField
-from real2sim.reconstruct.voxel_grid import VoxelGrid
+from real2sim.reconstruct.field.radiance import VoxelRadianceField
+from real2sim.multiview.voxel_grid import VoxelGrid
 
 VOXEL = 0.01
 SHAPE = (8, 6, 10)
@@ -190,8 +190,8 @@ def test_upsampled_field_renders_the_same():
 
 def test_a_step_and_voxel_budget_halves_for_the_coarse_grid():
     """``reconstruct`` and ``run`` both build their field settings from --steps and --voxels this way."""
-    from real2sim.formats.errors import UserInputError
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.reconstruct.field.train import FieldConfig
 
     base = FieldConfig()
     assert base.with_budget() == base
@@ -206,7 +206,7 @@ def test_a_step_and_voxel_budget_halves_for_the_coarse_grid():
 
 def test_deep_photo_carved_space_is_left_out_at_every_resolution():
     """What carving opened, farther than the margin from what it kept, is not part of the field."""
-    from real2sim.reconstruct.train import _deep_carved
+    from real2sim.reconstruct.field.train import _deep_carved
 
     coarse = VoxelGrid.covering(np.zeros(3), np.full(3, 0.16), 16, 0.0)  # 1 cm voxels
     fine = VoxelGrid.covering(np.zeros(3), np.full(3, 0.16), 32, 0.0)

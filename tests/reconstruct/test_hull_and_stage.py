@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.formats.errors import UserInputError
-from real2sim.reconstruct.extract import SURFACE_DENSITY_PER_VOXEL
+from real2sim.plumbing.errors import UserInputError
+from real2sim.reconstruct.field.extract import SURFACE_DENSITY_PER_VOXEL
 from real2sim.reconstruct.stage import ReconstructConfig, reconstruct, resolve_device, write_reconstruction
 
 HELD_OUT = [f"images/frame_{i:05d}.png" for i in range(5, 60, 10)]  # every 10th view, from the 5th
@@ -195,7 +195,7 @@ def test_written_texture_reads_back_like_the_images(hull_result, can_capture, tm
     Face centres facing a training camera (cos > 0.7) and not hidden from it: texture colour vs the
     pixel they project to. Measured mean absolute error 0.037 (colours in [0, 1]); with v flipped 0.24.
     """
-    from real2sim.reconstruct.views import load_views, project
+    from real2sim.multiview.views import load_views, project
 
     out = write_reconstruction(hull_result, tmp_path / "mesh_out")
     mesh = trimesh.load(out / "mesh.obj", force="mesh", process=False)
@@ -247,7 +247,7 @@ def test_field_config_validation(can_capture, tiny_config):
 def test_a_gpu_trains_in_fewer_larger_batches():
     """On a GPU a step costs the host's launching of its operators whatever its rays, so the same rays
     come in ``device_batch_scale`` times fewer steps; a CPU trains as configured."""
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.reconstruct.field.train import FieldConfig
 
     config = FieldConfig()
     assert config.on_device("cpu") is config
@@ -275,8 +275,8 @@ def test_resolve_device():
 
 def test_object_region_closes_with_24_views(tmp_path_factory):
     """The capture the reconstruct stage is meant to take: 24 views round the can (7 rings)."""
-    from real2sim.reconstruct.hull import object_region
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.hull import object_region
+    from real2sim.multiview.views import load_views
 
     from .conftest import capture_can
 
@@ -290,7 +290,7 @@ def test_largest_parts_keeps_an_open_surface_over_a_closed_speck():
     """A TSDF surface is open: a tiny closed speck beside it must not win on 'volume' (bench regression)."""
     import trimesh
 
-    from real2sim.reconstruct.voxel_grid import largest_parts
+    from real2sim.multiview.voxel_grid import largest_parts
 
     sheet = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
     sheet.update_faces(sheet.vertices[sheet.faces][:, :, 2].min(axis=1) > -0.03)  # open at the bottom
@@ -331,8 +331,8 @@ def test_silhouette_outliers_are_a_fraction_of_the_views_that_see_a_point():
     are still forgiven."""
     from real2sim.formats.dataset import CameraIntrinsics
     from real2sim.formats.rotations import rot_z
-    from real2sim.reconstruct.hull import silhouette_scores
-    from real2sim.reconstruct.views import PosedViews
+    from real2sim.multiview.hull import silhouette_scores
+    from real2sim.multiview.views import PosedViews
 
     k = CameraIntrinsics(32, 24, 30.0, 30.0, 16.0, 12.0)
     c2w = np.tile(np.eye(4), (100, 1, 1))
@@ -354,8 +354,8 @@ def test_silhouette_outliers_are_a_fraction_of_the_views_that_see_a_point():
 def test_the_masks_level_is_nearer_the_truth_than_half_light(field_result, truth, tiny_config):
     """On the tiny field (2.1 mm voxels) the surface at the masks' level (0.83 ln 2) is nearer the true can
     than the one at ln 2 per voxel, which lies inside it (measured: 0.52 against 0.61 mm Chamfer)."""
-    from real2sim.reconstruct.extract import density_mesh
-    from real2sim.reconstruct.voxel_grid import largest_parts, simplified
+    from real2sim.reconstruct.field.extract import density_mesh
+    from real2sim.multiview.voxel_grid import largest_parts, simplified
 
     half_light = simplified(largest_parts(density_mesh(field_result.field)), tiny_config.max_faces)
     chosen = _errors(field_result.mesh, truth)

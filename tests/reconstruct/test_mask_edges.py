@@ -22,7 +22,7 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def can_views(can_capture):
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     return load_views(can_capture)
 
@@ -48,7 +48,7 @@ def test_a_rough_mask_comes_back_to_the_object(can_views, change):
 def test_exact_masks_are_kept_as_given(can_views):
     """A rendered capture's masks differ from the colours only at a few mixed pixels (a rim seen
     edge-on): the stage keeps them, and says so."""
-    from real2sim.reconstruct.views import MIN_EDGE_SHIFT_PX, refined_mask_edges
+    from real2sim.multiview.views import MIN_EDGE_SHIFT_PX, refined_mask_edges
 
     kept, report = refined_mask_edges(can_views)
     assert not report["applied"] and report["median_edge_shift_px"] < MIN_EDGE_SHIFT_PX, report

@@ -13,9 +13,9 @@ VOXELS = 48  # longest side of the grid, as in test_photo_carving
 @pytest.fixture(scope="module")
 def can_hull(can_capture):
     """The can's views, a grid over it and its visual hull (bool)."""
-    from real2sim.reconstruct.hull import carve, object_region
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.hull import carve, object_region
+    from real2sim.multiview.voxel_grid import VoxelGrid
+    from real2sim.multiview.views import load_views
 
     views = load_views(can_capture)
     grid = VoxelGrid.covering(*object_region(views), VOXELS, 0.0)
@@ -24,7 +24,7 @@ def can_hull(can_capture):
 
 def _carvings_settings() -> dict:
     """The re-check's settings as photo carving passes them."""
-    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.carving.photo import CarvingConfig
 
     config = CarvingConfig()
     return dict(band_voxels=config.restore_band_voxels, max_rounds=config.max_restore_rounds,
@@ -34,7 +34,7 @@ def _carvings_settings() -> dict:
 def test_emptied_rays_put_back_a_removed_top(can_hull):
     """Remove the can's upper half by hand: the side views' rays through it meet nothing any more, so
     nearly all of it is put back; removing nothing puts nothing back."""
-    from real2sim.reconstruct.mask_recheck import emptied_rays
+    from real2sim.reconstruct.carving.mask_recheck import emptied_rays
 
     views, grid, hull = can_hull
     solid = hull.copy()
@@ -54,7 +54,7 @@ def test_a_rim_carving_lowered_grows_back_without_a_lid(can_hull):
     put back by whole rays, 31 by the rim first), and every mask ray meets the result."""
     from scipy.ndimage import binary_erosion, distance_transform_edt
 
-    from real2sim.reconstruct.mask_recheck import emptied_rays, put_back_for_masks
+    from real2sim.reconstruct.carving.mask_recheck import emptied_rays, put_back_for_masks
 
     views, grid, hull = can_hull
     top = np.nonzero(hull.any(axis=(0, 1)))[0].max()
@@ -76,7 +76,7 @@ def test_a_hollow_behind_an_intact_skin_empties_no_ray_and_chunks_do_not_matter(
     walking a whole view at once (the removed top of the test above)."""
     from scipy.ndimage import binary_erosion
 
-    from real2sim.reconstruct.mask_recheck import emptied_rays, put_back_for_masks
+    from real2sim.reconstruct.carving.mask_recheck import emptied_rays, put_back_for_masks
 
     views, grid, hull = can_hull
     hollow = hull & ~binary_erosion(hull, iterations=2)
@@ -96,7 +96,7 @@ def test_emptied_rays_on_cuda_match_the_cpu(can_hull):
     """The masks' rays walked on CUDA put back exactly the CPU's voxels (same float64 samples)."""
     import torch
 
-    from real2sim.reconstruct.mask_recheck import emptied_rays
+    from real2sim.reconstruct.carving.mask_recheck import emptied_rays
 
     if not torch.cuda.is_available():
         pytest.skip("needs a CUDA GPU")
@@ -114,7 +114,7 @@ def test_walking_only_the_rays_found_empty_before_finds_what_walking_all_finds(c
     same voxels and the same emptied rays as walking every mask ray."""
     import torch
 
-    from real2sim.reconstruct.mask_recheck import _mask_ray_check
+    from real2sim.reconstruct.carving.mask_recheck import _mask_ray_check
 
     views, grid, hull = can_hull
     topless = hull.copy()

@@ -13,8 +13,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from real2sim.reconstruct.size_placement import object_moved, placed_by_size
-from real2sim.reconstruct.views import load_views
+from real2sim.reconstruct.poses.size_placement import object_moved, placed_by_size
+from real2sim.multiview.views import load_views
 
 VOXELS = 96  # the stage's 160 takes three times as long for the same answer within 0.1 mm here
 
@@ -23,7 +23,7 @@ VOXELS = 96  # the stage's 160 takes three times as long for the same answer wit
 def ring(tmp_path_factory):
     """(true-posed views, the true can's bounding-box centre, metres) of a 32-view level ring at 160x120
     through an 825 px lens (3300 px at 640 wide), no table: the can stands on z = 0."""
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.formats.dataset import read_ground_truth
     from real2sim.geometry.objects import make_textured_object
     from real2sim.reconstruct.truth import load_truth
@@ -91,7 +91,7 @@ def test_too_few_whole_views_leave_the_cameras_as_they_are(ring):
 
 def test_the_move_bound_follows_the_given_poses_disagreement(ring):
     """4 x (median miss / focal length x distance) x sqrt(2 / views): 1 deg through 825 px at 0.65 m, 32 views."""
-    from real2sim.reconstruct.size_placement import size_move_bound_m
+    from real2sim.reconstruct.poses.size_placement import size_move_bound_m
 
     views, centre = ring
     distance = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - centre, axis=1)))
@@ -105,7 +105,7 @@ def test_align_all_tries_far_views_by_size_and_says_so_when_it_cannot(ring):
     object's placement by size is tried; views that agree exactly on a wrong place leave no doubt about it in
     the given poses (the bound is 0), so the sizes are not believed, the report says why, and a WARNING says
     where the object stands from."""
-    from real2sim.reconstruct.silhouette_poses import align_all
+    from real2sim.reconstruct.poses.silhouette import align_all
 
     views, centre = ring
     with pytest.warns(RuntimeWarning, match="placed among the cameras by the given poses' mean alone"):
@@ -119,7 +119,7 @@ def test_align_all_tries_far_views_by_size_and_says_so_when_it_cannot(ring):
 def test_the_others_hull_is_finer_where_a_voxel_would_span_pixels(ring):
     """Through the long lens (0.79 mm a pixel at the can) the others' hull gets voxels of about 1.5 px; a box
     small in the image keeps the default 96, and a huge one stops at the cap."""
-    from real2sim.reconstruct.others_hull import ALL_MAX_VOXELS, ALL_VOXELS, others_hull_voxels
+    from real2sim.reconstruct.poses.others_hull import ALL_MAX_VOXELS, ALL_VOXELS, others_hull_voxels
 
     views, centre = ring
     pixel_m = float(np.median(np.linalg.norm(views.c2w_cv[:, :3, 3] - centre, axis=1))) / views.intrinsics.fl_x
@@ -134,7 +134,7 @@ def test_near_cameras_keep_the_default_others_hull(ring):
     ring (about 11 can sizes away) gets it; the same lens 3 times nearer (under ``FAR_RATIO``) keeps 96,
     though its voxels would span more pixels (the robot's bottle on a stand: 1.22 mm with the finer hull,
     0.69 mm with 96; the can 0.39 and 0.46 mm)."""
-    from real2sim.reconstruct.others_hull import ALL_VOXELS, FAR_RATIO, others_hull_voxels, rounds_hull_voxels
+    from real2sim.reconstruct.poses.others_hull import ALL_VOXELS, FAR_RATIO, others_hull_voxels, rounds_hull_voxels
 
     views, centre = ring
     long_lens = replace(views, intrinsics=replace(views.intrinsics, fl_x=4 * views.intrinsics.fl_x,

@@ -34,7 +34,7 @@ MIN_BOTTOM_SHARE = 0.85
 
 
 def _masks(root: Path, folder: str) -> np.ndarray:
-    from real2sim.capture.masking import load_mask
+    from real2sim.capture.masks.methods import load_mask
 
     names = sorted(p.name for p in (root / "ground_truth" / "masks").glob("*.png"))
     return np.stack([load_mask(root / folder / name) for name in names])
@@ -70,7 +70,7 @@ def test_make_masks_match_the_rendered_truth(parallax_result):
     with its warped neighbour alone, without the half-pixel range, calls the printed table's edges
     parallax and the hull does not close at all (measured). Good masks raise no doubt (issue 33 #9:
     measured 0 of 60 views at the image border, median coverage 13 %)."""
-    from real2sim.capture.masking import iou
+    from real2sim.capture.masks.methods import iou
 
     root, code, out, err = parallax_result
     assert code == 0, err
@@ -100,7 +100,7 @@ def test_make_masks_reach_the_bottom_of_the_can(parallax_result):
 def test_make_masks_publish_into_the_dataset(parallax_result, can_capture):
     """masks_parallax/ holds one mask per frame and transforms.json names them; the capture's own masks/
     are left as they were, and the views load with the new masks."""
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     root = parallax_result[0]
     frames = json.loads((root / "transforms.json").read_text())["frames"]
@@ -124,7 +124,7 @@ def _disc(shape: tuple[int, int], centre: tuple[int, int], radius: float) -> np.
 def test_plain_disc_ringed_by_table_becomes_table():
     """A plain disc printed on the table has only table pixels around it: it is table. If the patches
     did not take their ring's verdict, a white table would stay a candidate and never be carved."""
-    from real2sim.reconstruct.parallax_table import _plain_patches_decided
+    from real2sim.capture.masks.parallax_table import _plain_patches_decided
 
     disc = _disc((40, 40), (20, 20), 8)
     table, other, beyond = ~disc, np.zeros_like(disc), np.zeros_like(disc)
@@ -138,7 +138,7 @@ def test_plain_patch_ringed_by_parallax_stays_not_table():
     its lower edge, standing on the table, matches it (here the whole lower half of the ring: about as
     many table votes as other ones; a simple majority would make the can table). A patch ringed almost
     all by table, but for a short arc, is table."""
-    from real2sim.reconstruct.parallax_table import _plain_patches_decided
+    from real2sim.capture.masks.parallax_table import _plain_patches_decided
 
     shape = (40, 40)
     patch = _disc(shape, (20, 20), 8)
@@ -160,7 +160,7 @@ def test_plain_border_patch_beyond_the_table_is_background():
     """A plain wall behind the object reaches the image's border and lies beyond the table (rays miss
     its plane or no neighbour sees where they land): it is background even though the object's parallax
     rings it. The same patch mostly on the table, or not touching the border, keeps its ring's verdict."""
-    from real2sim.reconstruct.parallax_table import _plain_patches_decided
+    from real2sim.capture.masks.parallax_table import _plain_patches_decided
 
     shape = (40, 40)
     rows = np.arange(shape[0])[:, None] * np.ones(shape[1], int)
@@ -180,7 +180,7 @@ def test_plain_border_patch_beyond_the_table_is_background():
 
 def test_no_undecided_pixels_returns_table_unchanged():
     """With every pixel decided there is nothing to grow into."""
-    from real2sim.reconstruct.parallax_table import _plain_patches_decided
+    from real2sim.capture.masks.parallax_table import _plain_patches_decided
 
     rng = np.random.default_rng(0)
     table = rng.random((20, 30)) < 0.5
@@ -192,7 +192,7 @@ def test_no_undecided_pixels_returns_table_unchanged():
 
 
 def _grid(shape=(12, 12, 40)):
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
+    from real2sim.multiview.voxel_grid import VoxelGrid
 
     return VoxelGrid(np.array([0.0, 0.0, 0.0005]), 0.001, shape)
 
@@ -201,7 +201,7 @@ def test_a_body_floating_one_voxel_up_is_filled_down_but_a_handle_is_not():
     """A can whose lowest voxel is one above the table (its foot looked like table) is filled down to
     the table; a mug handle sticking out sideways at mid-height is not extended to the table (the
     columns under it stay empty), and nothing above the lowest voxels changes."""
-    from real2sim.reconstruct.parallax_masks import _filled_to_table
+    from real2sim.capture.masks.parallax import _filled_to_table
 
     grid = _grid()
     scores = np.zeros(grid.shape, np.float32)
@@ -219,7 +219,7 @@ def test_fill_keeps_to_the_band_and_to_inside_voxels():
     """A body whose lowest voxel lies above the band is left alone (something standing on another
     thing, or a real gap); soft scores under 0.5 are not inside and do not anchor a fill; an empty
     hull comes back as it was."""
-    from real2sim.reconstruct.parallax_masks import _filled_to_table
+    from real2sim.capture.masks.parallax import _filled_to_table
 
     grid = _grid()
     scores = np.zeros(grid.shape, np.float32)
@@ -240,7 +240,7 @@ def test_the_stricter_verdicts_base_is_added_under_the_body_only():
     hull has it, with a halo around it and a skirt beside the body. Under the body's columns the strict
     hull's voxels come back; beside the body (the halo's columns) and under a handle, where the strict
     hull has nothing, nothing is added; above the lowest voxels nothing changes."""
-    from real2sim.reconstruct.parallax_masks import _base_added
+    from real2sim.capture.masks.parallax import _base_added
 
     grid = _grid()
     wide = np.zeros(grid.shape, np.float32)
@@ -259,9 +259,9 @@ def test_the_stricter_verdicts_base_is_added_under_the_body_only():
 
 def _ring_views(width: int = 320, height: int = 240):
     """60 views of a small object on the table (two rings, 35 and 60 degrees up, 0.5 m away), no images."""
-    from real2sim.capture.hard_rigs import ring_poses
+    from real2sim.capture.sim.hard_rigs import ring_poses
     from real2sim.formats.dataset import CameraIntrinsics
-    from real2sim.reconstruct.views import PosedViews
+    from real2sim.multiview.views import PosedViews
 
     c2w_cv = np.concatenate([ring_poses(30, e, 0.5, np.array([0.0, 0.0, 0.04])) for e in (35.0, 60.0)])
     c2w_cv = c2w_cv @ np.diag([1.0, -1.0, -1.0, 1.0])  # OpenGL -> OpenCV axes
@@ -280,7 +280,7 @@ def test_space_a_few_views_see_table_through_goes_but_the_foot_stays():
     0.05 there as well the foot is lost."""
     import trimesh
 
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig, _standing_hull, render_silhouettes
+    from real2sim.capture.masks.parallax import ParallaxConfig, _standing_hull, render_silhouettes
 
     views = _ring_views()
     def block(lo, hi):
@@ -318,7 +318,7 @@ def test_low_parallax_height_shrinks_with_the_pixels():
     60 views 0.5 m away at 300 px focal length it is a few centimetres, under the object's height."""
     from dataclasses import replace
 
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig, low_parallax_height_m
+    from real2sim.capture.masks.parallax import ParallaxConfig, low_parallax_height_m
 
     views = _ring_views()
     sharp = replace(views, intrinsics=replace(views.intrinsics, fl_x=1200.0, fl_y=1200.0, cx=640.0, cy=480.0,
@@ -333,8 +333,8 @@ def test_low_parallax_height_shrinks_with_the_pixels():
 def test_match_reach_must_be_ordered_and_at_most_a_pixel():
     """The base's reach may not be wider than the object's, nor either beyond a pixel (a 3x3 window would
     let a black-and-white pattern on the object match the table): one clear error."""
-    from real2sim.formats.errors import UserInputError
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.capture.masks.parallax import ParallaxConfig
 
     ParallaxConfig().validate()
     for bad in (dict(base_reach_px=1.0, match_reach_px=0.5), dict(match_reach_px=1.5), dict(base_reach_px=-0.1)):
@@ -361,7 +361,7 @@ def test_half_pixel_range_holds_a_step_edge_shifted_half_a_pixel():
     """A sharp edge printed on the table, resampled half a pixel off in the neighbour's warp, lies within
     the range (no false parallax); shifted a whole pixel it does not (the range is not a 3x3 window,
     which would let any black-and-white pattern on the object match)."""
-    from real2sim.reconstruct.parallax_table import _half_pixel_range
+    from real2sim.capture.masks.parallax_table import _half_pixel_range
 
     image = torch.zeros(3, 8, 12)
     image[:, :, 6:] = 1.0
@@ -386,7 +386,7 @@ def test_half_pixel_range_holds_a_step_edge_shifted_half_a_pixel():
 def test_one_pass_of_extremes_gives_the_range_of_every_reach():
     """The range over a pixel and the four points ``r`` towards its neighbours, computed point by point, is the
     blend of the pixel and its neighbours' extremes (what table_evidence computes once for both reaches)."""
-    from real2sim.reconstruct.parallax_table import _cross_extremes, _reached
+    from real2sim.capture.masks.parallax_table import _cross_extremes, _reached
 
     image = torch.rand(2, 3, 9, 11, generator=torch.Generator().manual_seed(0))
     padded = torch.nn.functional.pad(image, (1, 1, 1, 1), mode="replicate")
@@ -402,7 +402,7 @@ def test_one_pass_of_extremes_gives_the_range_of_every_reach():
 def test_specks_go_on_the_grid_and_parts_of_the_object_stay():
     """A part under 5 % of the largest one's voxels is cleared; a part above it (a handle cut off by the
     hull) and soft scores under 0.5 stay as they were."""
-    from real2sim.reconstruct.parallax_masks import _without_specks
+    from real2sim.capture.masks.parallax import _without_specks
 
     scores = np.zeros((20, 20, 20), np.float32)
     scores[2:12, 2:12, 0:10] = 1.0  # 1000 voxels
@@ -421,7 +421,7 @@ def test_specks_go_on_the_grid_and_parts_of_the_object_stay():
 def test_half_pixel_range_of_a_batch_is_per_image():
     """(K, C, H, W) in, (K, C, H, W) out, each image's range its own (padding per image: no bleeding
     between neighbours in the batch); a flat image's range is itself, edges included."""
-    from real2sim.reconstruct.parallax_table import _half_pixel_range
+    from real2sim.capture.masks.parallax_table import _half_pixel_range
 
     gen = torch.Generator().manual_seed(0)
     batch = torch.rand(4, 3, 9, 7, generator=gen)
@@ -443,10 +443,10 @@ def test_neighbours_are_other_views_in_the_angle_range(can_capture):
     """Each view's neighbours are other views, distinct, the nearest of those 8 to 35 degrees away from it as
     seen from the common point (views out of range only where too few are in it); too few views is a
     one-line error, and so is a config that cannot choose any."""
-    from real2sim.formats.errors import UserInputError
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig
-    from real2sim.reconstruct.parallax_table import neighbour_views
-    from real2sim.reconstruct.views import PosedViews, common_look_at_point, load_views
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.capture.masks.parallax import ParallaxConfig
+    from real2sim.capture.masks.parallax_table import neighbour_views
+    from real2sim.multiview.views import PosedViews, common_look_at_point, load_views
 
     views = load_views(can_capture, need_masks=False)
     config = ParallaxConfig()
@@ -478,9 +478,9 @@ def test_a_textureless_table_is_a_one_line_error(can_capture, tmp_path, capsys):
     """Uniform grey images give no texture to test against the table: nothing is carved and the hull does
     not close. That is a one-line UserInputError (exit status 2 from the CLI, nothing written), not a
     crash or an empty mask folder."""
-    from real2sim.formats.errors import UserInputError
-    from real2sim.reconstruct.parallax_masks import parallax_masks
-    from real2sim.reconstruct.views import PosedViews, load_views
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.capture.masks.parallax import parallax_masks
+    from real2sim.multiview.views import PosedViews, load_views
 
     views = load_views(can_capture, need_masks=False)
     grey = PosedViews(np.full_like(views.rgb, 0.5), np.zeros_like(views.mask), views.c2w_cv, views.intrinsics,
@@ -521,7 +521,7 @@ def test_cli_mask_unknown_method_exits_2(can_capture, tmp_path, capsys):
 def test_mask_doubts_measure_border_and_coverage():
     """Issue 33 #9, without ground truth: silhouettes wholly in view pass; masks at the image border in most
     views, or covering most of the image, are named with the measured share."""
-    from real2sim.reconstruct.parallax_masks import mask_doubts
+    from real2sim.capture.masks.parallax import mask_doubts
 
     masks = np.zeros((16, 72, 96), bool)
     masks[:, 20:50, 30:60] = True  # 13 % of each image, clear of the border
@@ -555,7 +555,7 @@ def test_parallax_along_an_edge_is_no_evidence():
     import torch
 
     from real2sim.formats.dataset import CameraIntrinsics
-    from real2sim.reconstruct.parallax_table import _parallax_across_edges
+    from real2sim.capture.masks.parallax_table import _parallax_across_edges
 
     k = CameraIntrinsics(width=40, height=40, fl_x=50.0, fl_y=50.0, cx=20.0, cy=20.0)
     c2w = np.eye(4)
@@ -580,7 +580,7 @@ def test_a_barrier_keeps_a_plain_base_apart_from_the_plain_table():
     """The plain base of an object (a dark band) and the plain squares of the board beside it meet along
     a blurred edge that no neighbour can judge: without the barrier they are one patch and the table's
     many votes make the base table; with it, the base keeps the verdict of its own ring (its sides)."""
-    from real2sim.reconstruct.parallax_table import _plain_patches_decided
+    from real2sim.capture.masks.parallax_table import _plain_patches_decided
 
     shape = (40, 60)
     rows = np.arange(shape[0])[:, None] * np.ones(shape[1], int)
@@ -604,7 +604,7 @@ def test_a_barrier_keeps_a_plain_base_apart_from_the_plain_table():
 def test_table_specks_inside_the_object_are_dropped_and_a_hole_is_kept():
     """Chance matches on a patterned object leave table specks of a few pixels; a table seen through a
     handle is a part of some size: the specks go, the hole and the table around stay."""
-    from real2sim.reconstruct.parallax_table import _without_table_specks
+    from real2sim.capture.masks.parallax_table import _without_table_specks
 
     shape = (120, 160)
     table = ~_disc(shape, (60, 80), 45)
@@ -622,7 +622,7 @@ def test_the_plates_specks_are_dropped_and_its_band_and_hole_kept():
     silhouette (touching the table), a hole's table of some size and a speck touching the band stay; a lone
     speck of the plate's inside the object goes, and every part of the table's own verdict stays, small or
     not (step 2 judged those)."""
-    from real2sim.reconstruct.parallax_masks import _plate_joined
+    from real2sim.capture.masks.parallax import _plate_joined
 
     shape = (120, 160)
     table = ~_disc(shape, (60, 80), 45)

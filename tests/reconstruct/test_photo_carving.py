@@ -18,7 +18,7 @@ MUG_VIEWS = 100
 
 @pytest.fixture(scope="module")
 def mug_capture(tmp_path_factory):
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     out = tmp_path_factory.mktemp("photo_carving") / "mug"
@@ -29,9 +29,9 @@ def mug_capture(tmp_path_factory):
 
 def _views_and_hull(dataset):
     """The dataset's views, the carving grid over its object region and the visual hull on it."""
-    from real2sim.reconstruct.hull import carve, object_region
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.hull import carve, object_region
+    from real2sim.multiview.voxel_grid import VoxelGrid
+    from real2sim.multiview.views import load_views
 
     views = load_views(dataset)
     grid = VoxelGrid.covering(*object_region(views), VOXELS, 0.0)
@@ -46,7 +46,7 @@ def mug_hull(mug_capture):
 
 
 def _hull_and_carving(dataset, config=None, views_and_hull=None):
-    from real2sim.reconstruct.photo_carving import CarvingConfig, photo_carve
+    from real2sim.reconstruct.carving.photo import CarvingConfig, photo_carve
 
     views, grid, hull = views_and_hull or _views_and_hull(dataset)
     return grid, hull, photo_carve(views, grid, hull, config or CarvingConfig())
@@ -86,7 +86,7 @@ def test_the_hollow_prior_empties_the_mugs_flat_coloured_lower_cavity(mug_captur
     hull's outside)."""
     from scipy.ndimage import distance_transform_edt
 
-    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.carving.photo import CarvingConfig
 
     grid, hull, first_pass = _hull_and_carving(mug_capture, CarvingConfig(hollow_prior=False), mug_hull)
     _, _, opened = _hull_and_carving(mug_capture, views_and_hull=mug_hull)
@@ -107,7 +107,7 @@ def test_the_depth_test_opens_more_of_the_cavity_and_keeps_the_solid(mug_capture
     hollow prior then opens what the image contrast alone calls placed (measured at 160x120, 48 voxels:
     19.4 % of the filled cavity left solid without the depth test, 10.5 % with it; 0.05 % and 0.09 % of
     the true solid carved)."""
-    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.carving.photo import CarvingConfig
 
     inside, concave = _truth_labels(mug_capture, mug_hull[1])
     results = {}
@@ -121,7 +121,7 @@ def test_the_depth_test_opens_more_of_the_cavity_and_keeps_the_solid(mug_capture
 
 
 def test_local_contrast_is_zero_on_flat_colour_and_large_on_texture():
-    from real2sim.reconstruct.photo_carving import _local_contrast
+    from real2sim.reconstruct.carving.photo import _local_contrast
 
     images = np.zeros((2, 20, 20, 3), np.float32)
     images[0] = [0.2, 0.4, 0.6]
@@ -166,7 +166,7 @@ def test_carving_on_poses_a_few_mm_off_is_undone_by_the_silhouettes(can_capture,
     assert result.carved_voxels <= 0.01 * np.count_nonzero(hull)
     # Out of rounds before the skin is whole: whole rays, and then the space closed off, still put it
     # all back (filling before the whole rays left 17 % carved after two rounds; found on a box)
-    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.carving.photo import CarvingConfig
 
     _, _, capped = _hull_and_carving(dataset, CarvingConfig(max_restore_rounds=2))
     assert capped.carved_voxels <= 0.01 * np.count_nonzero(hull)
@@ -175,7 +175,7 @@ def test_carving_on_poses_a_few_mm_off_is_undone_by_the_silhouettes(can_capture,
 def test_small_carved_pockets_are_put_back(mug_capture, mug_hull):
     """Carved parts smaller than ``min_component_fraction`` of the hull are filled again: at 0.99 even the
     cavity (less than half the hull's voxels) is."""
-    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.carving.photo import CarvingConfig
 
     grid, hull, result = _hull_and_carving(mug_capture, CarvingConfig(min_component_fraction=0.99), mug_hull)
     assert result.carved_voxels == 0
@@ -184,7 +184,7 @@ def test_small_carved_pockets_are_put_back(mug_capture, mug_hull):
 @pytest.mark.parametrize("quantile", [0.0, 0.3, 0.5, 0.8, 1.0])
 def test_row_quantile_matches_numpys_nanquantile(quantile):
     """The colour-spread quantile over each voxel's views (NaN where a view does not see it)."""
-    from real2sim.reconstruct.carving_verdict import row_nanquantile
+    from real2sim.reconstruct.carving.verdict import row_nanquantile
 
     rng = np.random.default_rng(0)
     spreads = rng.random((400, 90)).astype(np.float32)
@@ -200,11 +200,11 @@ def test_row_quantile_matches_numpys_nanquantile(quantile):
 def test_the_fields_start_leaves_the_opened_cavity_empty(mug_capture):
     """train_field's starting density: nearly nothing where either pass carved, and the hollow prior's
     count carried out (the stage reports it as ``photo_carving_opened_voxels``)."""
-    from real2sim.reconstruct.hull import object_region
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
-    from real2sim.reconstruct.photo_carving import CarvingConfig
-    from real2sim.reconstruct.train import FieldConfig, hull_density
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.hull import object_region
+    from real2sim.multiview.voxel_grid import VoxelGrid
+    from real2sim.reconstruct.carving.photo import CarvingConfig
+    from real2sim.reconstruct.field.train import FieldConfig, hull_density
+    from real2sim.multiview.views import load_views
 
     views = load_views(mug_capture)
     grid = VoxelGrid.covering(*object_region(views), VOXELS, 0.0)
@@ -222,8 +222,8 @@ def test_the_voxel_walk_sees_what_embree_sees(mug_hull):
     surface voxels (measured: 97.7 % of the sightings of either; the walk's trilinear surface and
     the marching-cubes triangles differ by a little inside a voxel; the nearest voxel's cubes,
     standing proud at the corners, gave 94 %), and a voxel deep inside is seen by no view in either."""
-    from real2sim.reconstruct.carving_views import observations, occluder
-    from real2sim.reconstruct.photo_carving import _surface
+    from real2sim.reconstruct.carving.views import observations, occluder
+    from real2sim.reconstruct.carving.photo import _surface
 
     views, grid, hull = mug_hull
     skin = _surface(torch.from_numpy(hull)).numpy()
@@ -243,7 +243,7 @@ def test_the_voxel_walk_sees_what_embree_sees(mug_hull):
 def test_carving_by_the_voxel_walk_opens_the_mug_as_by_embree(mug_capture, mug_hull):
     """What a GPU runs (the voxel walk; about 4x slower than Embree on 2 CPU cores): the same
     carving within 2 % of the voxels (measured: 17478 against 17453, 28 rounds each)."""
-    from real2sim.reconstruct.photo_carving import CarvingConfig
+    from real2sim.reconstruct.carving.photo import CarvingConfig
 
     _, hull, by_mesh = _hull_and_carving(mug_capture, CarvingConfig(visibility="mesh"), mug_hull)
     grid, _, by_voxels = _hull_and_carving(mug_capture, CarvingConfig(visibility="voxels"), mug_hull)
@@ -259,7 +259,7 @@ def test_carving_on_cuda_matches_the_voxel_walk_on_the_cpu(mug_capture, mug_hull
     float64 on both, so a sample on a voxel face may round the other way)."""
     import torch
 
-    from real2sim.reconstruct.photo_carving import CarvingConfig, photo_carve
+    from real2sim.reconstruct.carving.photo import CarvingConfig, photo_carve
 
     if not torch.cuda.is_available():
         pytest.skip("needs a CUDA GPU")
@@ -274,7 +274,7 @@ def test_the_rounds_grid_morphology_is_scipys():
     scipy's binary erosion, dilation and box counts (the CPU carving before them), borders included."""
     from scipy.ndimage import binary_dilation, binary_erosion, convolve
 
-    from real2sim.reconstruct.photo_carving import _face_dilated, _mostly_bad_neighbourhood, _near, _surface
+    from real2sim.reconstruct.carving.photo import _face_dilated, _mostly_bad_neighbourhood, _near, _surface
 
     faces = np.zeros((3, 3, 3), bool)
     faces[1, 1, :] = faces[1, :, 1] = faces[:, 1, 1] = True

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from real2sim.reconstruct.silhouette_poses import align_unrefined
-from real2sim.reconstruct.views import PosedViews, load_views, project
+from real2sim.reconstruct.poses.silhouette import align_unrefined
+from real2sim.multiview.views import PosedViews, load_views, project
 
 MOVED = (0, 13, 26, 39, 52)
 
@@ -137,7 +137,7 @@ def _mean_reprojection_px(views: PosedViews, c2w: np.ndarray, points_m: np.ndarr
 def test_the_rig_motion_is_taken_out_exactly():
     """A turn, shift and growth of the whole rig about the pivot leave every silhouette as it was: taken out,
     the given poses come back; what each view moved on its own is kept."""
-    from real2sim.reconstruct.silhouette_poses import remove_rig_motion
+    from real2sim.reconstruct.poses.silhouette import remove_rig_motion
 
     rng = np.random.default_rng(3)
     pivot = np.array([0.5, 0.1, 0.06])
@@ -164,7 +164,7 @@ def test_every_view_off_is_aligned_to_the_others(can_capture, truth):
     """All 60 views 5 mm / 1 degree off and none refined: one quick round of silhouette coherence must at
     least halve how far the true can's points land from where the true cameras see them, without moving
     the rig as a whole (the table stays where the robot put it)."""
-    from real2sim.reconstruct.silhouette_poses import align_all
+    from real2sim.reconstruct.poses.silhouette import align_all
 
     views = load_views(can_capture)
     noisy = _all_moved(views)
@@ -319,7 +319,7 @@ def test_views_far_off_are_first_turned_onto_a_common_point(can_capture, truth):
     land less than half as far from where the true cameras see them; with the robot's own noise (1 degree,
     5 mm: a few per cent of the can) nothing is turned, since the mask's centre is itself only a few
     pixels right."""
-    from real2sim.reconstruct.silhouette_poses import CENTRE_MIN_OFFSET, centre_views
+    from real2sim.reconstruct.poses.silhouette import CENTRE_MIN_OFFSET, centre_views
 
     views = load_views(can_capture)
     points = np.asarray(truth.vertices)
@@ -341,7 +341,7 @@ def test_views_far_off_are_first_turned_onto_a_common_point(can_capture, truth):
 def test_a_mask_cut_by_the_border_is_turned_only_along_its_whole_axis(can_capture):
     """A view whose mask runs off the image's left edge has no centre across the image: its camera is
     turned so the common point keeps its place across and lands on the mask's centre up and down."""
-    from real2sim.reconstruct.silhouette_poses import common_point, mask_centres, turned_onto
+    from real2sim.reconstruct.poses.silhouette import common_point, mask_centres, turned_onto
 
     views = _turned(load_views(can_capture), 4.0, seed=6)
     mask = views.mask.copy()
@@ -363,8 +363,8 @@ def test_a_far_camera_is_not_moved_along_its_optical_axis(can_capture):
     """``along_axis=False`` (cameras farther than FAR_RATIO object sizes: a long lens barely sees depth, and the
     one-sided fit walked them toward the object): the camera's move lies across its axis only, and it still
     brings the view back onto the others' hull."""
-    from real2sim.reconstruct.others_hull import leave_one_out_surfaces
-    from real2sim.reconstruct.silhouette_poses import align_view
+    from real2sim.reconstruct.poses.others_hull import leave_one_out_surfaces
+    from real2sim.reconstruct.poses.silhouette import align_view
 
     views = load_views(can_capture)
     noisy = _all_moved(views, seed=4)

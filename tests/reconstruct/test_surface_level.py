@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from real2sim.formats.dataset import CameraIntrinsics
-from real2sim.reconstruct.extract import SURFACE_DENSITY_PER_VOXEL, density_mesh, silhouette_surface_level
-from real2sim.reconstruct.field import VoxelRadianceField
-from real2sim.reconstruct.voxel_grid import VoxelGrid
-from real2sim.reconstruct.views import PosedViews, pixel_rays
+from real2sim.reconstruct.field.extract import SURFACE_DENSITY_PER_VOXEL, density_mesh, silhouette_surface_level
+from real2sim.reconstruct.field.radiance import VoxelRadianceField
+from real2sim.multiview.voxel_grid import VoxelGrid
+from real2sim.multiview.views import PosedViews, pixel_rays
 
 RADIUS_M = 0.02
 CENTRE_M = np.array([0.0, 0.0, 0.03])

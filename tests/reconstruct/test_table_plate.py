@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_dilation
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 VIEWS, W, H = 40, 320, 240
 
@@ -24,13 +24,13 @@ VIEWS, W, H = 40, 320, 240
 def mug_on_board(tmp_path_factory):
     """(views with the true poses and true masks, the true convex hull's silhouettes, that hull) of a
     handheld capture of the mug on the board."""
-    from real2sim.capture.board import DEFAULT_BOARD
-    from real2sim.capture.handheld import HandheldConfig, capture_handheld
+    from real2sim.capture.phone.board import DEFAULT_BOARD
+    from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld
     from real2sim.formats.dataset import read_ground_truth
     from real2sim.geometry.objects import make_textured_object
-    from real2sim.reconstruct.parallax_masks import render_silhouettes
+    from real2sim.capture.masks.parallax import render_silhouettes
     from real2sim.reconstruct.truth import load_truth
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     root = tmp_path_factory.mktemp("plate") / "mug"
     capture_handheld(make_textured_object("mug"), root,
@@ -45,7 +45,7 @@ def test_the_plate_is_the_empty_table(mug_on_board):
     true mask grown by 4 px, within 40 px of it), at the view's exposure: measured 96 % of those pixels
     within 0.06 (largest channel, the best of the plate shifted by up to a pixel), and it covers 94 % of
     them."""
-    from real2sim.reconstruct.table_plate import plate_in_view, table_plate
+    from real2sim.capture.masks.table_plate import plate_in_view, table_plate
 
     views, _, _ = mug_on_board
     masks = views.mask > 0.5
@@ -70,7 +70,7 @@ def test_the_plate_explains_the_handles_hole_and_little_of_the_mug(mug_on_board)
     leave it): the plate explains a share of the hole's pixels (measured 0.35) and few of the mug's
     (measured 0.020, most of them its black dots over the board's black squares); without its texture floor
     the test explains more of the mug (measured 0.023)."""
-    from real2sim.reconstruct.table_plate import explained_by_plate, table_plate
+    from real2sim.capture.masks.table_plate import explained_by_plate, table_plate
 
     views, hull, _ = mug_on_board
     mug = views.mask > 0.5
@@ -90,7 +90,7 @@ def test_a_sliding_window_explains_more_of_the_band_beside_the_silhouettes(mug_o
     of the band (measured 0.27); any window holding the pixel, with the pixel's own test at 0.06, explains
     more (measured 0.46), at the price of more of the mug (0.018 -> 0.046; at a pixel threshold of 0.03:
     band 0.32, mug 0.022)."""
-    from real2sim.reconstruct.table_plate import explained_by_plate, table_plate
+    from real2sim.capture.masks.table_plate import explained_by_plate, table_plate
 
     views, _, _ = mug_on_board
     mug = views.mask > 0.5
@@ -115,8 +115,8 @@ def test_parallax_masks_with_the_plate_cover_less_of_the_hole(mug_on_board):
     640x480 0.7 -> 1.6 %, with its centred windows). With the object's second opinion (0.08, a video's) a
     third of what it missed comes back, for a little of the hole and the band (missed 12.1 -> 9.0 %, hole
     0.88 -> 1.31 %, beside 19.1 -> 19.6 %)."""
-    from real2sim.reconstruct.parallax_config import PHONE_PLATE_OBJECT_THRESHOLD, ParallaxConfig
-    from real2sim.reconstruct.parallax_masks import parallax_masks, render_silhouettes
+    from real2sim.capture.masks.parallax_config import PHONE_PLATE_OBJECT_THRESHOLD, ParallaxConfig
+    from real2sim.capture.masks.parallax import parallax_masks, render_silhouettes
 
     views, hull, _ = mug_on_board
     mug = views.mask > 0.5
@@ -138,7 +138,7 @@ def test_parallax_masks_with_the_plate_cover_less_of_the_hole(mug_on_board):
 @pytest.mark.parametrize("field", ["plate_threshold", "plate_window_px", "plate_min_texture", "plate_pixel_threshold",
                                    "plate_min_island_share", "plate_object_threshold", "plate_outlier_fraction"])
 def test_plate_settings_must_not_be_negative(field):
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig
+    from real2sim.capture.masks.parallax import ParallaxConfig
 
     with pytest.raises(UserInputError, match="plate"):
         replace(ParallaxConfig(), **{field: -1}).validate()
@@ -151,9 +151,9 @@ def test_the_object_explains_the_plates_chance_matches_on_the_mug_not_the_hole(m
     neighbours see the same print on the hull and the object explains it (measured 0.66 of the explained mug
     pixels at 0.08, 0.52 at 0.05); where it is the table through the hole they see other things on the hull's
     surface in front of it (measured 0.21 of the explained hole at 0.08, 0.11 at 0.05)."""
-    from real2sim.reconstruct.parallax_masks import ParallaxConfig
-    from real2sim.reconstruct.parallax_table import neighbour_views
-    from real2sim.reconstruct.table_plate import explained_by_object, explained_by_plate, table_plate
+    from real2sim.capture.masks.parallax import ParallaxConfig
+    from real2sim.capture.masks.parallax_table import neighbour_views
+    from real2sim.capture.masks.table_plate import explained_by_object, explained_by_plate, table_plate
 
     views, hull, hull_mesh = mug_on_board
     mug = views.mask > 0.5

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.reconstruct.texture import texel_faces, unwrap
+from real2sim.reconstruct.field.texture import texel_faces, unwrap
 
 
 def _uv_area(faces: np.ndarray, uvs: np.ndarray) -> float:

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from real2sim.reconstruct.extract import density_mesh, unseen_voids
-from real2sim.reconstruct.field import VoxelRadianceField
-from real2sim.reconstruct.voxel_grid import VoxelGrid
+from real2sim.reconstruct.field.extract import density_mesh, unseen_voids
+from real2sim.reconstruct.field.radiance import VoxelRadianceField
+from real2sim.multiview.voxel_grid import VoxelGrid
 
 SHAPE = (40, 40, 40)
 

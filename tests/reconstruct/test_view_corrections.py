@@ -13,10 +13,10 @@ import pytest
 import torch
 
 from real2sim.formats.dataset import pose_errors
-from real2sim.reconstruct.hull import object_region
-from real2sim.reconstruct.train import FieldConfig, train_field
-from real2sim.reconstruct.view_corrections import ViewCorrections, rotation_matrices
-from real2sim.reconstruct.views import load_views, project
+from real2sim.multiview.hull import object_region
+from real2sim.reconstruct.field.train import FieldConfig, train_field
+from real2sim.reconstruct.field.view_corrections import ViewCorrections, rotation_matrices
+from real2sim.multiview.views import load_views, project
 
 from .conftest import copy_dataset
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from real2sim.reconstruct.view_exposure import corrected_images, linear_to_srgb, srgb_to_linear, view_gains
+from real2sim.reconstruct.carving.view_exposure import corrected_images, linear_to_srgb, srgb_to_linear, view_gains
 
 
 def _observations(gains: np.ndarray, points: int = 3000, per_point: int = 8, seed: int = 0):
@@ -66,7 +66,7 @@ def test_corrected_images_divide_the_gains_out_in_linear_light():
 def jittered_can(tmp_path_factory):
     """The can, 60 noise-free views at 160x120, each with its own exposure (0.5 stops RMS) and white
     balance (10 % RMS on red and blue), as `capture --exposure-jitter 0.5 --white-balance-jitter 0.1`."""
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 
     out = tmp_path_factory.mktemp("exposure") / "can"
@@ -79,12 +79,12 @@ def jittered_can(tmp_path_factory):
 def test_carving_leaves_a_can_shot_with_changing_exposure_alone(jittered_can):
     """Without the gains taken out, carving removed 23 % of this can's hull (8624 of 37314 voxels): every
     view disagreed with the others in colour. The gains found match the capture's own."""
-    from real2sim.reconstruct.carving_views import observations, occluder
-    from real2sim.reconstruct.hull import carve, object_region
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
-    from real2sim.reconstruct.carving_verdict import bilinear
-    from real2sim.reconstruct.photo_carving import CarvingConfig, _surface, photo_carve
-    from real2sim.reconstruct.views import load_views
+    from real2sim.reconstruct.carving.views import observations, occluder
+    from real2sim.multiview.hull import carve, object_region
+    from real2sim.multiview.voxel_grid import VoxelGrid
+    from real2sim.multiview.views import bilinear
+    from real2sim.reconstruct.carving.photo import CarvingConfig, _surface, photo_carve
+    from real2sim.multiview.views import load_views
 
     views = load_views(jittered_can)
     grid = VoxelGrid.covering(*object_region(views), 48, 0.0)

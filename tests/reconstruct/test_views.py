@@ -9,8 +9,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from real2sim.formats.dataset import CameraIntrinsics
-from real2sim.formats.errors import UserInputError
-from real2sim.reconstruct.views import (
+from real2sim.plumbing.errors import UserInputError
+from real2sim.multiview.views import (
     MIN_VIEWS,
     PosedViews,
     common_look_at_point,
@@ -237,7 +237,7 @@ def test_large_images_are_reduced_with_their_camera(can_capture, tmp_path):
 
 
 def test_working_size_keeps_the_aspect_ratio():
-    from real2sim.reconstruct.views import working_size
+    from real2sim.multiview.views import working_size
 
     phone = CameraIntrinsics(4032, 3024, 3000.0, 3000.0, 2016.0, 1512.0)
     assert working_size(phone, 640) == (640, 480)

@@ -1,10 +1,10 @@
-"""Rays walked through a voxel solid (real2sim.reconstruct.voxel_rays), against geometry worked by hand."""
+"""Rays walked through a voxel solid (real2sim.reconstruct.carving.voxel_rays), against geometry worked by hand."""
 
 import numpy as np
 import torch
 
-from real2sim.reconstruct.voxel_grid import VoxelGrid
-from real2sim.reconstruct.voxel_rays import flat_samples, segments_clear
+from real2sim.multiview.voxel_grid import VoxelGrid
+from real2sim.reconstruct.carving.voxel_rays import flat_samples, segments_clear
 
 VOXEL_M = 0.01
 

@@ -16,7 +16,7 @@ import pytest
 import trimesh
 
 from real2sim.formats.dataset import CameraIntrinsics
-from real2sim.reconstruct.views import PosedViews
+from real2sim.multiview.views import PosedViews
 
 RADIUS_M = 0.04
 CENTRE_M = np.array([0.01, -0.02, 0.05])
@@ -68,13 +68,13 @@ def test_a_level_ring_with_a_long_lens_bounds_the_object():
     """19 cameras over 135 degrees of one ring level with the object, fx 1600 px at 160x120 (a 6 degree
     field of view: the temple's rig). The three views at either end of the arc see long thin cones
     together; counted, they let the region run off far past the object (the bug this guards)."""
-    from real2sim.reconstruct.hull import object_region
+    from real2sim.multiview.hull import object_region
 
     views = ring_views(azimuths_deg=np.linspace(135, 270, 19), distance_m=1.2)
     lo, hi = object_region(views, table_z_m=None)
     assert _within(lo, hi, 0.012), (lo, hi)
     # The rule that makes it so: without the views' spread, the same masks leave it unbounded or loose.
-    from real2sim.reconstruct import hull
+    from real2sim.multiview import hull
 
     loose = hull.silhouette_scores(views, np.array([CENTRE_M + [0.0, 0.0, 0.0]]), 0.03, min_spread_deg=0.0)
     assert loose[0] == pytest.approx(1.0)
@@ -87,7 +87,7 @@ def test_points_seen_only_by_neighbouring_views_are_not_inside():
     nothing bounds it, so it is not inside."""
     import torch
 
-    from real2sim.reconstruct.hull import border_touched, seen_together, silhouette_scores, view_spread_deg
+    from real2sim.multiview.hull import border_touched, seen_together, silhouette_scores, view_spread_deg
 
     views = ring_views(azimuths_deg=np.linspace(135, 270, 19), distance_m=1.2, fx_px=2600)
     assert border_touched(views.mask)[:, :2].all()
@@ -105,7 +105,7 @@ def test_points_seen_only_by_neighbouring_views_are_not_inside():
 
 def test_a_point_beyond_an_edge_the_mask_stays_clear_of_is_outside():
     """With the whole sphere in every image, a view the point projects outside of votes against it."""
-    from real2sim.reconstruct.hull import border_touched, silhouette_scores
+    from real2sim.multiview.hull import border_touched, silhouette_scores
 
     views = ring_views(azimuths_deg=np.linspace(135, 270, 19), distance_m=1.2)
     assert not border_touched(views.mask).any()
@@ -116,8 +116,8 @@ def test_a_point_beyond_an_edge_the_mask_stays_clear_of_is_outside():
 def test_views_cut_by_the_image_border_do_not_cut_the_object():
     """A third of the views aim 10 cm off, so the sphere leaves their image: where a view cannot see,
     it casts no vote, and the hull keeps the whole sphere."""
-    from real2sim.reconstruct.hull import border_touched, carve, object_region
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
+    from real2sim.multiview.hull import border_touched, carve, object_region
+    from real2sim.multiview.voxel_grid import VoxelGrid
 
     az = np.linspace(0, 360, 24, endpoint=False)
     offsets = [np.array([0.0, 0.0, 0.1]) if i % 3 == 0 else np.zeros(3) for i in range(len(az))]
@@ -137,7 +137,7 @@ def test_views_cut_by_the_image_border_do_not_cut_the_object():
 def _ring_with_one_wrong_mask():
     """A 20-view ring of the sphere whose first mask lost the sphere's upper half, and a 40-voxel grid
     around the sphere."""
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
+    from real2sim.multiview.voxel_grid import VoxelGrid
 
     views = ring_views(azimuths_deg=np.linspace(0, 360, 20, endpoint=False), elevation_deg=25, distance_m=0.8,
                        fx_px=400)
@@ -150,7 +150,7 @@ def _ring_with_one_wrong_mask():
 def test_one_wrong_mask_does_not_cut_the_object():
     """One view's mask loses the sphere's upper half (a threshold that ate it): enough other views
     see that half, so it stays."""
-    from real2sim.reconstruct.hull import carve
+    from real2sim.multiview.hull import carve
 
     broken, grid = _ring_with_one_wrong_mask()
     centres = grid.centres()
@@ -176,7 +176,7 @@ def test_a_result_beyond_what_the_views_see_together_is_refused():
 def temple_views():
     if not (TEMPLE / "transforms.json").is_file():
         pytest.skip(f"the real temple photographs are not at {TEMPLE}")
-    from real2sim.reconstruct.views import load_views
+    from real2sim.multiview.views import load_views
 
     return load_views(TEMPLE, max_side_px=160)
 
@@ -184,7 +184,7 @@ def temple_views():
 def test_temple_region_is_the_object(temple_views):
     """19 real photographs (fx 1520 px at 640x480, one level ring over 135 degrees, rough thresholded
     masks): the region the views bound is the temple's box, not the 2.5 m it used to be."""
-    from real2sim.reconstruct.hull import object_region
+    from real2sim.multiview.hull import object_region
 
     truth = json.loads((TEMPLE / "truth_bbox.json").read_text())
     lo, hi = object_region(temple_views, table_z_m=0.0)
@@ -208,7 +208,7 @@ def test_temple_hull_reconstruction_matches_the_true_box(temple_views, tmp_path)
 def test_a_view_whose_mask_lost_part_of_the_object_is_not_trusted_alone():
     """Views whose masks agree with the robust hull carve alone; the one whose mask lost the sphere's
     upper half does not (it would remove a volume, not a sliver of skin)."""
-    from real2sim.reconstruct.hull import consistent_views, silhouette_scores
+    from real2sim.multiview.hull import consistent_views, silhouette_scores
 
     broken, grid = _ring_with_one_wrong_mask()
     inside = silhouette_scores(broken, grid.centres(), 0.03).reshape(grid.shape) >= 0.5
@@ -221,8 +221,8 @@ def test_trusted_views_trim_the_skin_that_robust_carving_leaves():
     sphere is bounded by one view's silhouette only, so the rule that two views must agree leaves a
     skin there; views whose masks all agree with each other carve alone and the hull's box error
     falls by two thirds (9 -> 3 mm here; what is left is six views' polygon around a sphere)."""
-    from real2sim.reconstruct.hull import carve
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
+    from real2sim.multiview.hull import carve
+    from real2sim.multiview.voxel_grid import VoxelGrid
 
     views = ring_views(azimuths_deg=np.linspace(135, 270, 6), elevation_deg=20, distance_m=0.6, fx_px=800)
     grid = VoxelGrid.covering(CENTRE_M - 1.5 * RADIUS_M, CENTRE_M + 1.5 * RADIUS_M, 60, None)
@@ -260,8 +260,8 @@ def test_cuda_carves_as_the_cpu():
     CPU's: the same votes, float32 bilinear mask values in another order."""
     import torch
 
-    from real2sim.reconstruct.hull import carve
-    from real2sim.reconstruct.voxel_grid import VoxelGrid
+    from real2sim.multiview.hull import carve
+    from real2sim.multiview.voxel_grid import VoxelGrid
 
     if not torch.cuda.is_available():
         pytest.skip("needs a CUDA GPU")

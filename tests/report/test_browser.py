@@ -81,7 +81,7 @@ def test_the_probe_sees_a_request_that_would_leave_the_machine(tmp_path):
 
 
 def test_report_images_load_and_nothing_leaves_the_machine(tmp_path):
-    from real2sim.evaluate.scene_config import SceneConfig
+    from real2sim.evaluate.scene.scene_config import SceneConfig
     from real2sim.evaluate.sweep import EvaluationConfig, evaluate
     from tests.evaluate.test_sweep import make_box_asset
 

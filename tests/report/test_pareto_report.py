@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.results import RUN_COLUMNS, SUMMARY_COLUMNS, read_summary_csv, summarize, write_csv_atomic
 from real2sim.report.pareto import PARETO_PLOTS, front_rows, pareto_front, recommend, recommend_per_contact_model
 from real2sim.report.html import paper_name, read_paper_table, write_report

@@ -26,11 +26,12 @@ from real2sim.asset.reuse import reuse_collision, reusable_representations
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
 from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.contact import ContactProperties
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.mesh_io import MAX_EXTENT_M, check_object_size, export_textured_mesh, load_mesh, validate_mesh  # noqa: F401
-from real2sim.formats.outputs import atomic_output_dir, file_sha256
+from real2sim.plumbing.errors import UserInputError
+from real2sim.geometry.mesh_io import MAX_EXTENT_M, check_object_size, export_textured_mesh, load_mesh, validate_mesh  # noqa: F401
+from real2sim.plumbing.digests import file_sha256
+from real2sim.plumbing.outputs import atomic_output_dir
 from real2sim.formats.physical import MESH_FRAME, PhysicalProperties, write_physical_properties
-from real2sim.formats.progress import ProgressFn, null_progress, prefixed
+from real2sim.plumbing.progress import ProgressFn, null_progress, prefixed
 from real2sim.formats.spec import CollisionSpec
 
 VISUAL_RELPATH = "visual/model.obj"
@@ -152,7 +153,7 @@ class AssetConfig:
         names = [s.name for s in self.specs]
         if len(set(names)) != len(names):
             raise UserInputError(f"a collision SPEC is given twice: {names}")
-        from real2sim.asset.writers import ASSET_FORMATS
+        from real2sim.asset.export.writers import ASSET_FORMATS
 
         bad = set(self.formats) - set(ASSET_FORMATS)
         if bad:
@@ -410,7 +411,7 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
                            ) -> list[RepresentationResult]:
     """Each SPEC's folder in ``tmp``: collision.json, the model files, fit_report.json; a SPEC in
     ``reusable`` is copied from there (:func:`reusable_representations`) instead of fitted."""
-    from real2sim.asset.writers import write_representation
+    from real2sim.asset.export.writers import write_representation
     from real2sim.geometry.fidelity import measure_fidelity
 
     results = []
@@ -454,7 +455,7 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
                 **report,
             }
         if "mjcf" in config.formats:
-            from real2sim.asset.mjcf import mjcf_notes
+            from real2sim.asset.export.mjcf import mjcf_notes
 
             notes = mjcf_notes(geometry)
             if notes:
@@ -483,7 +484,7 @@ def rewrite_models(asset_dir: Path | str, contact: ContactProperties, formats: t
     asset_config.json records the new material, which the evaluation's reference reads.
     Returns the URDF paths written.
     """
-    from real2sim.asset.writers import write_representation
+    from real2sim.asset.export.writers import write_representation
     from real2sim.formats.collision import read_collision_json
     from real2sim.formats.physical import read_physical_properties
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME
 from real2sim.formats.collision import CollisionGeometry
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 #: Settings of asset_config.json that do not shape the collision geometry: a representation fitted
 #: under other values of these is still valid (its model files are rewritten, see rewrite_models).

@@ -6,16 +6,16 @@ segmentation masks (:mod:`.masking`). Writes a dataset folder (:mod:`real2sim.fo
 from real2sim._lazy import lazy_exports
 
 _EXPORTS = {
-    "CaptureConfig": "wrist_camera",
-    "CaptureResult": "wrist_camera",
-    "capture": "wrist_camera",
-    "camera_poses": "wrist_camera",
-    "RefineConfig": "pose_refinement",
-    "RefineResult": "pose_refinement",
-    "refine_poses": "pose_refinement",
-    "MaskConfig": "masking",
-    "MaskResult": "masking",
-    "compute_masks": "masking",
+    "CaptureConfig": "sim.wrist_camera",
+    "CaptureResult": "sim.wrist_camera",
+    "capture": "sim.wrist_camera",
+    "camera_poses": "sim.wrist_camera",
+    "RefineConfig": "poses.refinement",
+    "RefineResult": "poses.refinement",
+    "refine_poses": "poses.refinement",
+    "MaskConfig": "masks.methods",
+    "MaskResult": "masks.methods",
+    "compute_masks": "masks.methods",
 }
 __all__ = sorted(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

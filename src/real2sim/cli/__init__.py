@@ -20,9 +20,9 @@ from pathlib import Path
 from real2sim import __version__
 from real2sim.cli import options
 from real2sim.cli.options import integer
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.inputs import check_outputs_spare_inputs
-from real2sim.formats.outputs import public_paths
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.inputs import check_outputs_spare_inputs
+from real2sim.plumbing.outputs import public_paths
 
 #: --threads: torch CPU threads; the environment variable that gives the default.
 THREADS = integer(1, 1024)

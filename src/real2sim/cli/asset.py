@@ -45,7 +45,7 @@ def add_contact_arguments(p: argparse.ArgumentParser) -> None:
                         "at about 3x the simulation time; on the oval bottle it gained nothing (docs/truth.md)")
 
 
-#: The keys of ``real2sim.formats.mesh_io.MESH_UNITS_M``, spelled here because importing that
+#: The keys of ``real2sim.geometry.mesh_io.MESH_UNITS_M``, spelled here because importing that
 #: module pulls in trimesh, which `--help` must not pay for (tests/cli/test_asset.py checks they agree).
 MESH_UNITS = ("m", "cm", "mm", "in")
 
@@ -138,7 +138,7 @@ def config_from_args(args: argparse.Namespace):
 
     specs = tuple(parse_spec(s) for s in (args.collision or DEFAULT_SPECS))
     if args.mu_dynamic > args.mu_static:
-        from real2sim.formats.errors import UserInputError
+        from real2sim.plumbing.errors import UserInputError
 
         raise UserInputError(f"--mu-dynamic {args.mu_dynamic:g} is greater than --mu-static {args.mu_static:g}; "
                              "Drake needs dynamic friction <= static friction")
@@ -146,7 +146,7 @@ def config_from_args(args: argparse.Namespace):
         import torch
 
         if not torch.cuda.is_available():
-            from real2sim.formats.errors import UserInputError
+            from real2sim.plumbing.errors import UserInputError
 
             raise UserInputError(f"--device {args.device} asked for, but torch sees no CUDA GPU here; use --device cpu")
     contact = ContactProperties(
@@ -165,7 +165,7 @@ def config_from_args(args: argparse.Namespace):
     fit_overrides = {}
     if args.iterations is not None:
         if args.iterations < 1:
-            from real2sim.formats.errors import UserInputError
+            from real2sim.plumbing.errors import UserInputError
 
             raise UserInputError(f"--iterations must be at least 1, got {args.iterations}")
         fit_overrides["max_iterations"] = args.iterations
@@ -189,7 +189,7 @@ def config_from_args(args: argparse.Namespace):
 
         vhacd_config = VhacdConfig(max_convex_hulls=args.vhacd_max_hulls)
     formats = tuple(dict.fromkeys(["urdf", *(args.formats or [])]))
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     given, frame, source = None, "asset", ""
     if getattr(args, "properties", None) is not None:
@@ -222,7 +222,7 @@ def config_from_args(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from real2sim.asset.build import build_asset
     from real2sim.cli.progress import progress_display
-    from real2sim.formats.outputs import check_output_dir
+    from real2sim.plumbing.outputs import check_output_dir
 
     config = config_from_args(args)
     check_output_dir(args.out, args.overwrite, inputs=[args.mesh])  # fail before any heavy work

@@ -77,7 +77,7 @@ def register(sub) -> None:
 def read_masses(path: Path) -> dict[str, float]:
     """{name: mass_kg} from a name,mass_kg CSV; UserInputError for a missing column, name or mass, or a
     mass that is not a finite number > 0."""
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
@@ -149,7 +149,7 @@ def _mass_of(name: str, dataset: Path, args: argparse.Namespace, table: dict[str
 def check_first(args: argparse.Namespace) -> tuple[list[str], dict[str, float], Path]:
     """The checks that read no dataset: the options, the objects' names, the masses file and CATALOGUE;
     returns (names, masses, CATALOGUE resolved). UserInputError for bad input."""
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
     from real2sim.pipeline.batch import check_catalogue, check_names
 
     if args.address is not None and args.executor != "ray":
@@ -167,7 +167,7 @@ def plan(args: argparse.Namespace, first: tuple[list[str], dict[str, float], Pat
     from dataclasses import replace
 
     from real2sim.cli.run import config_from_args
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
     from real2sim.pipeline.batch import BatchConfig, ObjectJob, cpu_count, dataset_folder
 
     names, table, out = first or check_first(args)
@@ -194,7 +194,7 @@ def plan(args: argparse.Namespace, first: tuple[list[str], dict[str, float], Pat
 
 
 def run(args: argparse.Namespace) -> int:
-    from real2sim.formats.outputs import output_lock
+    from real2sim.plumbing.outputs import output_lock
 
     first = check_first(args)
     out = first[2]

@@ -48,9 +48,9 @@ def register(sub) -> None:
 
 
 def run_board(args: argparse.Namespace) -> int:
-    from real2sim.capture.board import DEFAULT_BOARD, board_spec_for_paper, write_board
-    from real2sim.formats.errors import UserInputError
-    from real2sim.formats.outputs import check_output_path, check_replaceable
+    from real2sim.capture.phone.board import DEFAULT_BOARD, board_spec_for_paper, write_board
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.plumbing.outputs import check_output_path, check_replaceable
 
     pdf = Path(args.out)
     if pdf.suffix.lower() != ".pdf":

@@ -198,12 +198,12 @@ def _resolve_mesh(text: str):
 def _checked_input(args: argparse.Namespace):
     """The object to capture, after the output folder is checked (never the mesh's own folder): a
     bundled object, or the mesh file loaded in ``--mesh-units`` and of an object's size."""
-    from real2sim.formats.outputs import check_output_dir
+    from real2sim.plumbing.outputs import check_output_dir
 
     check_output_dir(args.out, args.overwrite, inputs=[Path(args.mesh)] if Path(args.mesh).exists() else [])
     mesh = _resolve_mesh(args.mesh)
     if isinstance(mesh, Path):
-        from real2sim.formats.mesh_io import check_object_size, load_mesh
+        from real2sim.geometry.mesh_io import check_object_size, load_mesh
 
         mesh_path, mesh = mesh, load_mesh(mesh, args.mesh_units)
         check_object_size(mesh, str(mesh_path), args.mesh_units)
@@ -211,9 +211,9 @@ def _checked_input(args: argparse.Namespace):
 
 
 def run_capture(args: argparse.Namespace) -> int:
-    from real2sim.capture.wrist_camera import CaptureConfig, capture
+    from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.cli.progress import progress_display
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     # Checked in every mode, before any work: each would otherwise be ignored without a word.
     if args.jpeg and args.video:
@@ -253,11 +253,11 @@ def run_refine(args: argparse.Namespace) -> int:
     import sys
     import warnings
 
-    from real2sim.capture.pose_refinement import RefineConfig, refine_poses
+    from real2sim.capture.poses.refinement import RefineConfig, refine_poses
     from real2sim.cli.progress import progress_display
-    from real2sim.formats.errors import UserInputError
-    from real2sim.formats.outputs import output_lock
-    from real2sim.formats.progress import prefixed
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.plumbing.outputs import output_lock
+    from real2sim.plumbing.progress import prefixed
 
     if args.neighbors < 1:
         raise UserInputError(f"--neighbors must be at least 1 (got {args.neighbors})")
@@ -282,10 +282,10 @@ def run_refine(args: argparse.Namespace) -> int:
 
 
 def run_mask(args: argparse.Namespace) -> int:
-    from real2sim.capture.masking import MaskConfig
+    from real2sim.capture.masks.methods import MaskConfig
     from real2sim.cli.progress import progress_display
-    from real2sim.formats.outputs import output_lock
-    from real2sim.pipeline.masks import make_masks
+    from real2sim.plumbing.outputs import output_lock
+    from real2sim.capture.masks.stage import make_masks
 
     cfg = MaskConfig(threshold=args.threshold, weights=args.weights, device=args.device,
                      maskrcnn_min_size_px=args.maskrcnn_min_size, maskrcnn_max_size_px=args.maskrcnn_max_size,
@@ -307,10 +307,10 @@ _NOT_HANDHELD = {"pose_noise_mm": 5.0, "pose_noise_deg": 1.0, "with_background":
 
 
 def _run_handheld(args: argparse.Namespace) -> int:
-    from real2sim.capture.board import DEFAULT_BOARD
-    from real2sim.capture.handheld import HandheldConfig, capture_handheld
+    from real2sim.capture.phone.board import DEFAULT_BOARD
+    from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld
     from real2sim.cli.progress import progress_display
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     for name, default in _NOT_HANDHELD.items():
         if getattr(args, name) != default:

@@ -113,7 +113,7 @@ def run_config(plan: DemoPlan):
         recon = replace(recon, max_faces=plan.max_faces)
     refine = None
     if plan.refine_poses:
-        from real2sim.capture.pose_refinement import RefineConfig
+        from real2sim.capture.poses.refinement import RefineConfig
 
         refine = RefineConfig()
     fit = None
@@ -127,7 +127,7 @@ def run_config(plan: DemoPlan):
 
 
 def capture_config(plan: DemoPlan):
-    from real2sim.capture.wrist_camera import CaptureConfig
+    from real2sim.capture.sim.wrist_camera import CaptureConfig
 
     noise = {} if plan.pose_noise else {"pose_noise_mm": 0.0, "pose_noise_deg": 0.0}
     return CaptureConfig(views=plan.views, width=plan.width, height=plan.height, **noise)
@@ -145,11 +145,11 @@ def run(args: argparse.Namespace) -> int:
     import time
     from dataclasses import replace
 
-    from real2sim.capture.wrist_camera import capture
+    from real2sim.capture.sim.wrist_camera import capture
     from real2sim.cli.progress import progress_display
     from real2sim.evaluate.sweep import EvaluationConfig
-    from real2sim.formats.outputs import atomic_output_dir, check_output_dir
-    from real2sim.formats.progress import prefixed
+    from real2sim.plumbing.outputs import atomic_output_dir, check_output_dir
+    from real2sim.plumbing.progress import prefixed
     from real2sim.geometry.objects import make_textured_object
     from real2sim.pipeline.run import StageFailed, run_pipeline
 
@@ -185,7 +185,7 @@ def _scene(duration_scale: float):
     """The tasks' scene, its simulated durations times ``duration_scale`` (as `evaluate --duration-scale`)."""
     from dataclasses import replace
 
-    from real2sim.evaluate.scene_config import SceneConfig
+    from real2sim.evaluate.scene.scene_config import SceneConfig
 
     scene = SceneConfig()
     if duration_scale == 1.0:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 # Light modules (numpy at most): the vocabulary of --tasks and --contact, defined once.
 from real2sim.cli.options import declare_paths, finish, integer, jobs, positive, seed
-from real2sim.evaluate.tasks import TASKS
+from real2sim.evaluate.scene.tasks import TASKS
 from real2sim.formats.contact import CONTACT_MODELS
 
 
@@ -93,10 +93,10 @@ def config_from_args(args: argparse.Namespace):
     import dataclasses
     import math
 
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
     from real2sim.evaluate.executors import _default_jobs
     from real2sim.evaluate.sweep import EvaluationConfig
-    from real2sim.evaluate.scene_config import SceneConfig
+    from real2sim.evaluate.scene.scene_config import SceneConfig
 
     if args.runs < 1:
         raise UserInputError(f"--runs must be >= 1, got {args.runs}")
@@ -155,8 +155,8 @@ def _reference_properties(args: argparse.Namespace):
     import numpy as np
 
     from real2sim.asset.inertia import estimate_physical_properties
-    from real2sim.formats.errors import UserInputError
-    from real2sim.formats.mesh_io import load_mesh
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.geometry.mesh_io import load_mesh
     from real2sim.formats.physical import read_physical_properties, write_physical_properties
 
     if args.reference is None:
@@ -184,11 +184,11 @@ def run(args: argparse.Namespace) -> int:
     from real2sim.cli.progress import progress_display
     from real2sim.evaluate.sweep import evaluate
     from real2sim.evaluate.workdir import partial_dir
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     config = config_from_args(args)
     if args.reference is not None and not args.reference.is_file():
-        from real2sim.formats.paths import missing
+        from real2sim.plumbing.paths import missing
 
         raise UserInputError(f"reference mesh {args.reference} is not a file" if args.reference.exists()
                              else missing(args.reference, "reference mesh"))

@@ -47,8 +47,8 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from real2sim.formats.errors import UserInputError
-    from real2sim.formats.outputs import check_output_dir
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.plumbing.outputs import check_output_dir
     from real2sim.geometry.objects import OBJECTS, make_object
     from real2sim.cli.progress import progress_display
     from real2sim.identify.excitation import DEFAULT_DURATION_S, periods_for
@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.object in OBJECTS:
         mesh = make_object(args.object)
     else:
-        from real2sim.formats.mesh_io import check_object_size, load_mesh
+        from real2sim.geometry.mesh_io import check_object_size, load_mesh
 
         mesh = load_mesh(args.object, args.mesh_units)
         check_object_size(mesh, args.object, args.mesh_units)

@@ -35,8 +35,8 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from real2sim.formats.errors import UserInputError
-    from real2sim.formats.outputs import check_output_path, check_replaceable, write_text_atomic
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.plumbing.outputs import check_output_path, check_replaceable, write_text_atomic
     from real2sim.identify.stage import errors_against_truth, read_truth, run_identify
 
     out = check_output_path(args.out, what="--out")

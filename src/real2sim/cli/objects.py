@@ -25,7 +25,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
     from real2sim.geometry.objects import OBJECTS
 
     if args.action == "list":
@@ -36,8 +36,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserInputError("usage: real2sim objects export NAME PATH.obj")
     if args.name not in OBJECTS:
         raise UserInputError(f"unknown bundled object {args.name!r}; known: {', '.join(OBJECTS)}")
-    from real2sim.formats.mesh_io import textured_mesh_files
-    from real2sim.formats.outputs import check_output_path, write_bytes_atomic
+    from real2sim.geometry.mesh_io import textured_mesh_files
+    from real2sim.plumbing.outputs import check_output_path, write_bytes_atomic
     from real2sim.geometry.objects import make_textured_object
 
     path = check_output_path(args.path, what="export")

@@ -182,7 +182,7 @@ def existing_file(text: str) -> Path:
         raise argparse.ArgumentTypeError("expected a file path, got ''")
     path = Path(text).expanduser()
     if not path.exists():
-        from real2sim.formats.paths import missing
+        from real2sim.plumbing.paths import missing
 
         raise argparse.ArgumentTypeError(missing(text, "file"))
     if not path.is_file():
@@ -198,7 +198,7 @@ def existing_dir(text: str) -> Path:
         raise argparse.ArgumentTypeError("expected a folder path, got ''")
     path = Path(text).expanduser()
     if not path.exists():
-        from real2sim.formats.paths import missing
+        from real2sim.plumbing.paths import missing
 
         raise argparse.ArgumentTypeError(missing(text, "folder"))
     if not path.is_dir():
@@ -293,7 +293,7 @@ def declare_paths(parser: argparse.ArgumentParser, *, reads: tuple[str, ...] = (
                   in_place: tuple[str, ...] = (), cache: tuple[str, ...] = ()) -> argparse.ArgumentParser:
     """Record, by argparse ``dest``, what ``parser``'s verb does with each path option, so that
     before any work the CLI refuses an output that is, contains or lies inside an input
-    (:func:`real2sim.formats.outputs.check_outputs_spare_inputs`). ``tests/cli/test_path_roles.py``
+    (:func:`real2sim.plumbing.outputs.check_outputs_spare_inputs`). ``tests/cli/test_path_roles.py``
     fails when a path option of any verb is left out."""
     actions = {action.dest: action for action in parser._actions}
     roles = {"reads": reads, "writes": writes, "in_place": in_place, "cache": cache}

@@ -1,4 +1,4 @@
-"""The one renderer of the stages' progress (:mod:`real2sim.formats.progress`) on stderr.
+"""The one renderer of the stages' progress (:mod:`real2sim.plumbing.progress`) on stderr.
 
 On a terminal: one rich line, a bar with counts and ETA while steps are counted
 (``total > 0``), a spinner and the message otherwise; messages without a count
@@ -15,7 +15,7 @@ import time
 from contextlib import contextmanager
 from typing import Callable, Iterator
 
-from real2sim.formats.progress import ProgressFn
+from real2sim.plumbing.progress import ProgressFn
 
 #: Plain (non-terminal) output: seconds between two lines of the same counted work.
 PLAIN_INTERVAL_S = 5.0
@@ -65,7 +65,7 @@ class _Live:
 
 @contextmanager
 def progress_display(echo: Callable[[str], None] | None = None, *, console=None) -> Iterator[ProgressFn]:
-    """A :class:`~real2sim.formats.progress.ProgressFn` that draws on stderr while the block runs.
+    """A :class:`~real2sim.plumbing.progress.ProgressFn` that draws on stderr while the block runs.
 
     ``echo``: where messages without a count go as lines (default: logged on stderr, above
     the bar on a terminal); ``evaluate`` prints them on stdout, as it always has.

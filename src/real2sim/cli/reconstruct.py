@@ -100,7 +100,7 @@ def reconstruct_config(args: argparse.Namespace, field_voxels: int | None):
     from dataclasses import replace
 
     from real2sim.reconstruct.stage import ReconstructConfig
-    from real2sim.reconstruct.train import FieldConfig
+    from real2sim.reconstruct.field.train import FieldConfig
 
     field = FieldConfig().with_budget(args.steps, field_voxels).with_carving(args.photo_carving, args.hollow_prior)
     field = replace(field, pose_refinement=getattr(args, "field_poses", True),
@@ -112,8 +112,8 @@ def reconstruct_config(args: argparse.Namespace, field_voxels: int | None):
 
 
 def run_reconstruct(args: argparse.Namespace) -> int:
-    from real2sim.formats.errors import UserInputError
-    from real2sim.formats.outputs import check_output_dir, output_lock
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.plumbing.outputs import check_output_dir, output_lock
 
     if args.seed < 0 or args.seed >= 2**63:
         raise UserInputError(f"--seed must be in 0..2^63-1 (got {args.seed})")
@@ -124,7 +124,7 @@ def run_reconstruct(args: argparse.Namespace) -> int:
 
 
 def _reconstruct(args: argparse.Namespace, out: Path) -> int:
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
     from real2sim.reconstruct.stage import ReconstructConfig, import_external, reconstruct, write_reconstruction
 
     if (args.from_mesh is None) != (args.dataparser_transforms is None):

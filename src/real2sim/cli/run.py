@@ -119,7 +119,7 @@ def config_from_args(args: argparse.Namespace):
     from dataclasses import replace
 
     from real2sim.cli.asset import config_from_args as asset_config
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
     from real2sim.pipeline.run import RunConfig, check_dataset, poses_to_refine
     from real2sim.reconstruct.stage import resolve_device
 
@@ -127,7 +127,7 @@ def config_from_args(args: argparse.Namespace):
         raise UserInputError(f"--seed must be in 0..2^63-1 (got {args.seed})")
     scale_given = args.object_height_m is not None or args.scale is not None
     if scale_given:
-        from real2sim.pipeline.normalise import NormaliseConfig
+        from real2sim.capture.phone.normalise import NormaliseConfig
 
         NormaliseConfig(object_height_m=args.object_height_m, scale=args.scale).validate()
     phone = phone_config(args)
@@ -151,7 +151,7 @@ def config_from_args(args: argparse.Namespace):
     recon.validate()
     mask = None
     if args.mask is not None:
-        from real2sim.capture.masking import MaskConfig
+        from real2sim.capture.masks.methods import MaskConfig
 
         if args.mask == "maskrcnn" and (args.mask_weights is None or not args.mask_weights.is_file()):
             raise UserInputError("--mask maskrcnn needs --mask-weights PATH, a local weights file")
@@ -163,7 +163,7 @@ def config_from_args(args: argparse.Namespace):
         raise UserInputError("--refine-poses is for given poses; photos and videos get theirs from structure from motion")
     if phone is None and (args.refine_poses or (args.refine_poses is None and not scale_given
                                                 and poses_to_refine(args.dataset))):
-        from real2sim.capture.pose_refinement import RefineConfig
+        from real2sim.capture.poses.refinement import RefineConfig
 
         refine = RefineConfig(seed=args.seed)
     evaluation = None
@@ -180,10 +180,10 @@ def config_from_args(args: argparse.Namespace):
 def phone_config(args: argparse.Namespace):
     """PhoneConfig when DATASET is a folder of photos or a video (UserInputError for one with no images),
     else None (and then --frames, --board-square-mm and --board are refused)."""
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
     from real2sim.pipeline.phone import PhoneConfig, phone_input
-    from real2sim.capture.sfm import SfmConfig
-    from real2sim.capture.video import DEFAULT_FRAMES
+    from real2sim.capture.phone.sfm import SfmConfig
+    from real2sim.capture.phone.video import DEFAULT_FRAMES
 
     phone = phone_input(args.dataset)
     if phone is None:
@@ -196,7 +196,7 @@ def phone_config(args: argparse.Namespace):
         raise UserInputError(f"--frames is for a video, and {args.dataset} is a folder of photos")
     board = None
     if args.board is not None:
-        from real2sim.capture.board import read_board_spec
+        from real2sim.capture.phone.board import read_board_spec
 
         board = read_board_spec(args.board)
     return PhoneConfig(frames=args.frames or DEFAULT_FRAMES, board_square_mm=args.board_square_mm, board=board,

@@ -32,10 +32,10 @@ def register(sub) -> None:
 
 def representation_urdfs(asset_dir: Path) -> list[Path]:
     """The model.urdf of every representation folder of an asset, sorted by name."""
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     if not asset_dir.is_dir():
-        from real2sim.formats.paths import missing
+        from real2sim.plumbing.paths import missing
 
         if asset_dir.exists():
             raise UserInputError(f"{asset_dir} is a file, not an asset folder")
@@ -62,7 +62,7 @@ def load_model(urdf: Path):
     from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
     from pydrake.systems.framework import DiagramBuilder
 
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
@@ -94,7 +94,7 @@ def resolve_host(host: str, timeout_s: float = RESOLVE_TIMEOUT_S, resolve=None) 
     import socket
     import threading
 
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     if host == "*":
         return host
@@ -144,7 +144,7 @@ def start_meshcat(host: str, port: int | None, address: str | None = None):
     ``host`` already resolved; None resolves it here, with a bounded wait (:func:`resolve_host`)."""
     from pydrake.geometry import Meshcat, MeshcatParams
 
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     address = address or resolve_host(host)
     try:
@@ -162,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
 
     from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role
 
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     urdfs = representation_urdfs(args.asset)
     if args.representation:

@@ -23,7 +23,7 @@ import numpy as np
 import trimesh
 
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 MAX_VOXELS = 20_000_000  # grid cells tested for one representation (memory ~ 0.5 GB of float64 centres)
 TOUCHING = 0.5

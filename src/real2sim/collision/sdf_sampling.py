@@ -45,8 +45,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.progress import ProgressFn, null_progress
 from real2sim.collision.mesh_distance import boundary_edges, signed_distance_winding  # noqa: F401 (boundary_edges: public here)
 
 _CACHE_FORMAT = 2  # bump when the sampling algorithm changes what it returns
@@ -157,7 +157,7 @@ def sample_sdf(
     no volume (fewer than ``min_inside_fraction`` of the near-surface samples
     clearly inside, |winding number| > 0.75).
     """
-    from real2sim.formats.mesh_io import validate_mesh
+    from real2sim.geometry.mesh_io import validate_mesh
 
     validate_mesh(mesh, "mesh")
     v = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
@@ -284,7 +284,7 @@ def _load_cache(path: Path) -> SdfSamples | None:
 
 
 def _save_cache(path: Path, samples: SdfSamples) -> None:
-    from real2sim.formats.outputs import atomic_file
+    from real2sim.plumbing.outputs import atomic_file
 
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -13,9 +13,9 @@ _EXPORTS = {
     "Trajectory": "simulate",
     "simulate_reference": "simulate",
     "simulate_candidate": "simulate",
-    "SceneConfig": "scene_config",
-    "RunSpec": "tasks",
-    "make_run_specs": "tasks",
+    "SceneConfig": "scene.scene_config",
+    "RunSpec": "scene.tasks",
+    "make_run_specs": "scene.tasks",
 }
 __all__ = sorted(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -87,7 +87,7 @@ def write_animation(reference, candidate, reference_mesh: Path, rep_dir: Path, s
     from pydrake.geometry import Mesh as DrakeMesh
 
     from real2sim.formats.collision import read_collision_json
-    from real2sim.formats.outputs import write_text_atomic
+    from real2sim.plumbing.outputs import write_text_atomic
 
     drake_log = logging.getLogger("drake")
     level = drake_log.level
@@ -136,9 +136,9 @@ def write_animations(results_dir: Path | str, summary: list[Mapping], preference
     """One animation per task of ``results_dir`` (run 0 of its first asset): the reference beside the
     representation recommended for ``preference``. Returns {task: HTML path}; {} when the sweep
     has no usable row or no cached reference."""
-    from real2sim.evaluate.scene_config import SceneConfig
+    from real2sim.evaluate.scene.scene_config import SceneConfig
     from real2sim.evaluate.simulate import simulate_candidate
-    from real2sim.evaluate.tasks import make_run_specs
+    from real2sim.evaluate.scene.tasks import make_run_specs
     from real2sim.formats.trajectory import load_trajectory
     from real2sim.report.pareto import recommend
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from real2sim.formats.asset_config import read_asset_contact
 from real2sim.formats.contact import POINT_URDF_NAME, ContactProperties
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,7 @@ def discover_assets(asset_dirs: Sequence[Path | str]) -> list[Asset]:
     for raw in asset_dirs:
         d = Path(raw).resolve()
         if not d.is_dir():
-            from real2sim.formats.paths import missing
+            from real2sim.plumbing.paths import missing
 
             raise UserInputError(f"{raw} is a file, not an asset folder" if d.exists() else missing(raw, "asset folder"))
         props = d / "physical_properties.json"
@@ -111,7 +111,7 @@ def read_canonical_transform(asset_dir: Path) -> np.ndarray:
 def place_reference_mesh(reference_mesh: Path | str, asset_dir: Path, out_path: Path) -> Path:
     """Write ``reference_mesh`` (given in the frame of the mesh the asset was built from) into
     the asset frame, as an .obj with normals at ``out_path``."""
-    from real2sim.formats.mesh_io import load_mesh
+    from real2sim.geometry.mesh_io import load_mesh
 
     mesh = load_mesh(reference_mesh).copy()
     mesh.apply_transform(read_canonical_transform(asset_dir))

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from real2sim.evaluate.jobs import _one_line, _row, run_reference_job
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 
 EXECUTORS = ("local", "ray")

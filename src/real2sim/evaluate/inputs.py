@@ -25,7 +25,7 @@ from typing import Sequence
 import numpy as np
 
 from real2sim.evaluate.discovery import Asset, Representation, read_canonical_transform
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.physical import PhysicalProperties, read_physical_properties
 
 #: Largest bounding-box side of an object the scenes can take, m: the ramp's table is 0.8 m
@@ -90,7 +90,7 @@ def check_representations(reps: Sequence[Representation]) -> None:
 
 
 def _check_reference_vertices(vertices: np.ndarray, asset: Asset, props: PhysicalProperties, label: str) -> None:
-    from real2sim.evaluate.placement import com_inside_hull
+    from real2sim.evaluate.scene.placement import com_inside_hull
 
     extents = vertices.max(axis=0) - vertices.min(axis=0)
     size_m = float(extents.max())
@@ -111,7 +111,7 @@ def check_inputs(assets: Sequence[Asset], reps: Sequence[Representation],
 
     ``reference_properties``: the reference's own physical_properties.json (one asset only).
     """
-    from real2sim.formats.mesh_io import load_mesh
+    from real2sim.geometry.mesh_io import load_mesh
 
     check_representations(reps)
     given = load_mesh(reference_mesh) if reference_mesh is not None else None  # UserInputError: not a mesh

@@ -14,9 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from real2sim.evaluate.discovery import Asset
-from real2sim.evaluate.placement import StablePoseCache
-from real2sim.evaluate.scene_config import SceneConfig
-from real2sim.evaluate.tasks import RunSpec
+from real2sim.evaluate.scene.placement import StablePoseCache
+from real2sim.evaluate.scene.scene_config import SceneConfig
+from real2sim.evaluate.scene.tasks import RunSpec
 from real2sim.evaluate.scoring import score
 from real2sim.evaluate.simulate import SimulationTimeout
 from real2sim.formats.contact import ContactProperties

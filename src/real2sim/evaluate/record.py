@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from real2sim.evaluate.discovery import Asset
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 # Settings that change the meaning of a row: a resumed sweep must use the same ones.
 PINNED_SETTINGS = ("seed", "scene", "simulation_error", "reference", "reference_contact", "reference_properties")

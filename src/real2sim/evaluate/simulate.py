@@ -38,10 +38,10 @@ import numpy as np
 
 from real2sim.formats.physical import read_physical_properties
 from real2sim.formats.trajectory import Trajectory
-from real2sim.evaluate.placement import StablePoseCache, initial_object_pose
-from real2sim.evaluate.scene_config import SceneConfig
-from real2sim.evaluate.tasks import RunSpec
-from real2sim.evaluate.world import Scene, build_scene, reference_object_adder, urdf_object_adder
+from real2sim.evaluate.scene.placement import StablePoseCache, initial_object_pose
+from real2sim.evaluate.scene.scene_config import SceneConfig
+from real2sim.evaluate.scene.tasks import RunSpec
+from real2sim.evaluate.scene.world import Scene, build_scene, reference_object_adder, urdf_object_adder
 
 
 class SimulationError(RuntimeError):
@@ -308,7 +308,7 @@ def _in_object_frame(contacts_w: list[np.ndarray], forces_w: list[np.ndarray],
 
 
 def _mesh_vertices(mesh_path: Path) -> np.ndarray:
-    from real2sim.formats.mesh_io import load_mesh
+    from real2sim.geometry.mesh_io import load_mesh
 
     return np.asarray(load_mesh(Path(mesh_path)).vertices, dtype=float)
 
@@ -322,7 +322,7 @@ def simulate_reference(reference_mesh_path: Path, physical_properties, run_spec:
     ``object_contact``: real2sim.formats.contact.ContactProperties for friction/dissipation
     (defaults when None). ``timeout_s``: wall-clock limit of the whole call
     (:class:`SimulationTimeout` past it); None: none. ``stable_poses``: the object's resting
-    poses kept by the caller (:class:`~real2sim.evaluate.placement.StablePoseCache`; None: computed)."""
+    poses kept by the caller (:class:`~real2sim.evaluate.scene.placement.StablePoseCache`; None: computed)."""
     deadline = _Deadline(timeout_s)
     scene = build_scene(run_spec.task, "hydroelastic",
                         reference_object_adder(reference_mesh_path, physical_properties, object_contact),

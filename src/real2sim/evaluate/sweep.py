@@ -3,7 +3,7 @@
 For each asset folder, task and run, the *reference* (the asset's own closed mesh,
 or ``--reference MESH``, simulated with hydroelastic contact) is simulated once;
 then every ``(representation, contact model)`` is simulated on the same
-:class:`~real2sim.evaluate.tasks.RunSpec` and scored against it with
+:class:`~real2sim.evaluate.scene.tasks.RunSpec` and scored against it with
 :mod:`real2sim.evaluate.metrics` (equation error: the candidate is reset to the reference
 state every 0.1 s, unless ``simulation_error`` asks for free roll-outs).
 
@@ -64,16 +64,16 @@ from real2sim.evaluate.discovery import (Asset, Representation, discover_assets,
 from real2sim.evaluate.executors import EXECUTORS, _default_jobs, _make_executor, _Retry
 from real2sim.evaluate.inputs import check_inputs
 from real2sim.evaluate.record import check_resume_settings, config_record
-from real2sim.evaluate.placement import StablePoseCache
+from real2sim.evaluate.scene.placement import StablePoseCache
 from real2sim.evaluate.jobs import CandidateJob, ReferenceJob, _reference_cache_name, _row, run_candidate_job, run_reference_job
-from real2sim.evaluate.scene_config import SceneConfig
-from real2sim.evaluate.tasks import TASKS, make_run_specs
+from real2sim.evaluate.scene.scene_config import SceneConfig
+from real2sim.evaluate.scene.tasks import TASKS, make_run_specs
 from real2sim.evaluate.workdir import (check_partial, check_results_dir, fresh_partial, partial_dir, protected_inputs,
                                        resolve_target)
 from real2sim.formats.contact import CONTACT_MODELS
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import output_lock, publish_dir, write_json_atomic
-from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import output_lock, publish_dir, write_json_atomic
+from real2sim.plumbing.progress import ProgressFn, null_progress
 from real2sim.formats.results import describe_torn, load_runs_csv, relative_paths_in_text, row_key, write_runs_csv
 
 
@@ -83,7 +83,7 @@ class EvaluationConfig:
 
     tasks: subset of ("push", "ramp"); contact_models: subset of ("point", "hydroelastic");
     runs: runs per (object, task) -- the paper uses 10; seed: seeds the run
-    randomisation (:func:`real2sim.evaluate.tasks.make_run_specs`); jobs: parallel
+    randomisation (:func:`real2sim.evaluate.scene.tasks.make_run_specs`); jobs: parallel
     simulations (local pool size, or Ray tasks in flight); executor: "local" or "ray";
     ray_address: Ray cluster address (None: ``$RAY_ADDRESS``, else a local Ray);
     simulation_error: free roll-outs instead of equation error (resets every 0.1 s);
@@ -338,7 +338,7 @@ def _stable_poses(mesh_path: Path, properties: Path) -> StablePoseCache:
     A failure leaves the cache empty: each job then meets it again and records it in its rows."""
     cache = StablePoseCache()
     try:
-        from real2sim.formats.mesh_io import load_mesh
+        from real2sim.geometry.mesh_io import load_mesh
         from real2sim.formats.physical import read_physical_properties
 
         vertices = np.asarray(load_mesh(Path(mesh_path)).vertices, dtype=float)

@@ -1,6 +1,6 @@
 """The results folder and its working folder: what the sweep may write, replace and resume.
 
-The rules of :func:`real2sim.formats.outputs.check_output_dir` apply to ``--out``, with
+The rules of :func:`real2sim.plumbing.outputs.check_output_dir` apply to ``--out``, with
 the evaluation's inputs being what it reads (:func:`protected_inputs`), so ``--overwrite``
 never deletes an asset, a representation, the reference mesh or the working folder.
 
@@ -9,7 +9,7 @@ Two evaluation-specific points:
 - A results folder may be resumed without ``--overwrite`` (that is how a sweep is
   extended); it is replaced, whole, only when the sweep completes.
 - A results folder written before real2sim marked its outputs (``runs.csv`` but no
-  :data:`~real2sim.formats.outputs.MARKER_NAME`) is clearly the evaluation's: it is
+  :data:`~real2sim.plumbing.outputs.MARKER_NAME`) is clearly the evaluation's: it is
   resumed, and marked as ours. ``--overwrite`` replaces such a folder (or an old working
   folder) only when it holds nothing but what the evaluation writes
   (:data:`RESULTS_ENTRIES`); a file the user added there would be lost, so it is refused
@@ -26,8 +26,8 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from real2sim.evaluate.discovery import Asset
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import MARKER_NAME, check_output_dir, make_output_dir, write_marker
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import MARKER_NAME, check_output_dir, make_output_dir, write_marker
 
 #: What the evaluation writes in a results folder (shell patterns; the hidden ones are the
 #: temporary files of older versions).

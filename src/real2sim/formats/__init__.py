@@ -9,7 +9,6 @@ stage's internals.
 from real2sim._lazy import lazy_exports
 
 _EXPORTS = {
-    "UserInputError": "errors",
     "CollisionSpec": "spec",
     "parse_spec": "spec",
     "CollisionGeometry": "collision",
@@ -23,9 +22,6 @@ _EXPORTS = {
     "Dataset": "dataset",
     "Frame": "dataset",
     "read_dataset": "dataset",
-    "atomic_output_dir": "outputs",
-    "check_output_dir": "outputs",
-    "publish_dir": "outputs",
     "load_mesh": "mesh_io",
     "validate_mesh": "mesh_io",
     "export_textured_mesh": "mesh_io",

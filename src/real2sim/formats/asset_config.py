@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from real2sim.formats.contact import ContactProperties
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 ASSET_CONFIG_NAME = "asset_config.json"
 

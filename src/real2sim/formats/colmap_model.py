@@ -1,5 +1,5 @@
 """A dataset from ``images/`` and a COLMAP model (``sparse/0``): poses in COLMAP's own frame and scale
-(:mod:`real2sim.pipeline.normalise` moves them into the robot frame)."""
+(:mod:`real2sim.capture.phone.normalise` moves them into the robot frame)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics, Dataset, Frame, check_frame_files
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 
 def _colmap_intrinsics(camera) -> CameraIntrinsics:

@@ -34,7 +34,7 @@ class ContactProperties:
         contact, tripling its OCAE (docs/benchmarks.md, "Point-contact stiffness").
     point_stiffness_per_piece: True (default): ``point_contact_stiffness_n_per_m`` is the body's, and
         each piece gets it divided by the mean number of pieces that touch a plane laid on the hull
-        (:mod:`real2sim.asset.point_contact`), so every representation rests as stiffly as the object
+        (:mod:`real2sim.asset.export.point_contact`), so every representation rests as stiffly as the object
         in one piece. False: every piece gets all of it, and a union of N pieces resting on all N is
         N times stiffer. Shared, every multi-piece primitive point row measured moved closer to the
         reference (ten on the bundled bottle and can, e.g. ellipsoids_64 0.0171 -> 0.0139 m OCAE;

@@ -40,8 +40,8 @@ import numpy as np
 from real2sim.formats.dataset_keys import (MODEL_FRAME_KEYS, POSE_REFINED_KEY, SUPPORT_Z_KEY,  # noqa: F401
                                            TABLE_PLANE_KEY, describe_model_frame, has_table_plane,
                                            is_model_frame, stated_support_z_m)
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import write_json_atomic as _write_json_atomic
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import write_json_atomic as _write_json_atomic
 
 # OpenCV camera (x right, y down, z forward) <-> OpenGL camera (x right, y up, z backward):
 # both are a flip of the camera's y and z axes, applied on the right of camera-to-world.
@@ -174,7 +174,7 @@ def dataset_to_json(ds: Dataset) -> dict:
 
 
 def write_json_atomic(path: Path, data: Any, default: Any = None) -> None:
-    """:func:`real2sim.formats.outputs.write_json_atomic` (kept here for the stages that import it)."""
+    """:func:`real2sim.plumbing.outputs.write_json_atomic` (kept here for the stages that import it)."""
     _write_json_atomic(path, data, default=default)
 
 
@@ -185,8 +185,8 @@ def write_transforms(path: Path, ds: Dataset) -> None:
 
 def _not_a_file(path: Path, kind: str) -> str:
     """Why ``path`` (an image or a mask) cannot be read as a file: a folder, a FIFO or a device is
-    there (reading a FIFO would wait forever), or nothing is (:func:`~real2sim.formats.paths.missing`)."""
-    from real2sim.formats.paths import missing
+    there (reading a FIFO would wait forever), or nothing is (:func:`~real2sim.plumbing.paths.missing`)."""
+    from real2sim.plumbing.paths import missing
 
     if path.is_dir():
         return f"{kind} {path} is a folder, not a file"
@@ -206,7 +206,7 @@ def read_transforms(path: Path, root: Path | None = None, check_files: bool = Tr
     try:
         data = json.loads(path.read_text())
     except FileNotFoundError:
-        from real2sim.formats.paths import missing
+        from real2sim.plumbing.paths import missing
 
         raise UserInputError(missing(path, "dataset file")) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -313,7 +313,7 @@ def check_dataset_outputs(root: Path | str, files: tuple[str, ...] = (), folders
 
     UserInputError (one line) for a folder where a file goes or a file where a folder goes,
     a folder that cannot be written (permission), or a name the file system refuses."""
-    from real2sim.formats.outputs import check_output_path
+    from real2sim.plumbing.outputs import check_output_path
 
     root = Path(root)
     for name, folder in [(n, False) for n in files] + [(n, True) for n in folders]:
@@ -335,7 +335,7 @@ def read_dataset(path: Path | str, check_files: bool = True) -> Dataset:
     if path.is_file() and path.suffix == ".json":
         return read_transforms(path, check_files=check_files)
     if not path.exists():
-        from real2sim.formats.paths import missing
+        from real2sim.plumbing.paths import missing
 
         raise UserInputError(missing(path, "dataset"))
     if not path.is_dir():

@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import write_text_atomic
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import write_text_atomic
 
 ROBOT_FILE = "robot.urdf"
 GRASP_FILE = "grasp.json"

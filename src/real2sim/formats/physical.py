@@ -121,7 +121,7 @@ def parse_properties(path: Path | str, label: str = "") -> tuple[PhysicalPropert
     ``samples_kept`` not an integer >= 0; ``method`` not a string; ``frame`` not "mesh" or "asset";
     a mass standard error (:func:`_mass_standard_error`) not a finite number >= 0.
     """
-    from real2sim.formats.errors import UserInputError
+    from real2sim.plumbing.errors import UserInputError
 
     path = Path(path)
 

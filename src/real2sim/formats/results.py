@@ -25,8 +25,8 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import write_text_atomic
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import write_text_atomic
 
 
 RUN_COLUMNS = (

@@ -9,7 +9,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 # SPEC family -> primitive kind used in collision.json and by the fitter.
 PRIMITIVE_FAMILIES: dict[str, str] = {

@@ -23,7 +23,7 @@ import math
 import numpy as np
 import trimesh
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 #: Voxels along the solid's longest side.
 ENVELOPE_VOXELS = 128

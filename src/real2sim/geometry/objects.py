@@ -22,8 +22,8 @@ import numpy as np
 import trimesh
 from PIL import Image
 
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.mesh_io import export_textured_mesh
+from real2sim.plumbing.errors import UserInputError
+from real2sim.geometry.mesh_io import export_textured_mesh
 from real2sim.geometry.tessellation import sections_for
 
 _TEXTURE_PX = 512

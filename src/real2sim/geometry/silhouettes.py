@@ -14,7 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 #: Share of an image's pixels above which a mask is "full": no silhouette leaves so little background.
 FULL_MASK_FRACTION = 0.95

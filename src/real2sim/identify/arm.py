@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 PAYLOAD_BODY = "payload"
 

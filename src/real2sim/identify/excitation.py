@@ -223,7 +223,7 @@ def cached_excitation(arm: ArmWithPayload, robot_key: str, grasp: np.ndarray, ca
             pass  # a damaged cache entry is recomputed
     traj, score = design_excitation(arm, seed=seed, periods=periods)
     if path is not None:
-        from real2sim.formats.outputs import write_text_atomic
+        from real2sim.plumbing.outputs import write_text_atomic
 
         path.parent.mkdir(parents=True, exist_ok=True)
         write_text_atomic(path, json.dumps({"trajectory": traj.to_json(), "quality": score.__dict__}))

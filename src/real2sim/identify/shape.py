@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.physical import parse_properties
 from real2sim.identify.arm import phi_from_properties
 from real2sim.identify.solve import ShapePrior

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.joint_log import JointLog
 from real2sim.identify.arm import ArmWithPayload, properties_from_phi
 from real2sim.identify.regressor import friction_regressor, payload_regressor

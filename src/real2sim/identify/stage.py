@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.joint_log import ROBOT_FILE, TRUTH_FILE, read_joint_log, write_joint_log
 from real2sim.formats.physical import MESH_FRAME
-from real2sim.formats.progress import ProgressFn
+from real2sim.plumbing.progress import ProgressFn
 from real2sim.identify.arm import default_arm_urdf, load_arm
 from real2sim.identify.excitation import DEFAULT_PERIODS
 from real2sim.identify.solve import PARAMETER_NAMES, Identification, identify
@@ -55,7 +55,7 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
     """Simulate the arm holding ``mesh`` (closed, metres) and write the log into ``out_dir`` (whole or
     not at all). ``inputs``: the files the mesh was read from; the log may not overlap them, nor
     ``config.robot_urdf``. Returns the truth written to ``truth.json``."""
-    from real2sim.formats.outputs import atomic_output_dir
+    from real2sim.plumbing.outputs import atomic_output_dir
     from real2sim.identify.excitation import cached_excitation
     from real2sim.identify.excite import Measurement, closed_solid, payload_truth, simulate_excitation
 

@@ -33,10 +33,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import MARKER_NAME, check_output_dir, make_output_dir, output_lock, write_json_atomic
-from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import MARKER_NAME, check_output_dir, make_output_dir, output_lock, write_json_atomic
+from real2sim.plumbing.progress import ProgressFn, null_progress
 from real2sim.pipeline import manifest as mf
+from real2sim.plumbing import digests
 
 BATCH_DIRNAME = ".batch"
 MADE_BY = "real2sim batch"
@@ -144,7 +145,7 @@ def check_names(datasets: list[Path]) -> list[str]:
 
 def object_key(job: ObjectJob) -> str:
     """What an object's outcome depends on: every file of its dataset and the run settings."""
-    files = mf.files_digest(job.dataset, mf.tree_files(job.dataset)) if job.dataset.is_dir() else str(job.dataset)
+    files = digests.files_digest(job.dataset, digests.tree_files(job.dataset)) if job.dataset.is_dir() else str(job.dataset)
     return mf.stage_key({"dataset": files}, job.config, None)
 
 

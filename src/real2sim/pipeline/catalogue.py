@@ -22,7 +22,7 @@ import math
 from pathlib import Path
 from typing import Any, Sequence
 
-from real2sim.formats.outputs import write_text_atomic
+from real2sim.plumbing.outputs import write_text_atomic
 from real2sim.pipeline import manifest as mf
 
 COLUMNS = (

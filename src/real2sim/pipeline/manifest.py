@@ -52,7 +52,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from real2sim.formats.dataset import write_json_atomic as _write_json_atomic
-from real2sim.formats.outputs import file_sha256  # noqa: F401 (public here)
+from real2sim.plumbing.digests import all_files, file_sha256
 
 MANIFEST_VERSION = 1
 RUN_DIRNAME = ".run"
@@ -78,33 +78,6 @@ def _jsonable(value: Any) -> Any:
 def settings_record(settings: Any) -> Any:
     """The JSON form of a stage's settings (dataclasses field by field, paths as strings)."""
     return _jsonable(settings)
-
-
-def files_digest(root: Path, relpaths: Iterable[str]) -> dict:
-    """``{"files": n, "bytes": total, "sha256": digest}`` over (relative path, content hash) of each file."""
-    root = Path(root)
-    digest = hashlib.sha256()
-    count = size = 0
-    for rel in sorted(set(relpaths)):
-        path = root / rel
-        digest.update(rel.encode())
-        digest.update(file_sha256(path).encode() if path.is_file() else b"<missing>")
-        count += 1
-        size += path.stat().st_size if path.is_file() else 0
-    return {"files": count, "bytes": size, "sha256": digest.hexdigest()}
-
-
-def tree_files(root: Path) -> list[str]:
-    """Every regular file below ``root`` (relative paths), hidden temporary names excluded."""
-    root = Path(root)
-    return [p.relative_to(root).as_posix() for p in sorted(root.rglob("*"))
-            if p.is_file() and ".tmp-" not in p.as_posix()]
-
-
-def all_files(root: Path) -> list[str]:
-    """Every regular file below ``root`` (relative paths), hidden ones included."""
-    root = Path(root)
-    return [p.relative_to(root).as_posix() for p in sorted(root.rglob("*")) if p.is_file()]
 
 
 def stage_key(inputs: dict, settings: Any, upstream: str | None) -> str:

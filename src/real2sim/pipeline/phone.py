@@ -2,17 +2,17 @@
 
 Two stages before the usual ones (:mod:`real2sim.pipeline.run`):
 
-1. ``sfm``: for a video, frames chosen for sharpness and even spacing (:mod:`real2sim.capture.video`);
-   then structure from motion from scratch (:mod:`real2sim.capture.sfm`; the printed board, where it
-   is seen, measures each camera's focal length: :mod:`real2sim.capture.board_focal`) ->
+1. ``sfm``: for a video, frames chosen for sharpness and even spacing (:mod:`real2sim.capture.phone.video`);
+   then structure from motion from scratch (:mod:`real2sim.capture.phone.sfm`; the printed board, where it
+   is seen, measures each camera's focal length: :mod:`real2sim.capture.phone.board_focal`) ->
    ``ASSETDIR/.run/sfm/``, a COLMAP dataset: ``images/`` (undistorted, one pinhole camera),
    ``sparse/0`` (that camera, the registered images' poses and the sparse points, the model's
    arbitrary frame and scale) and ``sfm.json`` (what registered, what was left out and why, the
    estimated cameras, the chosen video frames). Cached like every stage: a later failure (no board)
    does not redo it.
 2. ``board_frame`` (without ``--object-height-m``/``--scale``): the printed board
-   (:mod:`real2sim.capture.board`) found in the undistorted images gives the world frame
-   (:func:`real2sim.capture.board_frame.world_from_board_views`: table top z = 0, z up, the board's
+   (:mod:`real2sim.capture.phone.board`) found in the undistorted images gives the world frame
+   (:func:`real2sim.capture.phone.board_frame.world_from_board_views`: table top z = 0, z up, the board's
    centre the origin, metres) -> ``ASSETDIR/.run/phone/``, a metric transforms.json dataset, with
    ``board_frame.json``. With ``--object-height-m`` or ``--scale`` the COLMAP dataset of stage 1 goes
    to the ``robot_frame`` stage instead, as a COLMAP capture does.
@@ -21,7 +21,7 @@ Ground truth (simulated captures, tests, benchmarks): a ``ground_truth/`` folder
 beside the VIDEO, with ``transforms.json`` (true poses; frames named like the photos, or for a video
 one frame per clip frame in order) and ``mesh.obj``, in the board's frame. The sfm stage relates the
 model to it by the similarity of the camera centres (``ground_truth/model_from_world.json``, what
-:mod:`real2sim.pipeline.normalise` reads), and the board_frame stage copies it unchanged: its
+:mod:`real2sim.capture.phone.normalise` reads), and the board_frame stage copies it unchanged: its
 frame is the world frame the board defines, so every error of the board's frame shows in the truth
 comparison.
 """
@@ -37,15 +37,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from real2sim.capture.sfm import SfmConfig, list_images
-from real2sim.capture.video import DEFAULT_FRAMES, VIDEO_SUFFIXES
+from real2sim.capture.phone.sfm import SfmConfig, list_images
+from real2sim.capture.phone.video import DEFAULT_FRAMES, VIDEO_SUFFIXES
 from real2sim.formats.dataset import CV_FROM_GL, Dataset, Frame, read_ground_truth, write_transforms
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import publish_dir, write_json_atomic
-from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import publish_dir, write_json_atomic
+from real2sim.plumbing.progress import ProgressFn, null_progress
+from real2sim.plumbing import digests
 
 if TYPE_CHECKING:
-    from real2sim.capture.board import BoardSpec
+    from real2sim.capture.phone.board import BoardSpec
 
 SFM_DIRNAME, PHONE_DIRNAME = "sfm", "phone"
 SFM_RECORD, BOARD_RECORD = "sfm.json", "board_frame.json"
@@ -65,7 +66,7 @@ class PhoneInput:
 @dataclass(frozen=True)
 class PhoneConfig:
     """``frames``: video frames kept; ``board``: the printed board (a
-    :class:`real2sim.capture.board.BoardSpec`; None: ``real2sim board``'s default); ``board_square_mm``:
+    :class:`real2sim.capture.phone.board.BoardSpec`; None: ``real2sim board``'s default); ``board_square_mm``:
     its square as measured when the print was scaled (None: the board's own size); ``sfm``:
     structure-from-motion settings."""
 
@@ -136,8 +137,8 @@ def _copy_truth(source: Path, target: Path, c2w_cv: np.ndarray, sources: tuple[s
                 frame_index: dict[str, int] | None, record: dict) -> None:
     """``source/ground_truth`` copied to ``target`` with ``model_from_world.json``: the similarity of the true
     camera centres onto the model's (what the robot_frame stage and the board_frame stage's errors use)."""
-    from real2sim.capture.pose_refinement import umeyama
-    from real2sim.pipeline.normalise import MODEL_FROM_WORLD
+    from real2sim.capture.poses.refinement import umeyama
+    from real2sim.capture.phone.normalise import MODEL_FROM_WORLD
 
     truth = source / "ground_truth"
     centres = _true_centres(source, sources, frame_index) if (truth / "transforms.json").is_file() else None
@@ -158,7 +159,7 @@ def _copy_truth(source: Path, target: Path, c2w_cv: np.ndarray, sources: tuple[s
 
 def run_sfm(phone: PhoneInput, target: Path, config: PhoneConfig, progress: ProgressFn | None = None) -> dict:
     """Stage 1 (module docstring) into ``target`` (whole or not at all); the record it writes as sfm.json."""
-    from real2sim.capture.sfm import structure_from_motion
+    from real2sim.capture.phone.sfm import structure_from_motion
 
     progress = progress or null_progress
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
@@ -166,7 +167,7 @@ def run_sfm(phone: PhoneInput, target: Path, config: PhoneConfig, progress: Prog
         record: dict = {"input": str(phone.path), "kind": phone.kind}
         frame_index = None
         if phone.kind == "video":
-            from real2sim.capture.video import decode_frames
+            from real2sim.capture.phone.video import decode_frames
 
             frames = decode_frames(phone.path, config.frames, progress, folder=tmp / "frames")
             paths = list(frames.paths)
@@ -199,7 +200,7 @@ def run_sfm(phone: PhoneInput, target: Path, config: PhoneConfig, progress: Prog
 def board_layout(config: PhoneConfig):
     """The board as printed, whatever its measured square: what the sfm stage looks for (a focal length
     measured on it does not depend on the board's size)."""
-    from real2sim.capture.board import DEFAULT_BOARD
+    from real2sim.capture.phone.board import DEFAULT_BOARD
 
     return config.board if config.board is not None else DEFAULT_BOARD
 
@@ -217,12 +218,12 @@ def board_spec(config: PhoneConfig):
 
 def run_board_frame(source: Path, target: Path, config: PhoneConfig, progress: ProgressFn | None = None) -> dict:
     """Stage 2 (module docstring): the sfm stage's COLMAP dataset ``source`` -> the metric dataset ``target``."""
-    from real2sim.capture.board import detect_board
-    from real2sim.capture.board_frame import MIN_BOARD_VIEWS, world_from_board_views
+    from real2sim.capture.phone.board import detect_board
+    from real2sim.capture.phone.board_frame import MIN_BOARD_VIEWS, world_from_board_views
     from real2sim.formats.colmap_model import read_colmap_model
     from real2sim.formats.dataset import load_image_rgb
-    from real2sim.pipeline import robot_frame as rf
-    from real2sim.pipeline.normalise import model_from_world
+    from real2sim.capture.phone import robot_frame as rf
+    from real2sim.capture.phone.normalise import model_from_world
 
     progress = progress or null_progress
     spec = board_spec(config)
@@ -262,7 +263,7 @@ def run_board_frame(source: Path, target: Path, config: PhoneConfig, progress: P
                               "world_frame": "the board's: table top z=0, z up, its centre the origin, metres"}}
         write_transforms(tmp / "transforms.json", Dataset(tmp, ds.intrinsics, tuple(frames), extra))
         if (source / "ground_truth").is_dir():
-            from real2sim.pipeline.normalise import MODEL_FROM_WORLD
+            from real2sim.capture.phone.normalise import MODEL_FROM_WORLD
 
             shutil.copytree(source / "ground_truth", tmp / "ground_truth", ignore=shutil.ignore_patterns(MODEL_FROM_WORLD))
         write_json_atomic(tmp / BOARD_RECORD, record)
@@ -290,7 +291,7 @@ def phone_stages(runner, phone: PhoneInput, run_dir: Path, config) -> Path:
         return {"result": {k: record[k] for k in ("registered", "mean_reprojection_px", "matching")}
                 | {"left_out": len(record["left_out"])}}
 
-    upstream = runner.stage("sfm", {"input": mf.files_digest(phone.root, list(phone.files))}, settings, None,
+    upstream = runner.stage("sfm", {"input": digests.files_digest(phone.root, list(phone.files))}, settings, None,
                             [f"{mf.RUN_DIRNAME}/{SFM_DIRNAME}"], sfm_work)
     if config.robot_frame() is not None:  # the user's scale: the robot_frame stage finds the table
         if runner.manifest.entry("board_frame"):
@@ -303,6 +304,6 @@ def phone_stages(runner, phone: PhoneInput, run_dir: Path, config) -> Path:
         keys = ("found_in", "registered", "scale_m_per_unit", "camera_centre_residual_mm", "reprojection_px")
         return {"result": {k: record[k] for k in keys} | {k: record[k] for k in ("errors_vs_ground_truth",) if k in record}}
 
-    runner.stage("board_frame", {"sfm": mf.files_digest(sfm_dir, mf.tree_files(sfm_dir))},
+    runner.stage("board_frame", {"sfm": digests.files_digest(sfm_dir, digests.tree_files(sfm_dir))},
                  {"board": board_spec(cfg).to_json()}, upstream, [f"{mf.RUN_DIRNAME}/{PHONE_DIRNAME}"], board_work)
     return phone_dir

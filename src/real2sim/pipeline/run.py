@@ -8,7 +8,7 @@ Stages, in order (each one the existing stage function, called as it is; ``masks
 (with ``mask_method``) first makes the masks on a copy in ``ASSETDIR/.run/masked/``):
 
 0. ``robot_frame`` (a COLMAP dataset: images + ``sparse/0``, no transforms.json):
-   :func:`real2sim.pipeline.normalise.normalise` moves it into the robot frame (table
+   :func:`real2sim.capture.phone.normalise.normalise` moves it into the robot frame (table
    plane z = 0, z up, metres from ``object_height_m`` or ``scale``) -> ``ASSETDIR/.run/robot_frame/``;
 1. ``refine_poses`` (``RunConfig.refine``; the command's default where :func:`poses_to_refine`):
    :func:`real2sim.capture.refine_poses` on a copy of the dataset in ``ASSETDIR/.run/dataset/``
@@ -19,7 +19,7 @@ Stages, in order (each one the existing stage function, called as it is; ``masks
    the table plane z = 0 of the dataset's world frame, or, for a dataset without a table
    plane, the object's own lowest seen points, :mod:`real2sim.pipeline.support`) -> the usual ASSETDIR layout;
 4. ``truth`` (when the dataset has ``ground_truth/``; a COLMAP dataset also needs
-   ``ground_truth/model_from_world.json``, see :mod:`real2sim.pipeline.normalise`): ``ASSETDIR/truth.json``;
+   ``ground_truth/model_from_world.json``, see :mod:`real2sim.capture.phone.normalise`): ``ASSETDIR/truth.json``;
 5. ``evaluate`` (optional): :func:`real2sim.evaluate.sweep.evaluate` -> ``ASSETDIR/results/``.
 
 Caching, resuming and the manifest: :mod:`real2sim.pipeline.manifest`. Every Python warning a
@@ -38,12 +38,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 from real2sim.formats.dataset import has_table_plane, read_dataset
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import check_output_dir, make_output_dir, output_lock
-from real2sim.formats.progress import ProgressFn
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import check_output_dir, make_output_dir, output_lock
+from real2sim.plumbing.progress import ProgressFn
 from real2sim.pipeline import manifest as mf
-from real2sim.pipeline.masks import PARALLAX
-from real2sim.pipeline.normalise import MODEL_FROM_WORLD, NormaliseConfig
+from real2sim.capture.masks.stage import PARALLAX
+from real2sim.capture.phone.normalise import MODEL_FROM_WORLD, NormaliseConfig
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
                                       EVALUATIONS, _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine,
                                       _refine_unavailable, _robot_frame, _truth, check_evaluations, rewrite_reports)
@@ -52,14 +52,15 @@ from real2sim.pipeline.run_folder import (check_dataset, dataset_files, discard,
 from real2sim.pipeline.runner import Paused, RunProgress, Runner, StageFailed
 from real2sim.pipeline.support import support_height_m
 from real2sim.pipeline.truth import has_ground_truth
+from real2sim.plumbing import digests
 
 if TYPE_CHECKING:
     from real2sim.asset.build import AssetConfig
-    from real2sim.capture.masking import MaskConfig
-    from real2sim.capture.pose_refinement import RefineConfig
+    from real2sim.capture.masks.methods import MaskConfig
+    from real2sim.capture.poses.refinement import RefineConfig
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.pipeline.phone import PhoneConfig
-    from real2sim.reconstruct.parallax_config import ParallaxConfig
+    from real2sim.capture.masks.parallax_config import ParallaxConfig
     from real2sim.reconstruct.stage import ReconstructConfig
 
 # Evaluation settings that change how fast, not what: not part of the evaluate stage's key.
@@ -76,7 +77,7 @@ class RunConfig:
     on the bottom closed at the table (the paper's PCA rule, ``pca_up``, stands a box on
     its end and lays a mug on its side). reconstruct: None -> the
     stage's defaults. mask_method: None -> the dataset's own masks (every frame must
-    have one); else masks are made with :func:`real2sim.pipeline.masks.make_masks` (``mask``
+    have one); else masks are made with :func:`real2sim.capture.masks.stage.make_masks` (``mask``
     the capture methods' settings, or for parallax masks a ParallaxConfig; otherwise their defaults, and
     for a phone capture :func:`phone_mask_config`'s) on a copy; ``parallax`` masks of a robot
     capture are made after refine_poses, on the refined poses. refine: None -> no pose refinement
@@ -215,7 +216,7 @@ def phone_mask_config(config: RunConfig, kind: str) -> RunConfig:
     plate's chance matches on a printed object, which the hull then carves into a hollow; with the opinion
     photos can let fewer views carve (a mug's handle hole), a clip cannot (the measurements are in the
     settings' docstrings)."""
-    from real2sim.reconstruct.parallax_config import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
+    from real2sim.capture.masks.parallax_config import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
                                                       ParallaxConfig)
 
     if config.mask_method != PARALLAX or isinstance(config.mask, ParallaxConfig):
@@ -273,12 +274,12 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
     masks_last = config.mask_method == PARALLAX and robot_frame is None and config.refine is not None
 
     def masks_stage(source: Path, upstream: str | None) -> str:
-        from real2sim.capture.masking import MaskConfig
+        from real2sim.capture.masks.methods import MaskConfig
 
         mask_cfg = config.mask or MaskConfig()
         settings = {"method": config.mask_method, "config": mask_cfg}
         if config.mask_method == PARALLAX:
-            from real2sim.reconstruct.parallax_config import ParallaxConfig
+            from real2sim.capture.masks.parallax_config import ParallaxConfig
 
             settings = {"method": PARALLAX, "table_z_m": table_z_m, "seed": config.seed}
             if isinstance(mask_cfg, ParallaxConfig):  # only what differs from the defaults: older runs still match
@@ -286,7 +287,7 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
                 changed = {k: v for k, v in vars(mask_cfg).items() if k != "table_z_m" and getattr(default, k) != v}
                 if changed:
                     settings["parallax"] = changed
-        return runner.stage("masks", {"dataset": mf.files_digest(source, dataset_files(source))}, settings,
+        return runner.stage("masks", {"dataset": digests.files_digest(source, dataset_files(source))}, settings,
                             upstream, [f"{mf.RUN_DIRNAME}/masked"],
                             lambda: _masks(source, run_dir, config.mask_method, mask_cfg, progress, table_z_m,
                                            config.seed))
@@ -299,7 +300,7 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
         shutil.rmtree(run_dir / "masked", ignore_errors=True)
     if robot_frame is not None:
         source = used
-        upstream = runner.stage("robot_frame", {"dataset": mf.files_digest(source, dataset_files(source))},
+        upstream = runner.stage("robot_frame", {"dataset": digests.files_digest(source, dataset_files(source))},
                                 {"config": robot_frame, "seed": config.seed}, upstream,
                                 [f"{mf.RUN_DIRNAME}/robot_frame"],
                                 lambda: _robot_frame(source, run_dir, robot_frame, config.seed, progress))
@@ -309,7 +310,7 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
         shutil.rmtree(run_dir / "robot_frame", ignore_errors=True)
     if config.refine is not None:
         source = used
-        inputs = {"dataset": mf.files_digest(source, dataset_files(source))}
+        inputs = {"dataset": digests.files_digest(source, dataset_files(source))}
         if importlib.util.find_spec("pycolmap") is not None:
             upstream = runner.stage("refine_poses", inputs, config.refine, upstream, [f"{mf.RUN_DIRNAME}/dataset"],
                                     lambda: _refine(source, run_dir, config.refine, progress))
@@ -334,27 +335,27 @@ def _run_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfi
 
     recon_dir = run_dir / "reconstruct"
     upstream = runner.stage(
-        "reconstruct", {"dataset": mf.files_digest(used, dataset_files(used))},
+        "reconstruct", {"dataset": digests.files_digest(used, dataset_files(used))},
         {"config": recon_cfg, "device": config.device, "seed": config.seed}, upstream,
         [f"{mf.RUN_DIRNAME}/reconstruct/mesh.obj", f"{mf.RUN_DIRNAME}/reconstruct/report.json"],
         lambda: _reconstruct(used, recon_dir, recon_cfg, config.device, config.seed, progress))
 
-    mesh_files = [f for f in mf.tree_files(recon_dir) if f != "report.json"]
+    mesh_files = [f for f in digests.tree_files(recon_dir) if f != "report.json"]
     support_m, support_from = support_height_m(used, recon_dir / "mesh.obj", recon_cfg.table_z_m)
     asset_cfg = replace(asset_cfg, support_height_m=support_m)
-    asset_key = runner.stage("asset", {"mesh": mf.files_digest(recon_dir, mesh_files)}, asset_cfg, upstream, None,
+    asset_key = runner.stage("asset", {"mesh": digests.files_digest(recon_dir, mesh_files)}, asset_cfg, upstream, None,
                              lambda: {**_asset(recon_dir / "mesh.obj", asset_dir, asset_cfg, manifest, progress),
                                       "evaluation_mesh": evaluation_mesh, "support": support_from})
     asset_outputs = manifest.entry("asset")["outputs"]
 
     gt_files = [f for f in dataset_files(truth_root) if f.startswith("ground_truth/")] if with_truth else []
     files = [f"{top}/{rel}" for top in asset_outputs if (asset_dir / top).is_dir()
-             for rel in mf.tree_files(asset_dir / top)]
+             for rel in digests.tree_files(asset_dir / top)]
     files += [top for top in asset_outputs if (asset_dir / top).is_file()]
-    asset_digest = mf.files_digest(asset_dir, files)
+    asset_digest = digests.files_digest(asset_dir, files)
     inputs_now = {"evaluate": {"asset": asset_digest}}
     if with_truth:
-        inputs_now["evaluate_truth"] = {"asset": asset_digest, "ground_truth": mf.files_digest(truth_root, gt_files)}
+        inputs_now["evaluate_truth"] = {"asset": asset_digest, "ground_truth": digests.files_digest(truth_root, gt_files)}
     # An earlier evaluation is never deleted: kept while its asset is unchanged, else marked stale.
     valid, warnings = check_evaluations(asset_dir, manifest, inputs_now)
     warnings = [] if config.evaluation is not None else warnings  # simulated again just below
@@ -383,9 +384,9 @@ def _run_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfi
 
     truth = None
     if with_truth:
-        inputs = {"ground_truth": mf.files_digest(truth_root, gt_files),
-                  "asset": mf.files_digest(asset_dir, ["physical_properties.json", "canonical_transform.json"]),
-                  "reconstruct_report": mf.files_digest(recon_dir, ["report.json"])}
+        inputs = {"ground_truth": digests.files_digest(truth_root, gt_files),
+                  "asset": digests.files_digest(asset_dir, ["physical_properties.json", "canonical_transform.json"]),
+                  "reconstruct_report": digests.files_digest(recon_dir, ["report.json"])}
         raised = runner.warnings()  # the stages' so far, repeated in truth.json
         settings = {"seed": asset_cfg.seed, "refined": config.refine is not None, "dynamics": dynamics,
                     **({"warnings": raised} if raised else {})}  # none: the key of runs from before warnings

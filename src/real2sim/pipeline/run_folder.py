@@ -9,9 +9,10 @@ import shutil
 from pathlib import Path
 
 from real2sim.formats.dataset import is_model_frame, read_dataset
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.pipeline import manifest as mf
-from real2sim.pipeline.normalise import check_frame_options, sparse_point_files
+from real2sim.capture.phone.normalise import check_frame_options, sparse_point_files
+from real2sim.plumbing import digests
 
 
 def kept_note(asset_dir: Path | str) -> str:
@@ -45,7 +46,7 @@ def dataset_files(root: Path) -> list[str]:
             files.append(frame.mask_path)
     for folder in ("ground_truth", "background"):  # background/: the empty scene, for background masks
         if (root / folder).is_dir():
-            files += [f"{folder}/{rel}" for rel in mf.tree_files(root / folder)]
+            files += [f"{folder}/{rel}" for rel in digests.tree_files(root / folder)]
     return files
 
 

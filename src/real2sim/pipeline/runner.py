@@ -5,13 +5,13 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.progress import ProgressFn, null_progress
 from real2sim.pipeline import manifest as mf
 
 
 class RunProgress:
-    """The whole run through one :class:`~real2sim.formats.progress.ProgressFn`.
+    """The whole run through one :class:`~real2sim.plumbing.progress.ProgressFn`.
 
     A stage's end is a message ("[3/7] reconstruct: done", "... unchanged, skipped"); called as a
     ProgressFn itself, it passes the running stage's work on with the stage in front

@@ -1,6 +1,6 @@
 """The work of each `run` stage: the stage function called on the run's folders.
 
-Each takes the run's folders and settings and the stage's :class:`~real2sim.formats.progress.ProgressFn`
+Each takes the run's folders and settings and the stage's :class:`~real2sim.plumbing.progress.ProgressFn`
 (:class:`real2sim.pipeline.run.RunProgress` names the stage in front of its messages), and
 returns what run.json records of it. :mod:`real2sim.pipeline.run` decides which stages run.
 """
@@ -14,11 +14,12 @@ import warnings
 from pathlib import Path
 from typing import Callable
 
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.outputs import MARKER_NAME, publish_dir
-from real2sim.formats.progress import ProgressFn
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import MARKER_NAME, publish_dir
+from real2sim.plumbing.progress import ProgressFn
 from real2sim.pipeline import manifest as mf
-from real2sim.pipeline.normalise import NormaliseConfig
+from real2sim.capture.phone.normalise import NormaliseConfig
+from real2sim.plumbing import digests
 
 RESULTS_DIRNAME = "results"
 TRUTH_RESULTS_DIRNAME = "results_truth"
@@ -41,11 +42,11 @@ def _edited_copy(dataset: Path, target: Path, edit: Callable[[Path], dict]) -> d
 
 def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: ProgressFn, table_z_m: float = 0.0,
            seed: int = 0) -> dict:
-    from real2sim.pipeline.masks import make_masks
+    from real2sim.capture.masks.stage import make_masks
 
     def edit(copy: Path) -> dict:
         if not (copy / "transforms.json").exists():  # a COLMAP model: masks need a transforms.json to point from
-            from real2sim.pipeline.normalise import write_model_transforms
+            from real2sim.capture.phone.normalise import write_model_transforms
 
             write_model_transforms(copy)
         # the copy is run's own: a masks_<method>/ copied from the dataset is replaced there, not in the dataset
@@ -60,7 +61,7 @@ def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: Progre
 def _refine(dataset: Path, run_dir: Path, refine_cfg, progress: ProgressFn) -> dict:
     """refine_poses on a copy. When COLMAP keeps all the given poses, refine_poses warns itself; when it
     keeps some, this stage says so: those frames keep the robot's noise."""
-    from real2sim.capture.pose_refinement import refine_poses
+    from real2sim.capture.poses.refinement import refine_poses
 
     def edit(copy: Path) -> dict:
         result = refine_poses(copy, refine_cfg, progress)
@@ -87,7 +88,7 @@ def _refine_unavailable(run_dir: Path) -> dict:
 
 
 def _robot_frame(dataset: Path, run_dir: Path, cfg: NormaliseConfig, seed: int, progress: ProgressFn) -> dict:
-    from real2sim.pipeline.normalise import normalise
+    from real2sim.capture.phone.normalise import normalise
 
     record = normalise(dataset, run_dir / "robot_frame", cfg, seed=seed, progress=progress)
     keep = ("scale_from", "hull_height_m", "sparse_points", "table_fit_rms_mm", "errors_vs_ground_truth")
@@ -111,8 +112,8 @@ def check_reaches_table(mesh: Path, table_z_m: float) -> None:
     no bottom to close at the table. ``asset``'s own message speaks of ``--support-height``, which
     ``run`` sets itself."""
     from real2sim.asset.build import SUPPORT_BELOW_TOLERANCE, support_below_mesh
-    from real2sim.formats.errors import UserInputError
-    from real2sim.formats.mesh_io import load_mesh
+    from real2sim.plumbing.errors import UserInputError
+    from real2sim.geometry.mesh_io import load_mesh
 
     z_m = load_mesh(mesh).vertices[:, 2]
     bottom_m, top_m = float(z_m.min()), float(z_m.max())
@@ -187,7 +188,7 @@ def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: Pr
     # killed), the new ones in. Ownership is recorded first, as the union of both, so that a kill
     # halfway leaves every entry of the run's known as the run's.
     aside = Path(tempfile.mkdtemp(prefix=".asset.old-", dir=asset_dir / mf.RUN_DIRNAME))
-    manifest.claim("asset", {n: mf.all_files(built / n) if (built / n).is_dir() else None for n in outputs})
+    manifest.claim("asset", {n: digests.all_files(built / n) if (built / n).is_dir() else None for n in outputs})
     for name in sorted(previous | set(outputs)):
         if (asset_dir / name).exists() or (asset_dir / name).is_symlink():
             os.replace(asset_dir / name, aside / name)
@@ -268,9 +269,9 @@ def rewrite_reports(asset_dir: Path, manifest: mf.Manifest, folders) -> None:
     for name in folders:
         folder = Path(asset_dir) / name
         if (folder / "runs.csv").is_file():
-            before = set(mf.all_files(folder))
+            before = set(digests.all_files(folder))
             write_report(folder)
-            manifest.add_owned_files(name, set(mf.all_files(folder)) - before)
+            manifest.add_owned_files(name, set(digests.all_files(folder)) - before)
 
 
 def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, manifest: mf.Manifest, seed: int,

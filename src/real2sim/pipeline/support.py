@@ -74,7 +74,7 @@ def support_height_m(dataset: Path, mesh_path: Path, table_z_m: float) -> tuple[
     stated = stated_support_z_m(ds)
     if stated is not None:
         return stated, f"no table plane; the support the dataset states ({SUPPORT_Z_KEY}), z = {stated:g} m"
-    from real2sim.formats.mesh_io import load_mesh
+    from real2sim.geometry.mesh_io import load_mesh
 
     height = lowest_seen_height_m(load_mesh(mesh_path), ds.poses_c2w_gl()[:, :3, 3])
     return height, ("no table plane in the dataset: the lowest part of the reconstruction that the cameras see, "

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 
 _ON_TABLE_TOLERANCE_M = 1e-6
@@ -52,8 +52,8 @@ def world_from_nerfstudio(matrix: np.ndarray, scale: float) -> np.ndarray:
 def import_nerfstudio_mesh(mesh_path: Path | str, dataparser_transforms: Path | str, *, table_z_m: float = 0.0,
                            min_part_volume_fraction: float = 0.05) -> trimesh.Trimesh:
     """The exported mesh in the world frame (metres), texture kept, cleaned: nothing below the table, no floaters."""
-    from real2sim.formats.mesh_io import load_mesh
-    from real2sim.reconstruct.voxel_grid import largest_parts
+    from real2sim.geometry.mesh_io import load_mesh
+    from real2sim.multiview.voxel_grid import largest_parts
 
     mesh = load_mesh(mesh_path)
     matrix, scale = read_dataparser_transforms(dataparser_transforms)

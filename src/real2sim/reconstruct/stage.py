@@ -29,10 +29,10 @@ import torch
 import trimesh
 
 from real2sim.formats.dataset import has_table_plane, read_dataset, stated_support_z_m
-from real2sim.formats.errors import UserInputError
-from real2sim.formats.progress import ProgressFn
-from real2sim.reconstruct.train import FieldConfig
-from real2sim.reconstruct.views import MIN_VIEWS, PosedViews, held_out_split, load_views, refined_mask_edges
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.progress import ProgressFn
+from real2sim.reconstruct.field.train import FieldConfig
+from real2sim.multiview.views import MIN_VIEWS, PosedViews, held_out_split, load_views, refined_mask_edges
 
 BACKENDS = ("field", "hull")
 EXTRACTIONS = ("density", "tsdf")
@@ -163,8 +163,8 @@ class _StageClock:
 def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConfig(), *, device: str = "cpu",
                 seed: int = 0, progress: ProgressFn | None = None) -> Reconstruction:
     """Run the stage on a dataset folder; see the module docstring. Raises UserInputError for unusable input."""
-    from real2sim.reconstruct.hull import carve, object_region
-    from real2sim.reconstruct.voxel_grid import VoxelGrid, largest_parts, simplified, surface_from_grid
+    from real2sim.multiview.hull import carve, object_region
+    from real2sim.multiview.voxel_grid import VoxelGrid, largest_parts, simplified, surface_from_grid
     from real2sim.reconstruct.truth import load_truth
 
     config.validate()
@@ -189,7 +189,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         # refine-poses refined (almost) none: no good views to align the others to, so all are aligned
         # to each other, held-out ones too (their colours never train the field; their masks help place it)
         with clock.stage("all_poses"):
-            from real2sim.reconstruct.silhouette_poses import align_all
+            from real2sim.reconstruct.poses.silhouette import align_all
 
             views, report["silhouette_poses"] = align_all(views, table_z_m=table_z_m, progress=progress)
             if report["silhouette_poses"]["method"] == "none":
@@ -203,7 +203,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
     train, held = views.subset(train_idx), views.subset(held_idx)
     if views.unrefined:  # refine-poses could not refine them: the robot's poses, millimetres off
         with clock.stage("unrefined_poses"):
-            from real2sim.reconstruct.silhouette_poses import align_unrefined
+            from real2sim.reconstruct.poses.silhouette import align_unrefined
 
             train, report["unrefined_views"] = align_unrefined(
                 train, outlier_fraction=config.hull_outlier_fraction, table_z_m=config.table_z_m, progress=progress,
@@ -234,22 +234,22 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
             mesh = largest_parts(surface_from_grid(scores, grid, 0.5, config.table_z_m), config.min_part_volume_fraction)
             mesh = simplified(mesh, config.max_faces)
         with clock.stage("texture"):
-            from real2sim.reconstruct.texture import bake_texture_from_images
+            from real2sim.reconstruct.field.texture import bake_texture_from_images
 
             if progress:
                 progress("texture", 0, 0)
             textured = bake_texture_from_images(mesh, train, size_px=config.texture_px)
     else:
-        from real2sim.reconstruct.extract import (SURFACE_DENSITY_PER_VOXEL, density_mesh, render_view,
+        from real2sim.reconstruct.field.extract import (SURFACE_DENSITY_PER_VOXEL, density_mesh, render_view,
                                                   silhouette_surface_level, tsdf_mesh)
-        from real2sim.reconstruct.texture import bake_texture
-        from real2sim.reconstruct.train import train_field
+        from real2sim.reconstruct.field.texture import bake_texture
+        from real2sim.reconstruct.field.train import train_field
 
         with clock.stage("train_field"):
             trained = train_field(train, region, config.field, device=device, seed=seed, progress=progress,
                                   table_z_m=config.table_z_m)
         if trained.corrections is not None:  # per-view pose and colour corrections (view_corrections.py)
-            from real2sim.reconstruct.view_corrections import correction_report
+            from real2sim.reconstruct.field.view_corrections import correction_report
 
             report["view_corrections"] = correction_report(trained.corrections, train, dataset_root=dataset,
                                                            region_m=region)
@@ -260,7 +260,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         report["photo_carving_restored_voxels"] = trained.restored_voxels  # many: poses not refined?
         report["photo_carving_opened_voxels"] = trained.opened_voxels
         if config.field.photo_carving:  # how it decided which views see a voxel (carving_views.py)
-            from real2sim.reconstruct.carving_views import visibility_method
+            from real2sim.reconstruct.carving.views import visibility_method
 
             report["photo_carving_visibility"] = visibility_method(config.field.carving.visibility, device)
         if trained.carving_exposure is not None:
@@ -290,8 +290,8 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         if held.count:
             with clock.stage("held_out_field_psnr"):
                 if config.field.pose_refinement:  # held-out views never trained the field: fit their poses to it
-                    from real2sim.reconstruct.train import fit_views_to_field
-                    from real2sim.reconstruct.view_corrections import correction_report
+                    from real2sim.reconstruct.field.train import fit_views_to_field
+                    from real2sim.reconstruct.field.view_corrections import correction_report
 
                     fitted = fit_views_to_field(trained.field, held, config.field, seed=seed)
                     report["held_out_pose_fit"] = correction_report(fitted, held, dataset_root=dataset, region_m=region)
@@ -320,8 +320,8 @@ def _errors_vs_truth(dataset: Path | str, ds, views: PosedViews) -> dict:
     """``{"pose_error_vs_truth": ...}``: the given and the aligned poses of ``views`` against the dataset's
     true ones (ground_truth/), with how far the working volume's corners move in the image; {} without them."""
     from real2sim.formats.dataset import read_ground_truth
-    from real2sim.reconstruct.hull import object_region
-    from real2sim.reconstruct.view_corrections import pose_errors_vs_truth
+    from real2sim.multiview.hull import object_region
+    from real2sim.reconstruct.field.view_corrections import pose_errors_vs_truth
 
     if read_ground_truth(dataset) is None:
         return {}
@@ -341,8 +341,8 @@ def check_seen_together(mesh: trimesh.Trimesh, views: PosedViews, region: tuple[
     """Refuse (UnboundedReconstruction) a mesh (world frame, metres) larger than the region its views see
     together: more than ``max_outside_fraction`` of its vertices outside the hull's box ``region`` (by more
     than a tenth of the box's size) or where fewer than enough views see from far enough apart
-    (:func:`real2sim.reconstruct.hull.seen_together`). Nothing the views cannot bound is a result."""
-    from real2sim.reconstruct.hull import MIN_SPREAD_DEG, seen_together
+    (:func:`real2sim.multiview.hull.seen_together`). Nothing the views cannot bound is a result."""
+    from real2sim.multiview.hull import MIN_SPREAD_DEG, seen_together
 
     verts = np.asarray(mesh.vertices)
     if len(verts) > max_points:
@@ -377,7 +377,7 @@ def _field_psnr(field, held: PosedViews, render_view) -> float:
 
 
 def _mesh_psnr(mesh: trimesh.Trimesh, held: PosedViews) -> float:
-    from real2sim.reconstruct.texture import render_textured_mesh
+    from real2sim.reconstruct.field.texture import render_textured_mesh
     from real2sim.reconstruct.truth import psnr
 
     values = []
@@ -393,8 +393,8 @@ def write_reconstruction(result: Reconstruction, out_dir: Path | str, *, overwri
     """Write ``mesh.obj`` (+ .mtl, .png) and ``report.json`` into ``out_dir``, whole or not at all."""
     import json
 
-    from real2sim.formats.mesh_io import export_textured_mesh
-    from real2sim.formats.outputs import atomic_output_dir
+    from real2sim.geometry.mesh_io import export_textured_mesh
+    from real2sim.plumbing.outputs import atomic_output_dir
 
     out_dir = Path(out_dir)
     with atomic_output_dir(out_dir, overwrite=overwrite, inputs=inputs, made_by="real2sim reconstruct") as tmp:

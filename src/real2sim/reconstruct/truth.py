@@ -30,12 +30,12 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 
 
 def load_truth(dataset_root: Path | str) -> trimesh.Trimesh | None:
     """The true mesh in the dataset's world frame (metres), or None when the dataset has no ground truth."""
-    from real2sim.formats.mesh_io import load_mesh
+    from real2sim.geometry.mesh_io import load_mesh
 
     gt = Path(dataset_root) / "ground_truth"
     if not (gt / "mesh.obj").is_file():

@@ -17,7 +17,7 @@ import json
 from pathlib import Path
 from typing import Sequence
 
-from real2sim.formats.errors import UserInputError
+from real2sim.plumbing.errors import UserInputError
 from real2sim.report.page import METRIC_TITLES, METRICS, paper_name, read_paper_table, render_html  # noqa: F401
 
 def _read_config(path: Path) -> dict:
@@ -52,7 +52,7 @@ def build_outputs(results_dir: Path, rows: Sequence[dict], *, config: dict | Non
     results_dir: the results folder (its config.json is read unless ``config`` is given; paths
     in the report are relative to it); write_to: where the files go (default ``results_dir``).
     """
-    from real2sim.formats.outputs import write_text_atomic
+    from real2sim.plumbing.outputs import write_text_atomic
     from real2sim.formats.results import SUMMARY_COLUMNS, relative_paths_in_text, summarize, write_csv_atomic
     from real2sim.report.pareto import write_pareto_plots
 
@@ -135,12 +135,12 @@ def write_report(results_dir: Path | str, log=None) -> Path:
     import shutil
     import tempfile
 
-    from real2sim.formats.outputs import output_lock
+    from real2sim.plumbing.outputs import output_lock
     from real2sim.formats.results import describe_torn, load_runs_csv
 
     results_dir = Path(results_dir)
     if not results_dir.is_dir():
-        from real2sim.formats.paths import missing
+        from real2sim.plumbing.paths import missing
 
         if results_dir.exists():
             raise UserInputError(f"{results_dir} is a file, not a results folder (give the folder that "

@@ -18,7 +18,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from real2sim.formats.outputs import atomic_file
+from real2sim.plumbing.outputs import atomic_file
 
 # (x metric, y metric, file name, paper figure)
 PARETO_PLOTS: tuple[tuple[str, str, str, str], ...] = (

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.outputs import write_bytes_atomic
+from real2sim.plumbing.outputs import write_bytes_atomic
 
 PICTURE_DIRNAME = "pictures"
 

@@ -20,7 +20,7 @@ from real2sim.collision.fit.contact_weights import contact_weights, hull_planes
 from real2sim.collision.fit.initialization import interior_fill_points, _initial_packed, _packed_from_blobs
 from real2sim.collision.fit.losses import sdf_loss, _regularizers
 from real2sim.collision.fit.union import _closest, _paired_distance, _truncate_estimates, _alive
-from real2sim.formats.progress import ProgressFn, null_progress
+from real2sim.plumbing.progress import ProgressFn, null_progress
 
 
 @contextmanager

@@ -6,7 +6,7 @@ from real2sim.collision.fit.config import FitConfig
 from real2sim.collision.fit.convert import superquadric_parameters, to_collision_geometry
 from real2sim.collision.fit.loop import fit_primitives
 from real2sim.formats.collision import CollisionGeometry
-from real2sim.formats.progress import ProgressFn
+from real2sim.plumbing.progress import ProgressFn
 from real2sim.formats.spec import CollisionSpec
 
 

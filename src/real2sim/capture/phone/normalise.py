@@ -1,0 +1,352 @@
+"""The ``robot_frame`` stage of ``run``: a COLMAP capture (arbitrary frame and scale) -> a metric dataset copy.
+
+Input: a dataset folder with ``images/``, masks for every frame, and a COLMAP model in
+``sparse/0`` (cameras, images, points3D), or the masks stage's copy of one (which adds a
+``transforms.json`` holding the model's poses, still in the model frame), or what nerfstudio's
+``ns-process-data`` writes: a ``transforms.json`` in COLMAP's frame with axes swapped
+(``applied_transform``), its sparse points in ``ply_file_path`` (``sparse_pc.ply``, in the same
+frame) and the model in ``colmap/sparse/0`` (used, moved by ``applied_transform``, when the
+point cloud is missing). Output:
+``ASSETDIR/.run/robot_frame/``, a dataset in the robot frame -- z up, the table top at
+z = 0, the object's footprint centred at x = y = 0, metres -- with ``transforms.json``
+(OpenGL camera-to-world), the frames' images and masks, and ``robot_frame.json`` (the
+similarity ``robot_from_model`` and how it was found). The math is in
+:mod:`real2sim.capture.phone.robot_frame`.
+
+Steps (all lengths before the last one in model units):
+
+1. the sparse points within ``near_radius`` x (median camera distance) of the point the
+   cameras look at, minus those inside the object's masks: the table around the object;
+2. RANSAC plane, normal towards the cameras -> a rigid "table frame" (z up, table z = 0,
+   origin under the look-at point);
+3. the object's height and footprint centre from the **visual hull of the masks, carved in
+   the table frame** (:func:`real2sim.multiview.hull.visual_hull_mesh`, ``hull_voxels``
+   along its longest side). Why the hull and not the sparse points above the plane: (a)
+   the silhouettes bound the top in every view, while a real capture's sparse cloud is
+   thin on the object, often empty on a plain lid; (b) the asset is built from the same
+   silhouettes, so with ``--object-height-m H`` the reconstruction comes out H tall (up
+   to the grids' voxels). The price: the hull is an outer bound. Over a wide flat top
+   that no view sees edge-on (a mug shot from above), every silhouette holds the top
+   face's image, and the hull rises over it as a cone, r tan(lowest elevation) high: the
+   handheld mug's hull stood 7 % above its rim, the can's 4 %. So the top of the
+   **sparse points on the object** (surface points, not a bound: the median of the
+   ``top_points`` highest) replaces the hull's when the hull rises more than ``top_gap``
+   of its height above them *and* what stands above them is such a cap, not the object
+   going on full width (a featureless lid the SfM found no points on): the hull's volume
+   above them under ``cap_fill`` of a prism on its cross-section there (a cone's is 1/3;
+   measured: caps 0.44-0.62, a straight wall 0.77-0.89). Otherwise the hull's height, with
+   a WARNING when the two disagree by more than ``top_gap`` (:func:`object_top`);
+4. scale: ``scale`` (metres per model unit) as given, or ``object_height_m`` / measured height.
+
+Ground truth: a simulated capture moved into a COLMAP frame (tests, benchmarks) keeps
+``ground_truth/`` in its original robot frame and records the move as
+``ground_truth/model_from_world.json`` (``{"model_from_world": 4x4 similarity}``). The
+stage then knows ``robot_from_world = robot_from_model @ model_from_world`` -- ideally a
+turn about z and an x/y shift -- records its errors (scale, table tilt and height:
+:func:`real2sim.capture.phone.robot_frame.frame_errors`), and writes the copy's
+``ground_truth/`` re-expressed in the new frame by the *rigid part* of that map (the true
+object keeps its true size, so a scale error shows as a reconstruction error; the map is
+exact at the true world's origin, the object's footprint centre on the table): the truth
+comparison of ``run`` then aligns by the known similarity, with no ICP. ``depth/`` is
+not copied (millimetres of the original frame; ``run`` does not read it). Without
+``model_from_world.json`` the copy has no ``ground_truth/`` and ``run`` has no truth stage.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from real2sim.formats.dataset import (
+    MODEL_FRAME_KEYS,
+    Dataset,
+    check_inside,
+    describe_model_frame,
+    is_model_frame,
+    load_mask,
+    read_dataset,
+    read_ground_truth,
+    write_transforms,
+)
+from real2sim.formats.colmap_model import read_colmap_model
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import publish_dir, write_json_atomic
+from real2sim.plumbing.progress import ProgressFn
+from real2sim.capture.phone import robot_frame as rf
+from real2sim.plumbing.digests import tree_files
+from real2sim.capture.phone.object_height import measure_object, object_top
+
+MODEL_FROM_WORLD = "model_from_world.json"  # in ground_truth/: how a simulated capture was moved into the model frame
+RECORD_NAME = "robot_frame.json"
+
+
+@dataclass(frozen=True)
+class NormaliseConfig:
+    """How to find the robot frame. ``object_height_m`` (the object's height above the table, metres) or
+    ``scale`` (metres per model unit): exactly one. Distances as fractions of the median camera distance
+    from the look-at point, so they do not depend on the model's unknown scale."""
+
+    object_height_m: float | None = None
+    scale: float | None = None
+    near_radius: float = 1.0
+    inlier_threshold: float = 0.01
+    ransac_iterations: int = 1000
+    min_table_points: int = 30
+    object_vote_fraction: float = 0.8
+    hull_voxels: int = 128
+    hull_outlier_fraction: float = 0.03
+    # the object's top from the sparse points (step 3): the median of this many highest points on it,
+    # taken when there are at least ``min_object_points``, the hull rises more than ``top_gap`` (a
+    # fraction of its height) above them, and fills under ``cap_fill`` of the prism above them
+    top_points: int = 7
+    min_object_points: int = 20
+    top_gap: float = 0.03
+    cap_fill: float = 0.7
+
+    def validate(self) -> None:
+        given = [v for v in (self.object_height_m, self.scale) if v is not None]
+        if len(given) != 1:
+            raise UserInputError("a COLMAP model has no metric scale: give exactly one of --object-height-m H "
+                                 "(the object's height above the table, m) or --scale S (metres per model unit)")
+        if not (np.isfinite(given[0]) and given[0] > 0):
+            raise UserInputError(f"--object-height-m / --scale must be a finite number > 0 (got {given[0]})")
+
+
+def check_frame_options(ds: Dataset, scale_given: bool) -> None:
+    """UserInputError (one line) unless a model-frame dataset (:func:`is_model_frame`: a COLMAP model,
+    a nerfstudio-processed capture) comes with --object-height-m or --scale (``scale_given``), and a
+    metric transforms.json dataset (table at z = 0) with neither."""
+    if is_model_frame(ds) and not scale_given:
+        raise UserInputError(f"{ds.root} is {describe_model_frame(ds)}: its poses have no metric scale and no "
+                             "table frame; pass --object-height-m H (the object's height above the table, m) "
+                             "or --scale S (metres per model unit)")
+    if scale_given and not is_model_frame(ds):
+        raise UserInputError(f"{ds.root} has a transforms.json in metres with the table at z = 0: --object-height-m "
+                             "and --scale are for a COLMAP model dataset (images + sparse/0) or an ns-process-data "
+                             "folder (transforms.json with applied_transform)")
+
+
+def write_model_transforms(root: Path) -> None:
+    """Give a COLMAP dataset folder a ``transforms.json`` with the model's poses (still in the model frame),
+    so that the masks stage can point its frames to masks; ``model_frame`` marks it."""
+    ds = read_colmap_model(root)
+    write_transforms(Path(root) / "transforms.json",
+                     replace(ds, extra={"model_frame": "COLMAP sparse/0: arbitrary frame and scale, not metres"}))
+
+
+def _colmap_points(model: Path) -> np.ndarray:
+    """(P, 3) points3D of the COLMAP model folder ``model``, in its frame."""
+    import pycolmap
+
+    try:
+        rec = pycolmap.Reconstruction(str(model))
+    except Exception as exc:  # pycolmap raises generic errors on bad files
+        raise UserInputError(f"could not read COLMAP model {model}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+    return np.array([p.xyz for p in rec.points3D.values()], dtype=float).reshape(-1, 3)
+
+
+def _applied_transform(ds: Dataset) -> np.ndarray:
+    """nerfstudio's ``applied_transform`` (3x4 or 4x4, model -> transforms.json frame) as a 3x4 array."""
+    try:
+        matrix = np.asarray(ds.extra["applied_transform"], dtype=float)
+        if matrix.shape not in ((3, 4), (4, 4)) or not np.all(np.isfinite(matrix)):
+            raise ValueError(f"shape {matrix.shape}")
+    except (ValueError, TypeError) as exc:
+        raise UserInputError(f"{ds.root / 'transforms.json'}: applied_transform is not a 3x4 matrix ({exc})") from None
+    return matrix[:3]
+
+
+def _point_cloud_file(ds: Dataset) -> str | None:
+    """The point cloud a nerfstudio-processed transforms.json names (relative path), when it exists."""
+    rel = ds.extra.get("ply_file_path")
+    if not isinstance(rel, str):
+        return None
+    check_inside(Path(ds.root), rel, "transforms.json ply_file_path")
+    return rel if (Path(ds.root) / rel).is_file() else None
+
+
+def sparse_point_files(ds: Dataset) -> list[str]:
+    """The files :func:`read_sparse_points` may read, relative to ``ds.root`` (for the run's input hashes)."""
+    root, files = Path(ds.root), []
+    for model in ("sparse/0", "colmap/sparse/0"):
+        if (root / model).is_dir():
+            files += [f"{model}/{rel}" for rel in tree_files(root / model)]
+    cloud = _point_cloud_file(ds)
+    return files + ([cloud] if cloud is not None else [])
+
+
+def read_sparse_points(ds: Dataset) -> tuple[np.ndarray, str]:
+    """(P, 3) sparse SfM points in ``ds``'s frame, and where they came from (a path relative to ``ds.root``).
+
+    A COLMAP dataset (or the masks stage's copy of one): ``sparse/0``. A nerfstudio-processed
+    capture: the point cloud ``ply_file_path`` names (nerfstudio writes it in the transforms.json
+    frame), else ``colmap/sparse/0`` moved by ``applied_transform``."""
+    root = Path(ds.root)
+    if ds.extra.get("source") == "colmap" or "model_frame" in ds.extra:
+        points, source = _colmap_points(root / "sparse" / "0"), "sparse/0"
+    elif _point_cloud_file(ds) is not None:
+        import trimesh
+
+        rel = _point_cloud_file(ds)
+        try:
+            cloud = trimesh.load(root / rel)
+            points = np.asarray(cloud.vertices, dtype=float).reshape(-1, 3)
+        except Exception as exc:  # noqa: BLE001 -- trimesh raises many kinds on a bad file
+            raise UserInputError(f"cannot read the sparse point cloud {root / rel}: "
+                                 f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+        source = rel
+    elif (root / "colmap" / "sparse" / "0").is_dir() and "applied_transform" in ds.extra:
+        applied = _applied_transform(ds)
+        points = _colmap_points(root / "colmap" / "sparse" / "0") @ applied[:, :3].T + applied[:, 3]
+        source = "colmap/sparse/0 (moved by applied_transform)"
+    else:
+        raise UserInputError(f"{root}: no sparse points to find the table in: expected the point cloud that "
+                             "transforms.json's ply_file_path names, or a COLMAP model in colmap/sparse/0")
+    return points[np.all(np.isfinite(points), axis=1)], source
+
+
+def _masks(ds: Dataset) -> np.ndarray:
+    missing = [f.file_path for f in ds.frames if f.mask_path is None]
+    if missing:
+        raise UserInputError(f"{len(missing)} frames of {ds.root} have no mask (first: {missing[0]}): a COLMAP "
+                             "capture needs masks to find the object; pass --mask provided|maskrcnn|background")
+    return np.stack([load_mask(ds.root / f.mask_path) for f in ds.frames])
+
+
+def points_near_object(c2w_cv: np.ndarray, points: np.ndarray, config: NormaliseConfig
+                       ) -> tuple[np.ndarray, float, np.ndarray]:
+    """(the point the cameras look at, the median camera distance from it, the sparse points within
+    ``near_radius`` of those distances of it): step 1 without the masks (model units)."""
+    look_at = rf.optical_axes_point(c2w_cv)
+    distance = float(np.median(np.linalg.norm(c2w_cv[:, :3, 3] - look_at, axis=1)))
+    return look_at, distance, points[np.linalg.norm(points - look_at, axis=1) <= config.near_radius * distance]
+
+
+def table_plane(points: np.ndarray, c2w_cv: np.ndarray, distance: float, config: NormaliseConfig,
+                seed: int) -> rf.Plane:
+    """Step 2's plane: RANSAC on ``points`` (thresholds as fractions of ``distance``), normal towards the cameras."""
+    plane = rf.fit_plane_ransac(points, config.inlier_threshold * distance, seed=seed,
+                                iterations=config.ransac_iterations, min_inliers=config.min_table_points)
+    return rf.orient_towards_cameras(plane, c2w_cv[:, :3, 3])
+
+
+def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config: NormaliseConfig,
+                     seed: int) -> tuple[rf.Similarity, dict]:
+    """``robot_from_model`` and a JSON-ready record of how it was found (steps 1-4 of the module docstring)."""
+    c2w_cv = ds.poses_c2w_cv()
+    look_at, distance, near = points_near_object(c2w_cv, points, config)
+    on_object = rf.object_point_mask(near, ds.intrinsics, c2w_cv, masks, config.object_vote_fraction)
+    plane = table_plane(near[~on_object], c2w_cv, distance, config, seed)
+    table = rf.table_similarity(plane, centre=look_at)
+    hull = measure_object(ds, masks, table, config)
+    if not hull.top > 0:
+        raise UserInputError("the masks' visual hull has no height above the fitted table plane")
+    if config.scale is None:
+        height, top_record = object_top(hull, table.apply(near[on_object])[:, 2], config)
+    else:  # the height sets nothing
+        height, top_record = hull.top, {"hull_top_units": hull.top, "from": "the visual hull (--scale given)"}
+    centre_xy = hull.centre_xy
+    scale = config.scale if config.scale is not None else config.object_height_m / height
+    centre = table.inverse().apply(np.array([centre_xy[0], centre_xy[1], 0.0]))
+    robot_from_model = rf.table_similarity(plane, centre=centre, scale=scale)
+    record = {
+        "robot_from_model": robot_from_model.to_json(),
+        "scale_from": "scale" if config.scale is not None else "object_height_m",
+        "object_height_m_given": config.object_height_m,
+        "scale_given": config.scale,
+        "hull_height_units": hull.top,
+        "hull_height_m": hull.top * scale,
+        "height_units": height,
+        "height_m": height * scale,
+        "object_top": top_record,
+        "sparse_points": {"total": len(points), "near_object": len(near), "on_object": int(on_object.sum()),
+                          "table_inliers": plane.inliers},
+        "table_plane_model": {"normal": plane.normal.tolist(), "offset_units": plane.offset},
+        "table_fit_rms_mm": 1000.0 * plane.rms * scale,
+        "inlier_threshold_mm": 1000.0 * plane.threshold * scale,
+        "median_camera_distance_m": distance * scale,
+        "seed": seed,
+        "height_from": f"{top_record['from']}; the visual hull of the masks in the table frame, {config.hull_voxels} "
+                       "voxels on its longest side",
+    }
+    return robot_from_model, record
+
+
+def _copy_ground_truth(source: Path, target: Path, robot_from_world: rf.Similarity) -> None:
+    """``source/ground_truth`` re-expressed in the robot frame by the rigid part of ``robot_from_world``."""
+    rigid = robot_from_world.rigid_part()
+    gt_src, gt_dst = source / "ground_truth", target / "ground_truth"
+    skip = {"depth", "transforms.json", "object_pose.json", MODEL_FROM_WORLD}
+    gt_dst.mkdir()
+    for entry in gt_src.iterdir():
+        if entry.name not in skip:
+            (shutil.copytree if entry.is_dir() else shutil.copy2)(entry, gt_dst / entry.name)
+    pose_file = gt_src / "object_pose.json"
+    world_from_mesh = (np.asarray(json.loads(pose_file.read_text())["world_from_mesh"], float)
+                       if pose_file.is_file() else np.eye(4))
+    write_json_atomic(gt_dst / "object_pose.json", {
+        "world_from_mesh": (rigid.matrix() @ world_from_mesh).tolist(),
+        "note": "4x4 placing ground_truth/mesh.obj in this copy's robot frame: the source's world_from_mesh "
+                "moved by the rigid part of robot_from_world (robot_frame.json), metres"})
+    true_poses = read_ground_truth(source)
+    if true_poses is not None:
+        moved = rf.transform_poses(rigid, true_poses.poses_c2w_gl())
+        frames = tuple(replace(f, transform_matrix=m) for f, m in zip(true_poses.frames, moved))
+        write_transforms(gt_dst / "transforms.json", replace(true_poses, frames=frames))
+
+
+def model_from_world(source: Path) -> rf.Similarity | None:
+    path = Path(source) / "ground_truth" / MODEL_FROM_WORLD
+    if not path.is_file():
+        return None
+    try:
+        matrix = json.loads(path.read_text())["model_from_world"]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise UserInputError(f"{path}: no readable model_from_world ({exc})") from None
+    return rf.Similarity.from_matrix(matrix)
+
+
+def normalise(source: Path, target: Path, config: NormaliseConfig, *, seed: int = 0,
+              progress: ProgressFn | None = None) -> dict:
+    """Write the robot-frame copy of ``source`` to ``target`` (whole or not at all); return the record."""
+    config.validate()
+    source, target = Path(source), Path(target)
+    ds = read_dataset(source)
+    if progress:
+        progress("table plane, object height", 0, 0)
+    points, points_from = read_sparse_points(ds)
+    robot_from_model, record = find_robot_frame(ds, points, _masks(ds), config, seed)
+    record["sparse_points"]["from"] = points_from
+    truth, robot_from_world = model_from_world(source), None
+    if truth is not None:  # model_from_world.json lives in ground_truth/
+        robot_from_world = robot_from_model @ truth
+        record["robot_from_world"] = robot_from_world.to_json()
+        record["errors_vs_ground_truth"] = rf.frame_errors(robot_from_world)
+    elif (source / "ground_truth").is_dir():
+        record["ground_truth"] = f"not carried over: no ground_truth/{MODEL_FROM_WORLD} relates it to the model frame"
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    try:
+        for frame in ds.frames:
+            for rel in (frame.file_path, frame.mask_path):
+                if not (source / rel).resolve().is_relative_to(source.resolve()):
+                    raise UserInputError(f"{rel}: path points outside the dataset folder {source}")
+                (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(source / rel, tmp / rel)
+        moved = rf.transform_poses(robot_from_model, ds.poses_c2w_gl())
+        frames = tuple(replace(f, transform_matrix=m) for f, m in zip(ds.frames, moved))
+        extra = {k: v for k, v in ds.extra.items() if k not in MODEL_FRAME_KEYS}
+        extra["robot_frame"] = f"normalised from {describe_model_frame(ds)} by real2sim run: see {RECORD_NAME}"
+        write_transforms(tmp / "transforms.json", Dataset(tmp, ds.intrinsics, frames, extra))
+        if robot_from_world is not None:
+            _copy_ground_truth(source, tmp, robot_from_world)
+        write_json_atomic(tmp / RECORD_NAME, record)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    publish_dir(tmp, target)
+    return record

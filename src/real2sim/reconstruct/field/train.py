@@ -1,0 +1,382 @@
+"""Training the voxel radiance field on masked images (the paper's loss, eq. 3).
+
+Every training ray gets a random background colour: the target is the image
+where the mask is set and that colour elsewhere, the prediction is the field's
+colour composited over the same colour. So the field must be transparent
+wherever the mask is not (the table is never learned) and opaque where it is;
+this is the mask used as alpha.
+
+Empty space is carved first: the field lives only inside a relaxed, dilated
+visual hull. Training runs coarse-to-fine: a coarse grid first, then the field
+is resampled onto a finer grid and trained further.
+
+Each training view's pose and colour are corrected alongside
+(:mod:`real2sim.reconstruct.field.view_corrections`): the rays of a view leave from its
+corrected camera and the colour it sees is the field's through its gain and bias.
+The fine grid's region is the visual hull of the corrected views.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field as dataclass_field, replace
+
+import numpy as np
+import torch
+from scipy.ndimage import binary_dilation, binary_erosion
+
+from real2sim.plumbing.progress import ProgressFn
+from real2sim.reconstruct.field.radiance import VoxelRadianceField
+from real2sim.multiview.hull import carve
+from real2sim.multiview.voxel_grid import VoxelGrid
+from real2sim.reconstruct.carving.photo import CarvingConfig, CarvingResult, photo_carve
+from real2sim.reconstruct.field.ray_pool import PoolRanges, RayPool, ray_pool
+from real2sim.reconstruct.field.view_corrections import CorrectionConfig, ViewCorrections
+from real2sim.multiview.views import PosedViews
+
+
+@dataclass(frozen=True)
+class FieldConfig:
+    """How the radiance field is trained. Grid sizes are voxels along the object's longest side.
+
+    The density grid learns five times slower than the colour features
+    (``lr_density``): the field starts as the visual hull (``init_density`` per voxel
+    of the coarse grid inside it), which is already within a fraction of a millimetre
+    of a convex object's surface, and a fast density lets the view-dependent colour
+    trade geometry for shading. During development, on the bottle (100 views,
+    320x240, an earlier build), density rates of 0.1 / 0.02 / 0.005 gave Chamfer
+    0.74 / 0.51 / 0.47 mm; ``benchmarks/bench_reconstruct.py`` measures the defaults.
+    ``view_dependent=False`` gives a Lambertian field.
+
+    ``photo_carving``: before training, the visual hull is carved where the views disagree
+    about its colour (:mod:`real2sim.reconstruct.carving.photo`), and
+    the field starts empty there. Training cannot open a concavity the hull filled (a
+    mug's cavity) by itself: a lid across it with a painted top renders nearly as well.
+    The field may fill carved space again only within ``carved_margin_voxels`` (of the
+    coarse grid) of what carving kept; deeper carved space is not part of the field, so
+    rays into an opened cavity skip it (a negative margin keeps all of it in the field).
+
+    ``pose_refinement`` (on): each training view's pose is corrected with the field while it is on its
+    coarse grid, then kept (it brings a few bad views among good ones back; on the bundled can and
+    bottle after refine-poses, field PSNR +0.9 and +0.2 dB, Chamfer 0.146 -> 0.141 and 0.291 -> 0.287
+    mm, for 14 % and -3 % CPU time, docs/benchmarks/reconstruct_field_poses.md; learnt on the fine
+    grid as well it had cost a quarter more time); ``colour_correction`` (on): each view's exposure
+    and white balance, all through training. Both with the rates and priors of ``corrections``; see
+    :mod:`real2sim.reconstruct.field.view_corrections`.
+
+    ``device_batch_scale`` (2): on a GPU, each step draws this many times ``rays_per_step`` and the
+    steps (and the poses' warm-up) are as many times fewer, so training sees the same rays. A GPU step
+    is bound by the host launching its few hundred operators, not by its rays: on an H200 a mug's step
+    took 16 ms on the coarse grid and 12 ms on the fine one at 4096 and at 8192 rays alike
+    (``benchmarks/bench_field_step.py``, docs/benchmarks/field_step_cuda.md), so its steps took 11.7-12.6 s
+    instead of 20.1. The geometry stays about the CPU's: these batches trained on a CPU gave the mug
+    0.514 mm, IoU 0.729 against 0.505 mm, 0.733, the can 0.140 against 0.141 mm; the field's held-out PSNR
+    was 0.36-0.46 dB lower (docs/benchmarks/reconstruct_gpu_batches_cpu.md). A scale of 4 lost 1.2 dB on
+    the mug (by script, not kept). 1 trains on a GPU as on a CPU.
+    """
+
+    coarse_voxels: int = 80
+    fine_voxels: int = 160
+    coarse_steps: int = 400
+    fine_steps: int = 800
+    rays_per_step: int = 4096
+    lr_density: float = 0.02
+    lr_features: float = 0.1
+    lr_decoder: float = 3e-3
+    init_density: float = 4.0
+    feature_channels: int = 12
+    step_voxels: float = 0.5
+    hull_outlier_fraction: float = 0.03
+    carve_outlier_fraction: float = 0.1
+    carve_dilation_voxels: int = 2
+    view_dependent: bool = True
+    mask_dilation_px: int = 3
+    background_ray_fraction: float = 0.05
+    photo_carving: bool = True
+    carved_margin_voxels: int = 2
+    carving: CarvingConfig = dataclass_field(default_factory=CarvingConfig)
+    pose_refinement: bool = True
+    colour_correction: bool = True
+    corrections: CorrectionConfig = dataclass_field(default_factory=CorrectionConfig)
+    device_batch_scale: int = 2
+
+    def on_device(self, device: str | torch.device) -> "FieldConfig":
+        """These settings as trained on ``device``: on anything but a CPU, ``device_batch_scale`` times the
+        rays per step in as many times fewer steps (see the class docstring)."""
+        scale = 1 if torch.device(device).type == "cpu" else int(self.device_batch_scale)
+        if scale == 1:
+            return self
+        fewer = lambda steps: -(-steps // scale)  # rounded up: a stage of one step keeps it
+        return replace(self, rays_per_step=self.rays_per_step * scale, coarse_steps=fewer(self.coarse_steps),
+                       fine_steps=fewer(self.fine_steps),
+                       corrections=replace(self.corrections, warmup_steps=self.corrections.warmup_steps // scale))
+
+    def with_budget(self, steps: int | None = None, voxels: int | None = None) -> "FieldConfig":
+        """These settings with ``steps`` fine-grid training steps (the coarse grid gets half, so 1 step
+        skips it) and ``voxels`` along the longest side of the fine grid (the coarse grid gets half);
+        None keeps a setting."""
+        config = self
+        if steps is not None:
+            config = replace(config, fine_steps=steps, coarse_steps=steps // 2)
+        if voxels is not None:
+            config = replace(config, fine_voxels=voxels, coarse_voxels=max(voxels // 2, 4))
+        return config
+
+    def with_carving(self, photo_carving: bool, hollow_prior: bool = True) -> "FieldConfig":
+        """These settings with photo-consistent carving on or off, and its second pass (the hollow
+        prior, :mod:`real2sim.reconstruct.carving.photo`) on or off."""
+        return replace(self, photo_carving=photo_carving, carving=replace(self.carving, hollow_prior=hollow_prior))
+
+    def validate(self) -> None:
+        from real2sim.plumbing.errors import UserInputError
+
+        for name in ("coarse_voxels", "fine_voxels", "rays_per_step", "feature_channels"):
+            if int(getattr(self, name)) < 4:
+                raise UserInputError(f"field setting {name} must be at least 4 (got {getattr(self, name)})")
+        if int(self.device_batch_scale) < 1:
+            raise UserInputError(f"field setting device_batch_scale must be at least 1 (got {self.device_batch_scale})")
+        if self.coarse_steps < 0 or self.fine_steps < 1:
+            raise UserInputError("field training needs at least one fine step")
+        self.corrections.validate()
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    field: VoxelRadianceField
+    loss_curve: tuple[tuple[int, float], ...]  # (step, mean MSE over the last reporting window)
+    seconds: float
+    carved_voxels: int = 0  # coarse-grid voxels of the visual hull removed by photo-consistent carving
+    # carving-grid voxels the carving removed and the masks' rays put back (poses off, see photo_carving)
+    restored_voxels: int = 0
+    # carving-grid voxels the second pass (the hollow prior, see photo_carving) removed
+    opened_voxels: int = 0
+    # the views' exposure and white balance as photo carving found them (photo_carving.CarvingResult.exposure)
+    carving_exposure: dict | None = None
+    # the per-view corrections learnt with the field (None when neither poses nor colours are corrected)
+    corrections: ViewCorrections | None = None
+    # (N, 4, 4) the training views' camera-to-world poses the field was fitted to: the corrected ones
+    c2w_cv: np.ndarray | None = None
+    # where ``seconds`` went: the rays' pool, the starting density, then per grid (named by its longest side
+    # in voxels) the setup (the region the field may fill, the field made or upsampled) and its training steps
+    phase_seconds: dict[str, float] = dataclass_field(default_factory=dict)
+    # the settings the field trained with: the ones given, as this device takes them (FieldConfig.on_device)
+    config: FieldConfig | None = None
+
+    @property
+    def hull_and_carving_seconds(self) -> float:
+        """Of ``seconds``, the starting density: the visual hull's score and photo-consistent carving."""
+        return self.phase_seconds.get("hull_and_carving", 0.0)
+
+    def corrected_views(self, views: PosedViews) -> PosedViews:
+        """``views`` (the ones trained on) with the poses the field was fitted to."""
+        return views if self.c2w_cv is None else replace(views, c2w_cv=self.c2w_cv)
+
+
+def field_occupancy(views: PosedViews, grid: VoxelGrid, config: FieldConfig, device: str = "cpu") -> np.ndarray:
+    """The carved region the field may fill: a relaxed visual hull, dilated by a few voxels."""
+    inside = carve(views, grid, config.carve_outlier_fraction, device=device) >= 0.5
+    return binary_dilation(inside, np.ones((3, 3, 3), bool), iterations=config.carve_dilation_voxels)
+
+
+def hull_density(views: PosedViews, grid: VoxelGrid, config: FieldConfig,
+                 progress: ProgressFn | None = None, device: str = "cpu") -> tuple[np.ndarray, np.ndarray, CarvingResult | None]:
+    """Initial density per voxel (``grid.shape``): ``init_density`` inside the visual hull, fading to
+    nearly nothing outside it over about a voxel (a smooth step of the silhouette score), and
+    nearly nothing where photo-consistent carving removed the hull; the voxels carved (bool); and
+    the carving's result on its own grid (None without photo carving)."""
+    score = carve(views, grid, config.hull_outlier_fraction, device=device)
+    density = config.init_density * (1e-3 + 1.0 / (1.0 + np.exp(-12.0 * (score - 0.5))))
+    if not config.photo_carving:
+        return density, np.zeros(grid.shape, bool), None
+    carved, result = _photo_carved(views, grid, score >= 0.5, config, progress, device)
+    return np.where(carved, 1e-3 * config.init_density, density), carved, result
+
+
+def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: FieldConfig,
+                  progress: ProgressFn | None, device: str = "cpu") -> tuple[np.ndarray, CarvingResult]:
+    """Voxels of ``grid`` that photo-consistent carving removes from the visual hull (``hull`` on ``grid``),
+    and the carving's result on its own grid.
+
+    Carving runs on a grid of at least ``config.carving.voxels`` along the longest side: on
+    coarser voxels a true surface's voxel centres lie so far inside it that the views of
+    them disagree (a 24-voxel can lost a quarter of its volume)."""
+    if max(grid.shape) >= config.carving.voxels:
+        result = photo_carve(views, grid, hull, config.carving, progress=progress, device=device)
+        return hull & ~result.solid, result
+    lo, hi = grid.bounds_m
+    fine = VoxelGrid.covering(lo, hi, config.carving.voxels, table_z_m=float(lo[2]))
+    fine_hull = carve(views, fine, config.hull_outlier_fraction, device=device) >= 0.5
+    result = photo_carve(views, fine, fine_hull, config.carving, progress=progress, device=device)
+    return _resampled(fine_hull & ~result.solid, fine, grid), result
+
+
+def _resampled(mask: np.ndarray, source: VoxelGrid, target: VoxelGrid) -> np.ndarray:
+    """``mask`` (bool, ``source.shape``) at the centres of ``target``'s voxels (nearest voxel)."""
+    nearest = np.round((target.centres() - source.origin_m) / source.voxel_m).astype(int)
+    nearest = np.clip(nearest, 0, np.asarray(source.shape) - 1)
+    return mask[tuple(nearest.T)].reshape(target.shape)
+
+
+def _deep_carved(carved: np.ndarray, source: VoxelGrid, target: VoxelGrid, margin_voxels: int) -> np.ndarray:
+    """Photo-carved space (``carved`` on ``source``) farther than ``margin_voxels`` of ``source`` from
+    anything carving kept, on ``target``: left out of the field's occupancy, so that rays skip
+    it (a mug's opened cavity cost every ray into it a gradient sample per half voxel)."""
+    if margin_voxels < 0 or not carved.any():
+        return np.zeros(target.shape, bool)
+    # scipy erodes until nothing changes when iterations is 0, so a zero margin is handled here
+    deep = binary_erosion(carved, np.ones((3, 3, 3), bool), iterations=margin_voxels) if margin_voxels else carved
+    return _resampled(deep, source, target)
+
+
+def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], config: FieldConfig = FieldConfig(), *,
+                device: str = "cpu", seed: int = 0, progress: ProgressFn | None = None,
+                table_z_m: float = 0.0) -> TrainResult:
+    """Fit a :class:`VoxelRadianceField` to ``views`` inside the world box ``region_m`` (metres), with
+    the views' corrections (``config.pose_refinement``, ``config.colour_correction``); on a GPU in fewer,
+    larger steps (:meth:`FieldConfig.on_device`)."""
+    config.validate()
+    config = config.on_device(device)
+    t_start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    gen = torch.Generator(device="cpu").manual_seed(seed)
+    pool = ray_pool(views, mask_dilation_px=config.mask_dilation_px,
+                    background_fraction=config.background_ray_fraction, rng=rng).to(device)
+    lo, hi = region_m
+    corrections = None
+    if config.pose_refinement or config.colour_correction:
+        corrections = ViewCorrections(views.c2w_cv, 0.5 * (np.asarray(lo) + np.asarray(hi)), config.corrections,
+                                      poses=config.pose_refinement, colours=config.colour_correction, device=device)
+    stages = [(config.coarse_voxels, config.coarse_steps), (config.fine_voxels, config.fine_steps)]
+    stages = [(n, s) for n, s in stages if s > 0]
+    total = sum(s for _, s in stages)
+    first_grid = VoxelGrid.covering(lo, hi, stages[0][0], table_z_m)
+    t_hull = time.perf_counter()
+    init_density, carved, carving = hull_density(views, first_grid, config, progress, device)
+    hull_and_carving_s = time.perf_counter() - t_hull
+    field, done, curve = None, 0, []
+    # the rays' pool put on the device comes first: on a GPU it pays for starting the device
+    phases = {"ray_pool": t_hull - t_start, "hull_and_carving": hull_and_carving_s}
+    learner = _Learner(corrections, total) if corrections is not None else None
+    for voxels, steps in stages:
+        t_setup = time.perf_counter()
+        grid = VoxelGrid.covering(lo, hi, voxels, table_z_m)
+        # the region the field may fill, seen by the views as they are now corrected
+        now = views if field is None or corrections is None else replace(views, c2w_cv=corrections.corrected_c2w())
+        occupancy = field_occupancy(now, grid, config, device) & ~_deep_carved(carved, first_grid, grid,
+                                                                         config.carved_margin_voxels)
+        if field is None:
+            field = VoxelRadianceField(grid, occupancy, feature_channels=config.feature_channels,
+                                       init_density=init_density, device=device, generator=gen)
+        else:
+            field = field.upsampled(grid, occupancy)
+            if corrections is not None and corrections.poses_learning:
+                # The poses learn on the coarse grid only, whose big voxels give a misplaced pixel a gradient
+                # that reaches millimetres; on the fine grid they would chase its detail, and learning them
+                # there cost a quarter more time (rays cast again as they move, gradients through every
+                # sample's position) for no gain measured.
+                corrections.freeze_poses()
+        t_steps = time.perf_counter()
+        done = _optimise(field, pool, config, steps, done, total, gen, progress, curve, learner)
+        phases[f"grid_{voxels}_setup"] = t_steps - t_setup
+        phases[f"grid_{voxels}_steps"] = time.perf_counter() - t_steps  # the loss read at its end waits for them
+    return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
+                       carved_voxels=int(carved.sum()), restored_voxels=carving.restored_voxels if carving else 0,
+                       opened_voxels=carving.opened_voxels if carving else 0,
+                       carving_exposure=carving.exposure if carving else None,
+                       corrections=corrections,
+                       c2w_cv=corrections.corrected_c2w() if corrections is not None else None, phase_seconds=phases,
+                       config=config)
+
+
+@dataclass
+class _Learner:
+    """The corrections, their optimiser and schedule over ``total`` steps; ``gauge``: take the rig's
+    common motion out after each step (off when the field is frozen and fixes the frame itself)."""
+
+    corrections: ViewCorrections
+    total: int
+    gauge: bool = True
+
+    def __post_init__(self):
+        self.optimiser = self.corrections.optimiser()
+
+
+def fit_views_to_field(field: VoxelRadianceField, views: PosedViews, config: FieldConfig, *, steps: int = 60,
+                       seed: int = 0) -> ViewCorrections:
+    """Corrections of ``views`` (poses, and colours with ``config.colour_correction``) that fit them to a
+    trained, frozen ``field``: how held-out views, which never trained it, are placed on the field's
+    frame before they judge it (as BARF evaluates). No gauge: the field fixes the frame."""
+    gen = torch.Generator(device="cpu").manual_seed(seed)
+    pool = ray_pool(views, mask_dilation_px=config.mask_dilation_px,
+                    background_fraction=config.background_ray_fraction, rng=np.random.default_rng(seed)).to(field.device)
+    centre = field.grid.bounds_m.mean(axis=0)
+    corrections = ViewCorrections(views.c2w_cv, centre, replace(config.corrections, warmup_steps=0),
+                                  poses=True, colours=config.colour_correction, device=field.device)
+    learner = _Learner(corrections, steps, gauge=False)
+    learning = [p.requires_grad for p in field.parameters()]
+    field.requires_grad_(False)  # no gradients for the grid tables: the largest part of a step's backward
+    try:
+        _optimise(field, pool, config, steps, 0, steps, gen, None, [], learner, learn_field=False)
+    finally:
+        for p, flag in zip(field.parameters(), learning):
+            p.requires_grad_(flag)
+    return corrections
+
+
+def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
+              gen: torch.Generator, progress: ProgressFn | None, curve: list, learner: _Learner | None = None,
+              learn_field: bool = True) -> int:
+    """``steps`` Adam steps on ``field`` (and on the corrections of ``learner``; on those alone when not
+    ``learn_field``); appends (step, mean loss) to ``curve``; returns the steps done so far."""
+    corrections = learner.corrections if learner is not None else None
+    ranges = PoolRanges(field, pool, corrections)
+    optimisers = []
+    if learn_field:
+        # fused: one kernel over the whole grid; the per-tensor loop took a quarter of each step
+        grid_opt = torch.optim.Adam([{"params": [field.density_table], "lr": config.lr_density,
+                                      "base": config.lr_density},
+                                     {"params": [field.feature_table], "lr": config.lr_features,
+                                      "base": config.lr_features}], fused=True)
+        optimisers = [grid_opt, torch.optim.Adam(field.decoder.parameters(), lr=config.lr_decoder)]
+    if learner is not None:
+        optimisers.append(learner.optimiser)
+    window: list[torch.Tensor] = []  # losses on the device, read once per reporting window (a GPU sync)
+    report_every = max(steps // 20, 1)
+    device = field.device
+    for step in range(steps):
+        # the grid's learning rate decays tenfold over each stage
+        for group in optimisers[0].param_groups if learn_field else ():
+            group["lr"] = group["base"] * 0.1 ** (step / max(steps, 1))
+        if learner is not None:
+            corrections.schedule(learner.optimiser, done, learner.total)
+        pick = torch.randint(len(pool.origins), (config.rays_per_step,), generator=gen).to(device)
+        jitter = torch.rand(config.rays_per_step, generator=gen).to(device)
+        background = torch.rand(config.rays_per_step, 3, generator=gen).to(device)
+        origins, directions, view = pool.origins[pick], pool.directions[pick], pool.view[pick]
+        t_range = ranges.batch(pick)
+        if corrections is not None:
+            origins, directions = corrections.rays(view, origins, directions)
+        out = field.render(origins, directions, step_voxels=config.step_voxels, view_dependent=config.view_dependent,
+                           jitter=jitter, t_range_m=t_range)
+        rgb = out.rgb if corrections is None else corrections.colour(view, out.rgb, out.opacity)
+        m = pool.mask[pick][:, None]
+        target = m * pool.rgb[pick] + (1 - m) * background
+        predicted = rgb + (1 - out.opacity)[:, None] * background
+        loss = torch.mean((predicted - target) ** 2)
+        if corrections is not None:
+            loss = loss + corrections.prior_loss()
+        for opt in optimisers:
+            opt.zero_grad(set_to_none=True)
+        loss.backward()
+        for opt in optimisers:
+            opt.step()
+        if learner is not None and learner.gauge:
+            corrections.fix_gauge()
+        window.append(loss.detach())
+        done += 1
+        if step % report_every == report_every - 1 or step == steps - 1:
+            curve.append((done, float(torch.stack(window).mean())))
+            window = []
+        if progress:
+            progress(f"training field ({field.grid.shape[0]}x{field.grid.shape[1]}x{field.grid.shape[2]})", done, total)
+    return done
