@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.1.0"
+from real2sim.plumbing.version import __version__
 
 if TYPE_CHECKING:  # what IDEs and type checkers see; at run time the names load on first use
     from real2sim.api import Asset, Representation, build_asset, evaluate, load_asset, run

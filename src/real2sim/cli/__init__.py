@@ -17,7 +17,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from real2sim import __version__
+from real2sim.plumbing.version import __version__
 from real2sim.cli import options
 from real2sim.cli.options import integer
 from real2sim.plumbing.errors import UserInputError

@@ -210,7 +210,7 @@ def replace_blocker(folder: Path) -> str | None:
 
 def write_marker(folder: Path, made_by: str = "real2sim") -> None:
     """Mark ``folder`` as a real2sim output, so that ``--overwrite`` may later replace it."""
-    from real2sim import __version__
+    from real2sim.plumbing.version import __version__
 
     write_bytes_atomic(Path(folder) / MARKER_NAME,
                        (json.dumps({"made_by": made_by, "version": __version__}) + "\n").encode())

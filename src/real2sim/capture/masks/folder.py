@@ -26,7 +26,7 @@ def _sha256(path: Path) -> str:
 
 def write_mask_marker(folder: Path, method: str, names: list[str]) -> None:
     """The marker of a finished ``masks_<method>/``: made by `mask`, and the masks it wrote (SHA-256)."""
-    from real2sim import __version__
+    from real2sim.plumbing.version import __version__
 
     record = {"made_by": f"real2sim mask --method {method}", "version": __version__,
               "files": {name: _sha256(folder / name) for name in sorted(names)}}
