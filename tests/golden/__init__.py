@@ -1,0 +1,1 @@
+"""Recorded outputs of fixed small pipelines and their recorder (record.py)."""
