@@ -19,7 +19,7 @@ $(PY):
 
 $(STAMP): $(PY) pyproject.toml
 	@$(PY) -c "import torch" 2>/dev/null || $(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e ".[test,capture,maskrcnn]"
+	$(PY) -m pip install -q -e ".[all,test]"
 	@touch $(STAMP)
 
 install: $(STAMP)

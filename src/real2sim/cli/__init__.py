@@ -19,10 +19,11 @@ from pathlib import Path
 
 from real2sim.plumbing.version import __version__
 from real2sim.cli import options
+from real2sim.cli.extras import check_extras
 from real2sim.cli.options import integer
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.inputs import check_outputs_spare_inputs
-from real2sim.plumbing.outputs import public_paths
+from real2sim.plumbing.temporary_names import public_paths
 
 #: --threads: torch CPU threads; the environment variable that gives the default.
 THREADS = integer(1, 1024)
@@ -93,6 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         # every output against every input the verb declared, before any import or work (docs/reliability.md)
         check_outputs_spare_inputs(options.declared_paths(args, "writes"), options.declared_paths(args, "reads"))
+        check_extras(args)
         set_torch_threads(args.threads)
         with warnings.catch_warnings():  # the filters and the display are put back when the command ends
             warnings.showwarning = _plain_warning
@@ -239,7 +241,3 @@ def _in_main_thread() -> bool:
     import threading
 
     return threading.current_thread() is threading.main_thread()
-
-
-# argparse types of numbers with ranges live in cli/options.py; these two names stay importable from here.
-from real2sim.cli.options import positive_float, positive_int  # noqa: E402,F401

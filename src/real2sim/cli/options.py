@@ -121,10 +121,6 @@ def nonnegative(max_value: float = math.inf) -> Number:
     return Number(0.0, max_value)
 
 
-#: argparse type: a finite number > 0 (kept for ``from real2sim.cli import positive_float``).
-positive_float = positive()
-#: argparse type: an integer >= 1 (kept for ``from real2sim.cli import positive_int``).
-positive_int = integer(1, math.inf)
 
 
 def seed(max_value: int = SEED_MAX) -> Number:
