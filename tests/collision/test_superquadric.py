@@ -204,8 +204,8 @@ def test_a_box_of_two_superquadrics_rests_on_the_floor_in_drake(tmp_path, contac
 
 
 def test_exponents_stay_in_the_convex_range_whatever_the_raw_parameters():
-    from real2sim.collision.fit.params import _constrain
+    from real2sim.collision.fit.params import constrain
 
     raw = torch.tensor([[0.0, 0.0, 0.0, 0.1, 0.1, 0.1, -50.0, 50.0, 1.0, 0.0, 0.0, 0.0]], dtype=torch.float64)
-    packed = _constrain("superquadric", raw, 0.004, FitConfig().superquadric_exponent_gain)
+    packed = constrain("superquadric", raw, 0.004, FitConfig().superquadric_exponent_gain)
     assert 0.02 <= float(packed[0, 6]) < 0.021 and 1.99 < float(packed[0, 7]) <= 2.0

@@ -18,17 +18,13 @@ that are degenerate (flat, or less than a millionth of the total volume) are
 dropped: they carry no volume and Drake cannot build a hydroelastic mesh for them.
 
 Hull decimation (``CoacdConfig.decimate``, default on, at most 128 vertices per hull):
-CoACD's raw hulls of a dense mesh can have thousands of vertices (1924 for the main
-hull of our 5.9k-face bottle); as compliant hydroelastic convex shapes they are slow
-(that bottle rolling on a compliant floor: ~15 wall s per simulated s) and sometimes
-make Drake fail ("Cannot instantiate plane from normal"). CoACD's decimation keeps a
-subset of the hull's vertices, so the hull shrinks: on the bottle the pieces kept
-87.2% of the volume at 64 vertices, 94.4% at 128 and 97.2% at 256, and simulated at
-about 0.5-0.8, 0.6-1.4 and ~5 wall s per simulated s (2 loaded cores, noisy). 128 is
-the default: it is >10x faster than raw hulls without the ~2 mm radial shrink that
-64 vertices cause, which would handicap the baseline's accuracy. The paper gives
-only the threshold (0.05); pass ``CoacdConfig(decimate=False)`` for raw hulls, or
-``max_ch_vertex=64`` for the faster, coarser setting of DESIGN.md.
+CoACD's raw hulls of a dense mesh can have thousands of vertices, and as compliant
+hydroelastic convex shapes they are slow and sometimes make Drake fail ("Cannot
+instantiate plane from normal"). CoACD's decimation keeps a subset of the hull's
+vertices, so the hull shrinks; 128 vertices is fast without the visible shrink of 64
+(docs/design-notes/collision.md#coacd-hull-decimation). The paper gives only the threshold
+(0.05); pass ``CoacdConfig(decimate=False)`` for raw hulls, or ``max_ch_vertex=64`` for a
+faster, coarser setting.
 """
 
 from __future__ import annotations
@@ -48,32 +44,35 @@ _MIN_RELATIVE_VOLUME = 1e-6  # pieces below this fraction of the total are slive
 
 @dataclass(frozen=True)
 class CoacdConfig:
-    """Options of ``coacd.run_coacd`` (names as in CoACD).
-
-    threshold: concavity threshold (of the normalised mesh); 0.05 as in the paper.
-    max_convex_hull: upper bound on pieces after merging; -1 = no bound.
-    preprocess_mode: "auto" remeshes only non-manifold input, "on" always, "off" never.
-    preprocess_resolution: voxel resolution of that remeshing.
-    resolution: surface samples per piece used to measure concavity.
-    mcts_nodes, mcts_iterations, mcts_max_depth: the cutting-plane tree search.
-    merge: merge adjacent pieces while the concavity stays under the threshold.
-    decimate, max_ch_vertex: reduce each hull to at most max_ch_vertex vertices
-        (default on, 128: see the module docstring for why).
-    seed: CoACD's random seed (overridden by ``decompose(seed=...)`` when given).
-    """
+    """Options of ``coacd.run_coacd`` (names as in CoACD); the paper's threshold, the library's
+    defaults otherwise except hull decimation."""
 
     threshold: float = 0.05
+    """Concavity threshold (of the normalised mesh), in (0, 1); 0.05 as in the paper."""
     max_convex_hull: int = -1
+    """Upper bound on pieces after merging; -1: no bound."""
     preprocess_mode: str = "auto"
+    """Remeshing of the input: "auto" (only non-manifold input), "on" (always) or "off" (never)."""
     preprocess_resolution: int = 50
+    """Voxel resolution of that remeshing, >= 1."""
     resolution: int = 2000
+    """Surface samples per piece used to measure concavity, >= 1."""
     mcts_nodes: int = 20
+    """Child nodes per step of the cutting-plane tree search, >= 1."""
     mcts_iterations: int = 150
+    """Iterations of the cutting-plane tree search, >= 1."""
     mcts_max_depth: int = 3
+    """Depth of the cutting-plane tree search, >= 1."""
     merge: bool = True
+    """Merge adjacent pieces while the concavity stays under the threshold."""
     decimate: bool = True
+    """Reduce each hull to at most ``max_ch_vertex`` vertices (on, unlike the library's default).
+    (why: docs/design-notes/collision.md#coacd-hull-decimation)"""
     max_ch_vertex: int = 128
+    """Vertex budget of each hull when decimating, >= 4.
+    (why: docs/design-notes/collision.md#coacd-hull-decimation)"""
     seed: int = 0
+    """CoACD's random seed (``decompose(seed=...)`` overrides it when given)."""
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.threshold) and 0.0 < self.threshold < 1.0):
@@ -86,28 +85,26 @@ class CoacdConfig:
 
 @dataclass(frozen=True)
 class VhacdConfig:
-    """Options of V-HACD 4 (``vhacdx.compute_vhacd``), library defaults.
-
-    max_convex_hulls: number of pieces V-HACD aims for (4.x tends to return exactly this many).
-    resolution: voxels in the voxelisation of the whole mesh.
-    min_volume_percent_error: stop splitting a piece when its hull volume error is below this (%).
-    max_recursion_depth: splitting depth.
-    shrink_wrap: snap hull vertices back onto the source mesh surface.
-    fill_mode: interior fill of the voxelisation, "flood", "surface" or "raycast".
-    max_vertices_per_hull: vertex budget of each hull.
-    min_edge_length: smallest voxel edge a piece may be split down to, in voxels.
-    find_best_plane: search for the best splitting plane (slower).
-    """
+    """Options of V-HACD 4 (``vhacdx.compute_vhacd``), the library's defaults."""
 
     max_convex_hulls: int = 64
+    """Number of pieces V-HACD aims for (4.x tends to return exactly this many), >= 1."""
     resolution: int = 400_000
+    """Voxels in the voxelisation of the whole mesh, >= 1."""
     min_volume_percent_error: float = 1.0
+    """Stop splitting a piece when its hull's volume error is below this, in percent, >= 0."""
     max_recursion_depth: int = 10
+    """Splitting depth at most, >= 1."""
     shrink_wrap: bool = True
+    """Snap hull vertices back onto the source mesh's surface."""
     fill_mode: str = "flood"
+    """Interior fill of the voxelisation: "flood", "surface" or "raycast"."""
     max_vertices_per_hull: int = 64
+    """Vertex budget of each hull, >= 4."""
     min_edge_length: int = 2
+    """Smallest voxel edge a piece may be split down to, in voxels, >= 1."""
     find_best_plane: bool = False
+    """Search for the best splitting plane (slower)."""
 
     def __post_init__(self) -> None:
         if self.fill_mode not in ("flood", "surface", "raycast"):

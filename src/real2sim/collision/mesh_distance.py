@@ -5,7 +5,7 @@ comes from the winding number (:mod:`real2sim.geometry.inside`), robust to holes
 faces. Used by :mod:`real2sim.collision.sdf_sampling`.
 
 Speed (``sign_method="fast"``, the default). Evaluating the winding number at
-all 600k near-surface points costs twice as much as the distances, because
+every near-surface point costs more than the distances, because
 Barnes-Hut is slowest right at the surface. But the nearest-triangle query
 already tells on which side of its closest face a point lies, and the segment
 from a point to its closest surface point crosses no other face. So we evaluate
@@ -19,9 +19,10 @@ on an edge or a vertex rather than inside the face (the offset is not along the
 face normal), the face is degenerate, a boundary edge is nearer than twice the
 path probe -> closest point -> point, or the inferred winding number is within
 ``sign_margin`` of the 0.5 threshold. Queries are also issued in Morton
-(z-curve) order, which makes libigl's tree walks 2-3x faster than random order.
+(z-curve) order, which makes libigl's tree walks faster than random order
+(docs/design-notes/collision.md#fast-signs).
 ``sign_method="exact"`` evaluates the winding number at every point;
-``tests/test_sdf_sampling.py`` checks that the two agree, including on meshes
+``tests/collision/test_sdf_sampling.py`` checks that the two agree, including on meshes
 with holes, internal sheets and stray triangles.
 
 Limits: like any winding-number test, points right next to a stray open
@@ -110,8 +111,7 @@ def _fast_winding(
     # Probe each used face just in front of its centroid, 1e-3 of its longest
     # edge away: on the face plane the triangle's own solid angle is ambiguous
     # (+-2 pi), and libigl's winding number loses precision closer than ~1e-5
-    # edge (measured: wrong probes on 0.02% of a bottle's faces at 1e-5, 3% at
-    # 1e-6, none from 1e-4 to 1e-2); only another surface within 1e-3 edge of
+    # edge (docs/design-notes/collision.md#fast-signs); only another surface within 1e-3 edge of
     # the face (nearly coincident sheets) could lie in between.
     used = np.flatnonzero((np.bincount(face, minlength=len(f)) > 0) & ok_face)
     t_used = tri[used]

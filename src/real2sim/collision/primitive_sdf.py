@@ -63,8 +63,7 @@ SIZE_DIM: dict[str, int] = {"sphere": 1, "box": 3, "rotated_box": 3, "cylinder":
 EXPONENT_DIM: dict[str, int] = {k: 2 if k == "superquadric" else 0 for k in KINDS}
 HAS_ROTATION: dict[str, bool] = {k: PARAM_DIM[k] - 3 - SIZE_DIM[k] - EXPONENT_DIM[k] == 4 for k in KINDS}
 # Superquadric exponents: above 2 the solid is no longer convex. The lower end decides how
-# sharp an edge can get: on the bundled can, a superquadric with the can's own radius and
-# length still misclassifies 7 % of the near-surface samples at e1 = 0.1 and 3 % at 0.05.
+# sharp an edge can get (docs/design-notes/collision.md#superquadric-exponent-range).
 SUPERQUADRIC_EXPONENT_RANGE: tuple[float, float] = (0.02, 2.0)
 
 # Below this squared length a norm is treated as zero: keeps sqrt's gradient finite

@@ -7,18 +7,17 @@ with the signed distance of the mesh at each, negative inside. This stage
    with ``centre_m`` the centre of the vertices' axis-aligned bounding box and
    ``scale_m`` the largest distance of a vertex from it, so every vertex lies in
    the closed unit ball and at least one on its boundary. (The bounding-box
-   centre is cheap, deterministic and within a few percent of the minimal
-   enclosing sphere for the elongated objects we see; the fitter penalises
+   centre is cheap, deterministic and near the minimal enclosing sphere's
+   (docs/design-notes/collision.md#unit-sphere); the fitter penalises
    primitive centres outside the unit sphere, eq. 11, so the ball must hold the
    whole mesh);
 2. draws ``num_surface_samples`` area-uniform surface points and moves each by
    isotropic Gaussian noise, the samples split evenly over ``surface_sigmas``
-   (default 0.0025 and 0.025 unit-sphere units: for a 0.19 m bottle, about 0.25
-   mm and 2.5 mm). The small scale pins the surface down for the truncated loss
-   (eq. 9); the large one gives the fitter gradient information a few
-   millimetres off the surface and fills thin parts with inside samples. This
-   two-scale split follows DeepSDF/DualSDF-style preprocessing (their exact
-   variances differ);
+   (default 0.0025 and 0.025 unit-sphere units). The small scale pins the
+   surface down for the truncated loss (eq. 9); the large one gives the fitter
+   gradient information a little off the surface and fills thin parts with
+   inside samples. This two-scale split follows DeepSDF/DualSDF-style
+   preprocessing (their exact variances differ);
 3. adds ``num_uniform_samples`` points uniform in the ball of radius
    ``uniform_radius`` (1.3), as the paper does;
 4. computes the signed distance of every point: the magnitude is the exact
@@ -55,16 +54,31 @@ AUTO_CACHE = "auto"
 
 @dataclass(frozen=True)
 class SdfSamplingConfig:
-    """How many samples, where, and how their signs are computed. Lengths in unit-sphere units."""
+    """How many signed-distance samples, where, and how their signs are computed (lengths in
+    unit-sphere units)."""
 
-    num_surface_samples: int = 600_000  # paper: 600k near-surface samples
-    num_uniform_samples: int = 500  # paper: 500 uniform samples ...
-    uniform_radius: float = 1.3  # ... in a ball of radius 1.3
-    surface_sigmas: tuple[float, ...] = (0.0025, 0.025)  # Gaussian noise scales, samples split evenly
+    num_surface_samples: int = 600_000
+    """Near-surface samples (the paper's 600k), >= 0."""
+    num_uniform_samples: int = 500
+    """Samples uniform in the ball of radius ``uniform_radius`` (the paper's 500), >= 0; the two
+    counts together > 0."""
+    uniform_radius: float = 1.3
+    """Radius of the ball of the uniform samples (the paper's 1.3, unit sphere), > 0."""
+    surface_sigmas: tuple[float, ...] = (0.0025, 0.025)
+    """Standard deviations of the isotropic Gaussian noise that moves surface points off the
+    surface (unit sphere), each > 0; the near-surface samples split evenly over them.
+    (why: docs/design-notes/collision.md#surface-sigmas)"""
     seed: int = 0
-    sign_method: str = "fast"  # "fast" (per-face winding number, exact where doubtful) or "exact"
-    sign_margin: float = 0.25  # |inferred |w| - 0.5| below this -> exact winding number
-    min_inside_fraction: float = 0.01  # fewer near-surface samples inside -> UserInputError
+    """Seed of the sample draws."""
+    sign_method: str = "fast"
+    """"fast" (winding number once per face, carried to the points it is closest to, exact where
+    doubtful: :mod:`real2sim.collision.mesh_distance`) or "exact" (at every point)."""
+    sign_margin: float = 0.25
+    """With "fast": a point whose inferred ``|w|`` lies within this of 0.5 gets the exact winding
+    number; >= 0 (above 0.5 every point gets it)."""
+    min_inside_fraction: float = 0.01
+    """Fewest near-surface samples clearly inside (|w| > 0.75), as a fraction in [0, 1]; fewer
+    raise UserInputError (the mesh encloses no volume)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "surface_sigmas", tuple(float(x) for x in self.surface_sigmas))

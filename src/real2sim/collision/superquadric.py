@@ -15,8 +15,9 @@ sampled at evenly spaced angles of its normal (points bunch at the edges of box-
 shapes) or of the ray from the centre, and the product grid plus the two poles are
 the vertices; of the splits between the two curves and the two samplings, the one
 whose polytope holds the most volume is kept. An inscribed
-polytope holds less volume than the solid (about 3 % for an ellipsoid at 128
-vertices), so the hull is scaled about the centre until its volume equals the
+polytope holds less volume than the solid
+(docs/design-notes/collision.md#superquadric-polytopes), so the hull is scaled about
+the centre until its volume equals the
 superquadric's closed-form volume: the simulated solid then neither shrinks nor
 grows on average.
 """

@@ -12,8 +12,8 @@ norm, so it cannot tell a trajectory whose inertia torques are twice as large fr
 rotational inertia is what the torque noise hides (a 0.3 kg object's shows as ~1e-3 N m against
 0.05 N m of noise), so the design asks for it directly: the least-squares covariance of the six
 inertia parameters, friction columns included, over the rows :func:`real2sim.identify.solve.identify`
-keeps (those away from a joint's velocity reversal). On the can with a point mass, 32 s, 10 noise
-draws: the median inertia error went from 45 % to 28 %. The condition number is still reported,
+keeps (those away from a joint's velocity reversal); it identifies the inertia better
+(docs/design-notes/identify.md#trajectory-design). The condition number is still reported,
 and a candidate above :data:`MAX_DESIGN_CONDITION` is refused.
 """
 
@@ -38,10 +38,8 @@ DEFAULT_ACCEL_LIMITS_RAD_PER_S2 = (3.0, 3.0, 5.0, 5.0, 15.0, 15.0, 20.0)
 #: One period of the Fourier series and the rise (and fall) at each end, seconds.
 PERIOD_S = 6.0
 RAMP_S = 1.0
-#: How long the arm moves by default: the rotational inertia's error falls with one over the root
-#: of it. Six minutes (60 periods) bring the can with a point mass to 8-11 % median, 12-14 % at the
-#: 90th percentile over noise draws (3 minutes: 13 % / 20 %), with excitation and identification
-#: together about a minute and a half on 2 cores.
+#: How long the arm moves by default (six minutes): the rotational inertia's error falls with one
+#: over the root of it (docs/design-notes/identify.md#default-duration).
 DEFAULT_PERIODS = 60
 DEFAULT_DURATION_S = DEFAULT_PERIODS * PERIOD_S + 2.0 * RAMP_S
 #: A design must keep every inertial parameter excited (column-scaled regressor).

@@ -26,14 +26,18 @@ DEFAULT_VISCOUS_N_M_S = (0.8, 0.8, 0.5, 0.5, 0.3, 0.2, 0.2)
 
 @dataclass(frozen=True)
 class Measurement:
-    """How the simulated arm measures: torque noise (N m RMS, per joint), encoder resolution (rad),
-    joint friction (N m and N m s/rad per joint; the Coulomb part smoothed over ``stiction_band``)."""
+    """How the simulated arm measures its joints, and the friction they feel."""
 
     torque_noise_n_m: float = 0.05
+    """RMS of the white noise on each joint's logged torque, N m, >= 0."""
     encoder_resolution_rad: float = 2.0 * np.pi / 2**20
+    """Quantisation step of the logged joint positions, rad, >= 0 (a 2^20-count encoder)."""
     coulomb_n_m: tuple[float, ...] = DEFAULT_COULOMB_N_M
+    """Coulomb friction of each joint, shoulder to wrist, N m, >= 0 (repeated when shorter)."""
     viscous_n_m_s: tuple[float, ...] = DEFAULT_VISCOUS_N_M_S
+    """Viscous friction of each joint, shoulder to wrist, N m s/rad, >= 0 (repeated when shorter)."""
     stiction_band_rad_per_s: float = 0.01
+    """Speed scale of the tanh that smooths the Coulomb part through zero speed, rad/s, > 0."""
 
 
 @dataclass(frozen=True)
@@ -88,8 +92,8 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
     ``log_period_s``.
 
     The controller updates every ``control_period_s`` (an even fraction of the log period: 2 kHz by
-    default, as fast as a torque-controlled arm's joint loop; 4 kHz took 1.7 times as long for the same
-    result, 2.4 % against 1.9 % inertia error from noise-free torques on the can) and holds its torque
+    default, as fast as a torque-controlled arm's joint loop; faster costs time for no better result:
+    docs/design-notes/identify.md#controller-rate) and holds its torque
     in between, as a real joint controller does; a log sample's torque is the mean of
     what was applied over the log period centred on it (what a torque reading averaged over one
     period gives), so that it goes with the motion at that instant.
@@ -138,9 +142,8 @@ def simulate_excitation(arm: ArmWithPayload, nominal: ArmWithPayload, traj: Four
             break
         # The joints' friction acts all the time, not only at the controller's ticks: held over a control
         # period it is the friction at the period's middle (the velocity carried half a period on at the
-        # last period's rate). Held at the tick's velocity it lagged the motion by half a period, a torque
-        # of viscous x 0.125 ms x acceleration that looks like inertia: 1e-4 kg m^2 at the shoulder,
-        # the payload's whole size, and the can came out 5-8 % light in inertia from noise-free torques.
+        # last period's rate). Held at the tick's velocity it would lag the motion by half a period, a
+        # torque that looks like inertia (docs/design-notes/identify.md#friction-at-mid-period).
         v_mid = v + 0.5 * (v - v_before)
         port.FixValue(ctx, tau_applied[i] - _friction(v_mid, coulomb, viscous, measurement.stiction_band_rad_per_s))
         v_before = v

@@ -22,17 +22,25 @@ from real2sim.identify.solve import PARAMETER_NAMES, Identification, identify
 
 @dataclass(frozen=True)
 class ExciteConfig:
-    """``mass_kg``: the object's body at uniform density; ``extra_mass_kg`` at ``extra_at_m`` (mesh
-    frame, m) inside it; ``torque_noise_n_m``: RMS per joint; ``robot_urdf``: None for our arm;
-    ``periods``: of the exciting motion (6 s each, plus 2 s of rise and fall)."""
+    """What `excite` simulates: the object the arm holds, how noisy its torques are, and how long
+    it moves."""
 
     mass_kg: float
+    """Mass of the object's body at uniform density, kg, > 0."""
     extra_mass_kg: float = 0.0
+    """A point mass added inside the object at ``extra_at_m``, kg, >= 0 (0: none)."""
     extra_at_m: tuple[float, float, float] | None = None
+    """Where the extra mass sits, metres in the mesh's frame, inside the object; needed when
+    ``extra_mass_kg`` > 0."""
     torque_noise_n_m: float = 0.05
+    """RMS of the white noise on each joint's logged torque, N m, >= 0."""
     seed: int = 0
+    """Seed of the trajectory design and of the measurement noise."""
     robot_urdf: Path | None = None
+    """The arm's URDF; None: the bundled 7-joint arm (:func:`real2sim.identify.arm.default_arm_urdf`)."""
     periods: int = DEFAULT_PERIODS
+    """Periods of the exciting motion (6 s each, plus 2 s of rise and fall), >= 1.
+    (why: docs/design-notes/identify.md#default-duration)"""
 
 
 def default_grasp(mesh) -> np.ndarray:

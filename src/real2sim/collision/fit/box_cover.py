@@ -1,11 +1,9 @@
 """Where axis-aligned boxes start: a greedy cover of the solid by maximal inscribed boxes.
 
 k-means clusters of interior samples hug the surface, so boxes started there are tiles of the
-shell: on the bundled can (boxes:10) every box spanned a third to a half of the height and a
-quadrant of the disc, and the sides the object rolls on became a lumpy staircase that changed
-from one height to the next (support function 3.6 mm inside the true one on average over
-directions about the long axis, 5.3 mm at worst, on a 34 mm radius). Gradient steps do not
-undo that: a box that would have to grow through its neighbours gains nothing until it has.
+shell, and the sides the object rolls on become a lumpy staircase that changes from one height
+to the next (docs/design-notes/collision.md#box-cover). Gradient steps do not undo that: a box
+that would have to grow through its neighbours gains nothing until it has.
 
 Here the solid is voxelised (a voxel is solid when the sample nearest its centre is inside and
 it holds no outside sample; the interior fill points count as inside), and each box in turn is

@@ -9,72 +9,100 @@ import numpy as np
 from real2sim.collision.primitive_sdf import PARAM_DIM, SUPERQUADRIC_EXPONENT_RANGE
 
 
-#: Primitive kinds fitted with contact-aware weighting by default, and its gain (FitConfig.contact_gain).
+#: Primitive kinds fitted with contact-aware weighting by default, and its gain (FitConfig.contact_gain;
+#: why: docs/design-notes/collision.md#contact-aware-fitting).
 CONTACT_AWARE_KINDS = frozenset({"cylinder", "ellipsoid"})
 CONTACT_AWARE_GAIN = 5.0
 
 
 @dataclass(frozen=True)
 class FitConfig:
-    """Settings of the primitive fit; defaults follow the paper where it gives them.
+    """Settings of the primitive fit (lengths in unit-sphere coordinates); defaults follow the
+    paper where it gives them."""
 
-    Lengths are in unit-sphere coordinates. ``learning_rate=None`` picks the
-    default of the parameterization (the network's output moves by roughly
-    ``lr * hidden_dim`` per step, so it needs a much smaller step than ``direct``).
-    """
-
-    parameterization: str = "direct"  # "direct" or "network" (the paper's eq. 10, Fig. 3); see docs/benchmarks/fitting.md
-    init: str = "kmeans"  # "kmeans" (beyond the paper) or "random"
-    # Axis-aligned boxes alone (boxes:N) start from a greedy cover of the solid by maximal boxes
-    # ("cover", fit/box_cover.py) rather than k-means patches ("kmeans"); needs init="kmeans".
+    parameterization: str = "direct"
+    """How the raw parameters are produced: "direct" (optimised themselves) or "network" (the
+    paper's ``g_theta()``, eq. 10, Fig. 3). (why: docs/design-notes/collision.md#parameterization)"""
+    init: str = "kmeans"
+    """Where primitives start: "kmeans" (clusters of the interior samples, beyond the paper) or
+    "random" (the paper's random positions and sizes in the middle of the unit sphere)."""
     box_init: str = "cover"
+    """Start of a fit of axis-aligned boxes alone (boxes:N): "cover" (a greedy cover of the solid
+    by maximal inscribed boxes, :mod:`.box_cover`) or "kmeans"; "cover" needs ``init="kmeans"``.
+    (why: docs/design-notes/collision.md#box-cover)"""
     learning_rate: float | None = None
-    lr_schedule: str = "cosine"  # "cosine" (to final_lr_fraction * lr) or "constant"
+    """Adam's step size, > 0; None takes the parameterization's default (:attr:`lr`: 1e-4 for
+    "network", whose output moves by roughly ``lr * hidden_dim`` per step, 2e-2 for "direct")."""
+    lr_schedule: str = "cosine"
+    """"cosine" (from ``lr`` down to ``final_lr_fraction * lr`` over ``max_iterations``) or
+    "constant"."""
     final_lr_fraction: float = 0.02
+    """The cosine schedule's last step size as a fraction of ``lr``, in [0, 1]."""
     batch_size: int = 8192
+    """Samples per minibatch, >= 1 (all of them when there are fewer)."""
     max_iterations: int = 1000
-    min_iterations: int = 300  # no early stop before this
-    patience: int = 150  # early stop when the smoothed loss has not improved for this many steps
-    plateau_tolerance: float = 2e-3  # relative improvement that counts as progress
-    inside_loss: str = "squared"  # eq. 9 inside term: "hinge" max(d, 0) (paper) or "squared" max(d, 0)^2
-    weight_centre: float = 1e-3  # w_c, eq. 11
-    weight_quaternion: float = 1e-3  # w_q, eq. 12
-    weight_rotation: float = 0.1  # w_r, eq. 13
-    rotation_range_kinds: tuple[str, ...] = ("rotated_box", "cylinder")  # eq. 13 applies to these
-    min_size: float = 0.004  # smallest half-size / radius (unit sphere), added to a softplus
-    # Samples whose closest primitive is a superquadric compare min(distance, this) (unit sphere):
-    # its distance is a first-order estimate, too small away from the surface near edges, and
-    # fitting those far values rounds boxes off (a box's samples pulled e2 to 0.38, not ~0).
+    """Adam steps at most, >= 0."""
+    min_iterations: int = 300
+    """Steps before which the early stop never acts, >= 0."""
+    patience: int = 150
+    """Early stop after this many steps without progress of the smoothed loss, >= 1."""
+    plateau_tolerance: float = 2e-3
+    """Relative drop of the smoothed loss that counts as progress, >= 0."""
+    inside_loss: str = "squared"
+    """Eq. 9's inside term: "hinge" max(d, 0) (the paper) or "squared" max(d, 0)^2 (beyond the
+    paper). (why: docs/design-notes/collision.md#inside-loss)"""
+    weight_centre: float = 1e-3
+    """w_c of eq. 11 (centres outside the unit sphere), >= 0."""
+    weight_quaternion: float = 1e-3
+    """w_q of eq. 12 (raw quaternions away from unit length), >= 0."""
+    weight_rotation: float = 0.1
+    """w_r of eq. 13 (rotations beyond pi/4), >= 0."""
+    rotation_range_kinds: tuple[str, ...] = ("rotated_box", "cylinder")
+    """Primitive kinds eq. 13 applies to."""
+    min_size: float = 0.004
+    """Smallest half-size / radius (unit sphere), > 0, added to a softplus of the raw size."""
     superquadric_truncation: float = 0.1
-    # Raw superquadric exponents are multiplied by this before their sigmoid, i.e. they take larger
-    # steps than the sizes: only samples near edges and corners inform them, so their minibatch
-    # gradient is noisy and Adam moves them slowly.
+    """Samples whose closest primitive is a superquadric compare min(distance, this) (unit
+    sphere), > 0: that distance is a first-order estimate, too small away from the surface near
+    edges. (why: docs/design-notes/collision.md#superquadric-truncation)"""
     superquadric_exponent_gain: float = 4.0
-    # Both exponents of a new superquadric; 1 would start it as an ellipsoid. The box-like 0.3 ties
-    # on IoU (fitting_superquadric_ablations_*.md) but simulates better: in the Table I protocol,
-    # superquadrics:10 from 0.3 scored OCAE 0.0087 m against 0.0118 m from 1 (table1_superquadrics*.md).
+    """Factor on the raw superquadric exponents before their sigmoid, > 0, so that they take larger
+    steps than the sizes: only samples near edges and corners inform them, so their minibatch
+    gradient is noisy and Adam moves them slowly."""
     superquadric_init_exponent: float = 0.3
-    latent_dim: int = 128  # Fig. 3: latent vector ...
-    hidden_dim: int = 512  # ... through FC layers of this width, with a dense (concat) skip
-    fill_interior: bool = True  # add labelled-inside points in the enclosed interior (beyond the paper)
-    fill_resolution: int = 64  # voxels along the longest side of the interior's bounding box
-    # Contact-aware fitting (beyond the paper, fit/contact_weights.py): samples within contact_band
-    # (unit sphere) of the hull of the samples weigh 1 + contact_weight in eq. 9's mean; 0 is off.
-    # The hull holds every surface the object touches a floor or wall with: the bottom it stands
-    # on, the sides it rolls on, the edges it tips over. None takes the family's measured default
-    # (:meth:`contact_gain`).
+    """Both exponents of a new superquadric, inside ``SUPERQUADRIC_EXPONENT_RANGE`` (0.02, 2); 1
+    would start it as an ellipsoid, near 0 as a box. (why: docs/design-notes/collision.md#superquadric-start)"""
+    latent_dim: int = 128
+    """Length of the learned latent vector of the network parameterization (Fig. 3), >= 1."""
+    hidden_dim: int = 512
+    """Width of the network's FC layers (with a dense concat skip of the latent), >= 1."""
+    fill_interior: bool = True
+    """Add labelled-inside points in the enclosed interior (beyond the paper), so that the union
+    is solid rather than a shell. (why: docs/design-notes/collision.md#interior-fill)"""
+    fill_resolution: int = 64
+    """Voxels along the longest side of the interior's bounding box, for the interior fill and the
+    box cover, >= 1."""
     contact_weight: float | None = None
+    """Contact-aware fitting's gain (beyond the paper, :mod:`.contact_weights`), >= 0: samples
+    within ``contact_band`` of the hull of the samples weigh ``1 + contact_weight`` in eq. 9's
+    mean; 0 is off; None takes the family's default (:meth:`contact_gain`).
+    (why: docs/design-notes/collision.md#contact-aware-fitting)"""
     contact_band: float = 0.02
-    # Outside samples the union reaches past (it comes nearer them than the true surface) weigh
-    # 1 + protrusion_weight in eq. 9's outside square (losses.sdf_loss); 0: the paper's symmetric
-    # square. A piece standing proud of the object is what a reset to the object's pose presses
-    # into a stiff support.
+    """Half-width of the band around the samples' hull whose samples are weighted (unit sphere), > 0."""
     protrusion_weight: float = 0.0
-    revive_dead: bool = True  # re-seed dead primitives during the fit (beyond the paper)
+    """Extra weight, >= 0, of outside samples the union reaches past (it comes nearer them than
+    the true surface) in eq. 9's outside square (:func:`.losses.sdf_loss`); 0 is the paper's
+    symmetric square. (why: docs/design-notes/collision.md#protrusion-weight)"""
+    revive_dead: bool = True
+    """Re-seed dead primitives at the worst-covered interior samples during the fit (beyond the paper)."""
     revive_every: int = 200
-    remove_dead: bool = True  # drop primitives that are still dead at the end
+    """Steps between revivals, >= 1 (no revival after ``0.7 * max_iterations``)."""
+    remove_dead: bool = True
+    """Drop the primitives still dead at the end (``FitResult.effective_count``)."""
     seed: int = 0
+    """Seed of the fit's random draws (minibatches, initialisation, revival)."""
     device: str = "cpu"
+    """Torch device of the fit ("cpu", "cuda", "cuda:1", ...)."""
 
     def __post_init__(self) -> None:
         if self.parameterization not in ("network", "direct"):
@@ -103,14 +131,9 @@ class FitConfig:
         """The contact weighting's gain for a fit of primitives of these ``kinds``: ``contact_weight``
         when it is set, else :data:`CONTACT_AWARE_GAIN` for cylinders and ellipsoids alone and 0 for the rest.
 
-        Why by family: in the Table I protocol (bundled bottle and can, 10 runs, both contact models;
-        docs/benchmarks/table1_contact_weight5.md against the unweighted sweep of the same code) gain 5
-        brought cylinders:10 closer to the reference (OCAE 0.0168 -> 0.0143 m hydroelastic, 0.0265 ->
-        0.0232 m point) and left ellipsoids:64 where they were (0.0089 -> 0.0089, 0.0169 -> 0.0171), and
-        on the two generated shapes (table1_shapes_cw.md) it improved 7 of their 8 rows; the box
-        families and spheres lost (boxes:10 0.0297 -> 0.0318 m hydroelastic, rotated_boxes:50 0.0212 ->
-        0.0305, spheres:128 0.0144 -> 0.0150) and boxes:400 broke (the can fitted with 65 boxes instead
-        of 112, its ramp runs 0.36 m off): boxes gain nothing from it.
+        By family because the weighting brought cylinders nearer the reference, left ellipsoids
+        as they were, and cost the box families and spheres accuracy
+        (docs/design-notes/collision.md#contact-aware-fitting).
         """
         if self.contact_weight is not None:
             return float(self.contact_weight)

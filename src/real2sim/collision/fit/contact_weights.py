@@ -8,8 +8,7 @@ support plane needs no rule of its own, it is a hull face.
 
 The hull is computed from the samples alone: the convex hull of the interior samples near the
 surface (``-band <= sdf <= 0``), which lies inside the object's hull by about the spacing of the
-samples there (for the sampler's 600k points, under 0.01 in unit-sphere lengths, 0.8 mm, on the
-bottle, at its nozzle tip).
+samples there (docs/design-notes/collision.md#contact-hull).
 """
 
 from __future__ import annotations
@@ -18,11 +17,9 @@ import numpy as np
 
 # Points x distinct planes per block of the signed-distance pass: bounds its memory (~64 MB).
 _CHUNK_ELEMENTS = 8_000_000
-# The samples scatter around the surface, so their exact hull has ~10^4 sliver facets (10,475 on
-# the bottle) and the distance pass costs tens of seconds. qhull's pre-merge of facets whose
-# centrums lie within this of their neighbours' planes (unit sphere; 0.2 mm on the bottle) leaves
-# a few hundred planes (252 on the bottle); the bottle's vertices lie at most 0.0080 outside that
-# hull and 0.0076 outside the exact one (its nozzle tip, where the samples are sparse).
+# The samples scatter around the surface, so their exact hull has ~10^4 sliver facets; qhull's
+# pre-merge of facets whose centrums lie within 0.002 (unit sphere) of their neighbours' planes
+# leaves a few hundred, at about the exact hull's accuracy (docs/design-notes/collision.md#contact-hull).
 _QHULL_OPTIONS = "Qc C-0.002"
 # qhull triangulates a merged face into simplices with the same equation: one plane.
 _PLANE_DECIMALS = 5

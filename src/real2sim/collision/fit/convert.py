@@ -13,17 +13,17 @@ from real2sim.collision.superquadric import DEFAULT_VERTICES, superquadric_hull
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.spec import CollisionSpec, parse_spec
 from real2sim.collision.fit.config import FitResult
-from real2sim.collision.fit.params import _Layout
-from real2sim.collision.fit.union import _closest
+from real2sim.collision.fit.params import Layout
+from real2sim.collision.fit.union import closest
 
 
 def result_sdf(result: FitResult, points_unit) -> np.ndarray:
     """Union signed distance (N,) of a fit at points in unit-sphere coordinates."""
     pts = torch.as_tensor(np.asarray(points_unit, dtype=np.float64))
     kinds = tuple(dict.fromkeys(result.kinds))
-    layout = _Layout.of(tuple((kind, result.kinds.count(kind)) for kind in kinds))
+    layout = Layout.of(tuple((kind, result.kinds.count(kind)) for kind in kinds))
     packed = [torch.as_tensor(result.packed(kind)) for kind in kinds]
-    dist, _ = _closest(layout, packed, pts)
+    dist, _ = closest(layout, packed, pts)
     return dist.numpy()
 
 

@@ -9,7 +9,7 @@ import torch
 
 from real2sim.collision.primitive_sdf import HAS_ROTATION, SIZE_DIM
 from real2sim.collision.fit.config import FitConfig
-from real2sim.collision.fit.params import _Layout
+from real2sim.collision.fit.params import Layout
 
 
 def interior_fill_points(
@@ -82,7 +82,7 @@ def _cluster_spreads(x: torch.Tensor, centres: torch.Tensor, labels: torch.Tenso
     return torch.sqrt(sums / counts)
 
 
-def _packed_from_blobs(kind: str, centres: torch.Tensor, sigma: torch.Tensor, init_exponent: float) -> torch.Tensor:
+def packed_from_blobs(kind: str, centres: torch.Tensor, sigma: torch.Tensor, init_exponent: float) -> torch.Tensor:
     """Packed rows for primitives whose volume matches blobs with per-axis std ``sigma``.
 
     A uniform solid of half-extent h has std h/sqrt(3) (box), a uniform disc of radius r
@@ -110,8 +110,8 @@ def _packed_from_blobs(kind: str, centres: torch.Tensor, sigma: torch.Tensor, in
     return torch.cat((centres, radius[:, None], half[:, None], ident), 1)
 
 
-def _initial_packed(
-    layout: _Layout, points: torch.Tensor, sdf: torch.Tensor, config: FitConfig, generator: torch.Generator
+def initial_packed(
+    layout: Layout, points: torch.Tensor, sdf: torch.Tensor, config: FitConfig, generator: torch.Generator
 ) -> list[torch.Tensor]:
     """Initial packed rows per family (unit-sphere coordinates)."""
     n = layout.total
@@ -148,7 +148,7 @@ def _initial_packed(
         sigma = (0.03 + 0.07 * torch.rand(n, 3, generator=generator)).to(dev, dt)
     out = []
     for kind, count, off in zip(layout.kinds, layout.counts, layout.offsets):
-        packed = _packed_from_blobs(kind, centres[off : off + count], sigma[off : off + count], config.superquadric_init_exponent)
+        packed = packed_from_blobs(kind, centres[off : off + count], sigma[off : off + count], config.superquadric_init_exponent)
         s = SIZE_DIM[kind]
         packed[:, 3 : 3 + s] = packed[:, 3 : 3 + s].clamp(min=floor)
         if HAS_ROTATION[kind] and config.init == "random":

@@ -15,11 +15,11 @@ import torch
 
 from real2sim.collision.primitive_sdf import HAS_ROTATION, PARAM_DIM, SIZE_DIM
 from real2sim.collision.fit.config import FitConfig, FitResult
-from real2sim.collision.fit.params import _Layout, _unconstrain, _constrain_all, _PrimitiveNet, _DirectParams
+from real2sim.collision.fit.params import Layout, unconstrain, constrain_all, PrimitiveNet, DirectParams
 from real2sim.collision.fit.contact_weights import contact_weights, hull_planes
-from real2sim.collision.fit.initialization import interior_fill_points, _initial_packed, _packed_from_blobs
-from real2sim.collision.fit.losses import sdf_loss, _regularizers
-from real2sim.collision.fit.union import _closest, _paired_distance, _truncate_estimates, _alive
+from real2sim.collision.fit.initialization import interior_fill_points, initial_packed, packed_from_blobs
+from real2sim.collision.fit.losses import sdf_loss, regularizers
+from real2sim.collision.fit.union import closest, paired_distance, truncate_estimates, alive
 from real2sim.plumbing.progress import ProgressFn, null_progress
 
 
@@ -61,7 +61,7 @@ def fit_primitives(
     """
     device = device or config.device
     seed = config.seed if seed is None else seed
-    layout = _Layout.of(tuple(parts))
+    layout = Layout.of(tuple(parts))
     if layout.total < 1:
         raise ValueError("at least one primitive is needed")
     t0 = time.perf_counter()
@@ -92,25 +92,25 @@ def fit_primitives(
         if cuda_devices:
             torch.cuda.manual_seed_all(seed)
         gen = torch.Generator(device="cpu").manual_seed(seed)
-        init = _initial_packed(layout, points, target, config, gen)
-        base = torch.cat([_unconstrain(k, p, config.min_size, config.superquadric_exponent_gain).reshape(-1) for k, p in zip(layout.kinds, init)])
+        init = initial_packed(layout, points, target, config, gen)
+        base = torch.cat([unconstrain(k, p, config.min_size, config.superquadric_exponent_gain).reshape(-1) for k, p in zip(layout.kinds, init)])
         if config.parameterization == "network":
-            model: torch.nn.Module = _PrimitiveNet(base.cpu(), config.latent_dim, config.hidden_dim).to(device)
+            model: torch.nn.Module = PrimitiveNet(base.cpu(), config.latent_dim, config.hidden_dim).to(device)
         else:
-            model = _DirectParams(base.cpu()).to(device)
+            model = DirectParams(base.cpu()).to(device)
         optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
         iteration, history, revived = _iterate(model, optimiser, layout, points, target, weight, config, gen,
                                                progress or null_progress)
 
         with torch.no_grad():
             raws = layout.split(model())
-            packed = _constrain_all(layout, raws, config)
-            dist, arg = _closest(layout, packed, points)
-            keep = _alive(arg, dist, target, layout.total) if config.remove_dead else torch.ones(layout.total, dtype=torch.bool, device=device)
+            packed = constrain_all(layout, raws, config)
+            dist, arg = closest(layout, packed, points)
+            keep = alive(arg, dist, target, layout.total) if config.remove_dead else torch.ones(layout.total, dtype=torch.bool, device=device)
             if not bool(keep.any()):
                 keep[0] = True  # never return an empty representation
             kept_layout, kept = _subset(layout, packed, keep)
-            final_dist, _ = _closest(kept_layout, kept, points)
+            final_dist, _ = closest(kept_layout, kept, points)
             final_loss = float(sdf_loss(final_dist[:n_samples], target[:n_samples]).mean())
 
     kinds, rows = _rows(kept_layout, kept)
@@ -130,7 +130,7 @@ def fit_primitives(
 
 
 
-def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: _Layout, points: torch.Tensor,
+def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: Layout, points: torch.Tensor,
              target: torch.Tensor, weight: torch.Tensor | None, config: FitConfig, gen: torch.Generator,
              progress: ProgressFn) -> tuple[int, list[float], int]:
     """The Adam steps on minibatches, with revival and the early stop: (iterations, history, revived).
@@ -161,18 +161,18 @@ def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: _
         x, s = points[idx], target[idx]
         raw = model()
         raws = layout.split(raw)
-        packed = _constrain_all(layout, raws, config)
-        dist, arg = _closest(layout, [p.detach() for p in packed], x)
-        d = _paired_distance(layout, packed, x, arg)
+        packed = constrain_all(layout, raws, config)
+        dist, arg = closest(layout, [p.detach() for p in packed], x)
+        d = paired_distance(layout, packed, x, arg)
         if "superquadric" in layout.kinds:
-            d, s = _truncate_estimates(layout, arg, d, s, config.superquadric_truncation)
+            d, s = truncate_estimates(layout, arg, d, s, config.superquadric_truncation)
         per_sample = sdf_loss(d, s, config.inside_loss, config.protrusion_weight)
         if weight is None:
             data_loss = per_sample.mean()
         else:
             w = weight[idx]
             data_loss = (per_sample * w).sum() / w.sum()
-        loss = data_loss + _regularizers(layout, raws, config)
+        loss = data_loss + regularizers(layout, raws, config)
         optimiser.zero_grad(set_to_none=True)
         loss.backward()
         optimiser.step()
@@ -196,7 +196,7 @@ def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: _
     return iteration, history, revived
 
 
-def _rows(layout: _Layout, packed: list[torch.Tensor]) -> tuple[list[str], list[tuple[float, ...]]]:
+def _rows(layout: Layout, packed: list[torch.Tensor]) -> tuple[list[str], list[tuple[float, ...]]]:
     """Each primitive's kind and parameter row (quaternions normalised, w >= 0)."""
     kinds: list[str] = []
     rows: list[tuple[float, ...]] = []
@@ -211,20 +211,20 @@ def _rows(layout: _Layout, packed: list[torch.Tensor]) -> tuple[list[str], list[
             rows.append(tuple(float(v) for v in row))
     return kinds, rows
 
-def _subset(layout: _Layout, packed: list[torch.Tensor], keep: torch.Tensor) -> tuple[_Layout, list[torch.Tensor]]:
+def _subset(layout: Layout, packed: list[torch.Tensor], keep: torch.Tensor) -> tuple[Layout, list[torch.Tensor]]:
     parts, kept = [], []
     for kind, p, off, count in zip(layout.kinds, packed, layout.offsets, layout.counts):
         m = keep[off : off + count]
         if bool(m.any()):
             parts.append((kind, int(m.sum())))
             kept.append(p[m])
-    return _Layout.of(tuple(parts)), kept
+    return Layout.of(tuple(parts)), kept
 
 
 @torch.no_grad()
 def _revive(
     model: torch.nn.Module,
-    layout: _Layout,
+    layout: Layout,
     cover_counts: torch.Tensor,
     points: torch.Tensor,
     target: torch.Tensor,
@@ -239,8 +239,8 @@ def _revive(
     probe = torch.randint(len(points), (min(len(points), 65_536),), generator=gen).to(points.device)
     x, s = points[probe], target[probe]
     raws = layout.split(model())
-    packed = _constrain_all(layout, raws, config)
-    dist, _ = _closest(layout, packed, x)
+    packed = constrain_all(layout, raws, config)
+    dist, _ = closest(layout, packed, x)
     miss = torch.where(s < 0, dist, torch.zeros_like(dist))  # how far an interior sample is from being covered
     order = miss.argsort(descending=True)
     order = order[miss[order] > 0]
@@ -256,10 +256,10 @@ def _revive(
         if len(sel) == 0:
             continue
         sigma = size[sel, None].expand(-1, 3) / math.sqrt(3.0)
-        new_packed = _packed_from_blobs(kind, seeds[sel], sigma, config.superquadric_init_exponent)
+        new_packed = packed_from_blobs(kind, seeds[sel], sigma, config.superquadric_init_exponent)
         s_dim = SIZE_DIM[kind]
         new_packed[:, 3 : 3 + s_dim] = new_packed[:, 3 : 3 + s_dim].clamp(min=2 * config.min_size)
-        new_raw = _unconstrain(kind, new_packed, config.min_size, config.superquadric_exponent_gain)
+        new_raw = unconstrain(kind, new_packed, config.min_size, config.superquadric_exponent_gain)
         d = PARAM_DIM[kind]
         rows = dead[sel] - off
         flat = (ro + rows[:, None] * d + torch.arange(d, device=rows.device)[None, :]).reshape(-1)

@@ -8,7 +8,7 @@ import torch
 
 from real2sim.collision.primitive_sdf import HAS_ROTATION
 from real2sim.collision.fit.config import FitConfig
-from real2sim.collision.fit.params import _Layout
+from real2sim.collision.fit.params import Layout
 
 
 def sdf_loss(predicted: torch.Tensor, target: torch.Tensor, inside: str = "hinge",
@@ -54,7 +54,9 @@ def rotation_penalty(quaternions: torch.Tensor) -> torch.Tensor:
     return torch.clamp(rotation_angle(quaternions) - math.pi / 4.0, min=0.0)
 
 
-def _regularizers(layout: _Layout, raws: list[torch.Tensor], config: FitConfig) -> torch.Tensor:
+def regularizers(layout: Layout, raws: list[torch.Tensor], config: FitConfig) -> torch.Tensor:
+    """The weighted sum of eqs. 11-13 over every primitive of ``raws`` (raw rows per family); eq. 13
+    only for the kinds in ``config.rotation_range_kinds``."""
     total = raws[0].new_zeros(())
     for kind, raw in zip(layout.kinds, raws):
         total = total + config.weight_centre * centre_penalty(raw[:, :3]).sum()

@@ -22,7 +22,7 @@ def _inverse_softplus(y: torch.Tensor) -> torch.Tensor:
 
 
 @dataclass(frozen=True)
-class _Layout:
+class Layout:
     """Where each family's raw parameters live in the flat raw vector."""
 
     kinds: tuple[str, ...]  # one per family, in SPEC order
@@ -32,7 +32,7 @@ class _Layout:
     total_raw: int
 
     @staticmethod
-    def of(parts: tuple[tuple[str, int], ...]) -> "_Layout":
+    def of(parts: tuple[tuple[str, int], ...]) -> "Layout":
         kinds, counts, offs, roffs = [], [], [], []
         p = r = 0
         for family, count in parts:
@@ -45,7 +45,7 @@ class _Layout:
             roffs.append(r)
             p += count
             r += count * PARAM_DIM[kind]
-        return _Layout(tuple(kinds), tuple(counts), tuple(offs), tuple(roffs), r)
+        return Layout(tuple(kinds), tuple(counts), tuple(offs), tuple(roffs), r)
 
     @property
     def total(self) -> int:
@@ -58,7 +58,7 @@ class _Layout:
         ]
 
 
-def _constrain(kind: str, raw: torch.Tensor, min_size: float, gain: float) -> torch.Tensor:
+def constrain(kind: str, raw: torch.Tensor, min_size: float, gain: float) -> torch.Tensor:
     """Raw rows -> packed rows: sizes through softplus + min_size, superquadric exponents through a
     sigmoid onto their convex range; centre and quaternion as they are (the SDFs normalise
     quaternions, so eq. 12 still sees the raw output, as in the paper)."""
@@ -69,7 +69,8 @@ def _constrain(kind: str, raw: torch.Tensor, min_size: float, gain: float) -> to
     return torch.cat((raw[:, :3], sizes, exponents, raw[:, 3 + s + e :]), 1)
 
 
-def _unconstrain(kind: str, packed: torch.Tensor, min_size: float, gain: float) -> torch.Tensor:
+def unconstrain(kind: str, packed: torch.Tensor, min_size: float, gain: float) -> torch.Tensor:
+    """Packed rows -> raw rows, the inverse of :func:`constrain` (exponents clamped just inside their range)."""
     s, e = SIZE_DIM[kind], EXPONENT_DIM[kind]
     sizes = _inverse_softplus(packed[:, 3 : 3 + s] - min_size)
     lo, hi = SUPERQUADRIC_EXPONENT_RANGE
@@ -77,12 +78,12 @@ def _unconstrain(kind: str, packed: torch.Tensor, min_size: float, gain: float) 
     return torch.cat((packed[:, :3], sizes, torch.logit(unit) / gain, packed[:, 3 + s + e :]), 1)
 
 
-def _constrain_all(layout: _Layout, raws: list[torch.Tensor], config: FitConfig) -> list[torch.Tensor]:
-    """Packed rows of every family from its raw rows (:func:`_constrain` with the config's bounds)."""
-    return [_constrain(k, r, config.min_size, config.superquadric_exponent_gain) for k, r in zip(layout.kinds, raws)]
+def constrain_all(layout: Layout, raws: list[torch.Tensor], config: FitConfig) -> list[torch.Tensor]:
+    """Packed rows of every family from its raw rows (:func:`constrain` with the config's bounds)."""
+    return [constrain(k, r, config.min_size, config.superquadric_exponent_gain) for k, r in zip(layout.kinds, raws)]
 
 
-class _PrimitiveNet(torch.nn.Module):
+class PrimitiveNet(torch.nn.Module):
     """g_theta() of eq. 10 / Fig. 3: a learned latent vector through FC layers with a dense skip
     (the latent concatenated into the last hidden layer) to the flat raw parameter vector.
 
@@ -116,7 +117,10 @@ class _PrimitiveNet(torch.nn.Module):
         self.base[index] += new_raw - current[index]
 
 
-class _DirectParams(torch.nn.Module):
+class DirectParams(torch.nn.Module):
+    """The raw parameter vector optimised directly (``parameterization="direct"``), with the
+    same interface as :class:`PrimitiveNet`."""
+
     def __init__(self, base: torch.Tensor) -> None:
         super().__init__()
         self.raw = torch.nn.Parameter(base.clone())

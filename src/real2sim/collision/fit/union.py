@@ -8,14 +8,14 @@ from __future__ import annotations
 import torch
 
 from real2sim.collision.primitive_sdf import primitive_sdf
-from real2sim.collision.fit.params import _Layout
+from real2sim.collision.fit.params import Layout
 
 
 _CHUNK_ELEMENTS = 4_000_000  # primitives x points per dense no-grad block: bounds memory
 
 
 @torch.no_grad()
-def _closest(layout: _Layout, packed: list[torch.Tensor], points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def closest(layout: Layout, packed: list[torch.Tensor], points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Union distance (N,) and index of the closest primitive (N,), dense but chunked, no autograd."""
     n = len(points)
     step = max(1, _CHUNK_ELEMENTS // max(1, layout.total))
@@ -30,7 +30,7 @@ def _closest(layout: _Layout, packed: list[torch.Tensor], points: torch.Tensor) 
     return dist, arg
 
 
-def _paired_distance(layout: _Layout, packed: list[torch.Tensor], points: torch.Tensor, arg: torch.Tensor) -> torch.Tensor:
+def paired_distance(layout: Layout, packed: list[torch.Tensor], points: torch.Tensor, arg: torch.Tensor) -> torch.Tensor:
     """Distance of each point to its own (closest) primitive, with autograd through the parameters."""
     out = points.new_zeros(len(points))
     for kind, p, off, count in zip(layout.kinds, packed, layout.offsets, layout.counts):
@@ -42,8 +42,8 @@ def _paired_distance(layout: _Layout, packed: list[torch.Tensor], points: torch.
     return out
 
 
-def _truncate_estimates(
-    layout: _Layout, arg: torch.Tensor, d: torch.Tensor, target: torch.Tensor, limit: float
+def truncate_estimates(
+    layout: Layout, arg: torch.Tensor, d: torch.Tensor, target: torch.Tensor, limit: float
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Clamp prediction and target at ``limit`` where the closest primitive is a superquadric."""
     estimated = torch.zeros_like(arg, dtype=torch.bool)
@@ -53,7 +53,7 @@ def _truncate_estimates(
     return torch.where(estimated, d.clamp(max=limit), d), torch.where(estimated, target.clamp(max=limit), target)
 
 
-def _alive(arg: torch.Tensor, dist: torch.Tensor, target: torch.Tensor, total: int) -> torch.Tensor:
+def alive(arg: torch.Tensor, dist: torch.Tensor, target: torch.Tensor, total: int) -> torch.Tensor:
     """Bool (P,): the primitive is the closest one of at least one interior sample it covers."""
     covered = (target < 0) & (dist <= 0)
     return torch.bincount(arg[covered], minlength=total) > 0
