@@ -13,7 +13,7 @@ from real2sim.capture.phone.board import (DEFAULT_BOARD, DOTS_PER_MM, BoardSpec,
                                     board_corners_m, board_view_from_corners, detect_board, read_board_spec,
                                     write_board)
 from real2sim.capture.phone.board_frame import world_from_board_views
-from real2sim.capture.sim.wrist_camera import look_at_c2w_gl
+from real2sim.capture.sim.look_at import look_at_c2w_gl
 from real2sim.formats.dataset import CV_FROM_GL
 from real2sim.plumbing.errors import UserInputError
 from tests.cli_helpers import run_cli

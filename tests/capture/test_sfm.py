@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from real2sim.capture.phone.sfm import SfmConfig, camera_groups, list_images, match_pairs, structure_from_motion
+from real2sim.capture.phone.sfm import SfmConfig, list_images, match_pairs, structure_from_motion
+from real2sim.capture.phone.sfm_images import camera_groups
 from real2sim.formats.dataset import CV_FROM_GL, read_ground_truth
 from real2sim.plumbing.errors import UserInputError
 

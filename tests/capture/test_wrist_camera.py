@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from real2sim.capture.sim.capture_config import ReachabilityModel
 from real2sim.capture.sim.wrist_camera import (
     CaptureConfig,
-    ReachabilityModel,
     camera_poses,
     capture,
     object_frame,

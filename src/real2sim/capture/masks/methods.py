@@ -44,36 +44,43 @@ METHODS = ("provided", "maskrcnn", "background")
 
 @dataclass(frozen=True)
 class MaskConfig:
-    """``threshold``: background-difference threshold on the max channel difference (0-255);
-    ``low_threshold`` (off by default): optional hysteresis threshold; both on the
-    max channel difference (0-255). ``max_hole_fraction``: holes up to this fraction of the
-    object's area are filled, larger ones when their median difference exceeds
-    ``hole_background_max_diff`` (0-255).
-    ``open_px`` / ``close_px``: structuring-element radii (pixels) of the opening (removes
-    speckle) and closing (joins parts the threshold split). ``min_area_fraction``:
-    connected components smaller than this fraction of the largest are dropped.
-    ``score_threshold`` / ``mask_threshold``: Mask R-CNN instance score and per-pixel probability.
-    ``maskrcnn_min_size_px`` / ``maskrcnn_max_size_px``: Mask R-CNN resizes each image so that
-    its short side is ``min`` pixels unless its long side would exceed ``max`` (torchvision's
-    defaults 800 / 1333, which the COCO weights were trained with); smaller is faster on a CPU
-    (about quadratically) and coarser. Masks always come back at the image's own size.
-    ``maskrcnn_max_instances``: most detections per image (torchvision's default 100); each
-    costs a mask-head pass, and only the top-scoring ones can be picked."""
+    """Settings of the background-difference and Mask R-CNN mask methods (``provided`` reads none). Masks
+    always come back at the image's own size."""
 
     threshold: float = 12.0
+    """Background difference: a pixel is object where its largest channel difference to the empty scene
+    exceeds this (0-255)."""
     low_threshold: float | None = None
+    """Hysteresis: pixels whose difference exceeds this (0-255) join the object where they touch pixels above
+    ``threshold``; None: off."""
     max_hole_fraction: float = 0.01
+    """Holes up to this fraction of the object's area are filled."""
     hole_background_max_diff: float = 3.0
+    """Larger holes are filled too when their median difference exceeds this (0-255): a hole that matches
+    the background (a mug handle's opening) is background."""
     open_px: int = 1
+    """Radius (px) of the morphological opening that removes speckle; 0: none."""
     close_px: int = 3
+    """Radius (px) of the closing that joins parts the threshold split; 0: none."""
     min_area_fraction: float = 0.05
+    """Connected parts smaller than this fraction of the largest are dropped."""
     score_threshold: float = 0.5
+    """Mask R-CNN: an instance is picked only when it scores above this (0-1)."""
     mask_threshold: float = 0.5
+    """Mask R-CNN: a pixel is object where the picked instance's mask probability exceeds this (0-1)."""
     weights: Path | None = None
+    """Mask R-CNN: the local weights file (a state dict); required by ``maskrcnn``, never downloaded."""
     device: str = "cpu"
+    """Mask R-CNN: the torch device it runs on."""
     maskrcnn_min_size_px: int = 800
+    """Mask R-CNN resizes each image so that its short side is this many pixels, unless its long side would
+    exceed ``maskrcnn_max_size_px`` (torchvision's default, which the COCO weights were trained with); smaller
+    is faster on a CPU (about quadratically) and coarser."""
     maskrcnn_max_size_px: int = 1333
+    """Mask R-CNN: the long side's limit of that resize, pixels (torchvision's default; >= the min size)."""
     maskrcnn_max_instances: int = 100
+    """Mask R-CNN: most detections per image (torchvision's default; >= 1); each costs a mask-head pass,
+    and only the top-scoring ones can be picked."""
 
 
 @dataclass(frozen=True)

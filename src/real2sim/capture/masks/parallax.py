@@ -79,9 +79,8 @@ from real2sim.multiview.views import PosedViews, pixel_rays, project, project_to
 
 
 #: Masks are doubtful when they reach the image border in more than this share of the views (the object found
-#: is not wholly in view: measured 16 of 16 views on a 16-view 96x72 can capture whose masks had IoU 0.47 against
-#: the truth, 0 of 60 on a 60-view 160x120 one at IoU 0.95) or cover more than MAX_MEDIAN_COVERAGE of the
-#: median image: the capture frames the object with table around it.
+#: is not wholly in view) or cover more than MAX_MEDIAN_COVERAGE of the median image: the capture frames the
+#: object with table around it. (why: docs/design-notes/capture.md#parallax-doubts)
 MAX_BORDER_SHARE = 0.5
 MAX_MEDIAN_COVERAGE = 0.5
 #: The hull's voxels span at least this many pixels of a typical view (the masks are its silhouettes, cast at
@@ -152,8 +151,7 @@ def _plate_joined(table: np.ndarray, explained: np.ndarray, min_share: float) ->
     """The table verdict (N, H, W) with the plate's ``explained`` pixels joined, less each view's islands of
     explained pixels alone (parts of the union holding no table of step 2) smaller than ``min_share`` of its
     image (step 6). The plate explains a patterned object by chance in specks, as a neighbour's warp does in
-    step 2; lined up across views they tunnel through it (the bottle from a video, the plate's sliding
-    windows on: masks with holes in 71 of 80 views, a hollow reconstruction 2.28 mm from the truth)."""
+    step 2; lined up across views they tunnel through it (docs/design-notes/capture.md#parallax-plate-islands)."""
     out = table | explained
     if min_share <= 0:
         return out

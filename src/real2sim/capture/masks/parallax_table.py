@@ -2,8 +2,8 @@
 the textured table, judged by warping neighbouring views onto it through the table plane.
 
 This module holds the per-view image work (the warps, the Birchfield-Tomasi match, texture, the aperture
-test, plain patches, table specks); the masks' module holds the settings (``ParallaxConfig``, whose docstring
-gives the measurements behind each), the standing hull made of these verdicts, and its silhouettes.
+test, plain patches, table specks); the settings are :class:`~real2sim.capture.masks.parallax_config.ParallaxConfig`;
+the masks' module holds the standing hull made of these verdicts, and its silhouettes.
 World frame: the views', table plane z = ``config.table_z_m``.
 """
 
@@ -173,7 +173,7 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[
                 informative = torch.from_numpy(_parallax_across_edges(
                     own, views.c2w_cv[i], views.c2w_cv[near[i]], k, config.texture_px) >= config.min_parallax_share)
                 # only where enough neighbours see the table point at all: with fewer, the pixel cannot be
-                # confirmed as table whatever its edges, and stays "not table" as before
+                # confirmed as table whatever its edges, and stays "not table" as without this test
                 barrier = textured & ((voters.sum(dim=0) >= 2) & ((voters & informative).sum(dim=0) < 2)).numpy()
                 voters = voters & informative
             extremes = _cross_extremes(warped)

@@ -52,7 +52,8 @@ def _table_frame(ds: Dataset, seed: int) -> Dataset:
     """``ds`` with its poses in a rigid frame whose z = 0 is the table plane fitted to the sparse points near
     the cameras' common point (model units; the scale is not needed for masks)."""
     from real2sim.capture.phone import robot_frame as rf
-    from real2sim.capture.phone.normalise import NormaliseConfig, points_near_object, read_sparse_points, table_plane
+    from real2sim.capture.phone.normalise import points_near_object, read_sparse_points, table_plane
+    from real2sim.capture.phone.normalise_config import NormaliseConfig
 
     settings = NormaliseConfig()
     points, _ = read_sparse_points(ds)

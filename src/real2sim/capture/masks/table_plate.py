@@ -23,8 +23,8 @@ when *some* window that holds it passes, and the pixel itself differs by less th
 The masks' excess beside a silhouette is a band a few pixels wide: the window centred on a table pixel
 there holds the object's edge and fails, one further out holds table only; the pixel's own test keeps
 the object's edge pixels out of the windows that reach over them. It takes more of that band and a little
-more of the object too (``test_table_plate.py`` has the figures); the parallax masks use it at 0.04
-(``ParallaxConfig.plate_pixel_threshold``, where the measurements are).
+more of the object too; the parallax masks use it (``ParallaxConfig.plate_pixel_threshold``;
+docs/design-notes/capture.md#parallax-plate-sliding).
 
 A view that explains part of the object by chance does not carve it alone: the explained pixels join
 the table verdict of one more round of the standing hull, where a voxel goes only when several views call

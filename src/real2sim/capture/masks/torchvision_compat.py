@@ -11,10 +11,10 @@ and ``torchvision::qnms`` whether or not the ops exist.
 Mask R-CNN inference needs only two of torchvision's compiled ops:
 
 - ``roi_align``: torchvision falls back to its own pure-PyTorch version when the ops
-  are missing, but wraps it in ``torch.compile`` on its first call: about 10 s of
-  compilation in every process (most of a two-image mask run on 2 cores) and, on CPU, a C++
-  compiler the user may not have; uncompiled, its gather of every sample of every
-  channel took 7 s for the two images' 2000 proposals. Where the sampling grid is fixed
+  are missing, but wraps it in ``torch.compile`` on its first call: seconds of
+  compilation in every process and, on CPU, a C++ compiler the user may not have;
+  uncompiled, its gather of every sample of every channel is slow
+  (docs/design-notes/capture.md#mask-r-cnn-roi-align). Where the sampling grid is fixed
   (Mask R-CNN's poolers: 2 x 2 samples per bin) :func:`roi_align_by_grid_sample` computes
   the same bilinear samples with ``torch.nn.functional.grid_sample`` (one call per image;
   equal to torchvision's to float rounding, ``tests/capture/test_masking_maskrcnn.py``);

@@ -1,17 +1,14 @@
 """A phone camera's focal length measured on the printed board, for structure from motion.
 
 Why: SfM alone estimates the focal length from the scene's own points, and on an orbit around
-an object that estimate is a fraction of a percent off (a simulated 80-frame video of the bottle:
-505.96 px against the true 502.30, +0.73 %). The board's frame then inherits that error as a scale
-error: a longer focal length puts the board, seen at its printed size, further from each camera
-(the same video: scale 0.72 % off, the whole error). The board is a calibration target of known
-geometry seen from many angles, which measures the focal length far better (another capture of
-the kind: +0.07 % where SfM was +0.70 %): Zhang's planar calibration, here OpenCV's
+an object that estimate is a fraction of a percent off. The board's frame then inherits that error as a
+scale error: a longer focal length puts the board, seen at its printed size, further from each camera.
+The board is a calibration target of known geometry seen from many angles, which measures the focal
+length far better (docs/design-notes/capture.md#board-focal-length): Zhang's planar calibration, here OpenCV's
 ``calibrateCamera`` with the focal length and the radial distortion (k1, k2) free, the principal
 point, square pixels and SfM's tangential distortion held. The radial distortion must be free:
-SfM's, found with its own focal length, leans the same way, and held it pulled the board's focal
-length 0.22 % short on 58 photos of the bottle (free: 0.00 % and -0.02 % on two SfM runs, where SfM's
-own was +0.18 to +0.21 %). The camera then starts the last bundle adjustment from the board's focal
+SfM's, found with its own focal length, leans the same way, and held it pulls the board's focal
+length short. The camera then starts the last bundle adjustment from the board's focal
 length (held) and radial distortion (refined again with every SfM point).
 
 The estimate is used only when it is sound: at least ``MIN_VIEWS`` views with the board, and the

@@ -27,15 +27,15 @@ Steps (all lengths before the last one in model units):
    silhouettes, so with ``--object-height-m H`` the reconstruction comes out H tall (up
    to the grids' voxels). The price: the hull is an outer bound. Over a wide flat top
    that no view sees edge-on (a mug shot from above), every silhouette holds the top
-   face's image, and the hull rises over it as a cone, r tan(lowest elevation) high: the
-   handheld mug's hull stood 7 % above its rim, the can's 4 %. So the top of the
+   face's image, and the hull rises over it as a cone, r tan(lowest elevation) high
+   (docs/design-notes/capture.md#normalise-object-top). So the top of the
    **sparse points on the object** (surface points, not a bound: the median of the
    ``top_points`` highest) replaces the hull's when the hull rises more than ``top_gap``
    of its height above them *and* what stands above them is such a cap, not the object
    going on full width (a featureless lid the SfM found no points on): the hull's volume
-   above them under ``cap_fill`` of a prism on its cross-section there (a cone's is 1/3;
-   measured: caps 0.44-0.62, a straight wall 0.77-0.89). Otherwise the hull's height, with
-   a WARNING when the two disagree by more than ``top_gap`` (:func:`object_top`);
+   above them under ``cap_fill`` of a prism on its cross-section there (a cone's is 1/3).
+   Otherwise the hull's height, with a WARNING when the two disagree by more than ``top_gap``
+   (:func:`object_top`);
 4. scale: ``scale`` (metres per model unit) as given, or ``object_height_m`` / measured height.
 
 Ground truth: a simulated capture moved into a COLMAP frame (tests, benchmarks) keeps
@@ -57,7 +57,7 @@ from __future__ import annotations
 import json
 import shutil
 import tempfile
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -74,47 +74,16 @@ from real2sim.formats.dataset import (
     write_transforms,
 )
 from real2sim.formats.colmap_model import read_colmap_model
+from real2sim.plumbing.digests import tree_files
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import publish_dir, write_json_atomic
 from real2sim.plumbing.progress import ProgressFn
 from real2sim.capture.phone import robot_frame as rf
-from real2sim.plumbing.digests import tree_files
+from real2sim.capture.phone.normalise_config import NormaliseConfig
 from real2sim.capture.phone.object_height import measure_object, object_top
 
 MODEL_FROM_WORLD = "model_from_world.json"  # in ground_truth/: how a simulated capture was moved into the model frame
 RECORD_NAME = "robot_frame.json"
-
-
-@dataclass(frozen=True)
-class NormaliseConfig:
-    """How to find the robot frame. ``object_height_m`` (the object's height above the table, metres) or
-    ``scale`` (metres per model unit): exactly one. Distances as fractions of the median camera distance
-    from the look-at point, so they do not depend on the model's unknown scale."""
-
-    object_height_m: float | None = None
-    scale: float | None = None
-    near_radius: float = 1.0
-    inlier_threshold: float = 0.01
-    ransac_iterations: int = 1000
-    min_table_points: int = 30
-    object_vote_fraction: float = 0.8
-    hull_voxels: int = 128
-    hull_outlier_fraction: float = 0.03
-    # the object's top from the sparse points (step 3): the median of this many highest points on it,
-    # taken when there are at least ``min_object_points``, the hull rises more than ``top_gap`` (a
-    # fraction of its height) above them, and fills under ``cap_fill`` of the prism above them
-    top_points: int = 7
-    min_object_points: int = 20
-    top_gap: float = 0.03
-    cap_fill: float = 0.7
-
-    def validate(self) -> None:
-        given = [v for v in (self.object_height_m, self.scale) if v is not None]
-        if len(given) != 1:
-            raise UserInputError("a COLMAP model has no metric scale: give exactly one of --object-height-m H "
-                                 "(the object's height above the table, m) or --scale S (metres per model unit)")
-        if not (np.isfinite(given[0]) and given[0] > 0):
-            raise UserInputError(f"--object-height-m / --scale must be a finite number > 0 (got {given[0]})")
 
 
 def check_frame_options(ds: Dataset, scale_given: bool) -> None:

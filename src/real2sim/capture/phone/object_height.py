@@ -7,15 +7,12 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from real2sim.formats.dataset import CV_FROM_GL, Dataset
 from real2sim.capture.phone import robot_frame as rf
-
-if TYPE_CHECKING:
-    from real2sim.capture.phone.normalise import NormaliseConfig
+from real2sim.capture.phone.normalise_config import NormaliseConfig
+from real2sim.formats.dataset import CV_FROM_GL, Dataset
 
 
 @dataclass(frozen=True)

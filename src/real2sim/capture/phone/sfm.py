@@ -15,8 +15,8 @@ Steps (:func:`structure_from_motion`):
    estimated per camera); the largest model is kept, and every image it does not hold is listed with
    the reason (no features, no verified match, matched but not registered);
 3b. with a printed board given: each camera's focal length measured on the board where it is seen,
-   and the model adjusted to it (:mod:`real2sim.capture.phone.board_focal`: SfM's own focal length was
-   0.7 % long on a simulated video, and the board's metres with it);
+   and the model adjusted to it (:mod:`real2sim.capture.phone.board_focal`: SfM's own focal length is a
+   fraction of a percent off, and the board's metres with it);
 4. every registered image resampled (OpenCV's remap) into one distortion-free pinhole camera: the
    largest group's focal length and principal point at its size. The poses do not change.
 
@@ -26,7 +26,6 @@ Frames: poses are camera-to-world 4x4 in the model's arbitrary frame and scale, 
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 import time
@@ -36,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from real2sim.capture.phone.board import BoardSpec
+from real2sim.capture.phone.sfm_images import camera_groups, stage_images, undistorted
 from real2sim.formats.dataset import CameraIntrinsics
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.progress import ProgressFn, null_progress
@@ -43,35 +43,45 @@ from real2sim.plumbing.progress import ProgressFn, null_progress
 #: File name endings read as photos (case-insensitive).
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp")
 MIN_REGISTERED = 8
-_EXIF_ORIENTATION, _EXIF_MAKE, _EXIF_MODEL, _EXIF_FOCAL = 0x0112, 0x010F, 0x0110, 0x920A
 
 
 @dataclass(frozen=True)
 class SfmConfig:
-    """``exhaustive_max_images``: photos matched all against all up to this count. ``sequential_overlap``:
-    successors each frame is matched with otherwise; ``loop_every``: spacing of the key frames matched all
-    against all for loop closure. ``min_group_images``: a camera group needs this many images for its
-    camera to be estimated. ``max_num_features``: SIFT features per image."""
+    """Structure from motion settings: how images are matched, and the thresholds of COLMAP's incremental
+    mapper."""
 
     exhaustive_max_images: int = 150
+    """Photos are matched all against all up to this count; more photos, and video frames always, are matched
+    sequentially with loop key frames."""
     sequential_overlap: int = 10
+    """Successors each image is matched with in sequential matching (>= 1)."""
     loop_every: int = 5
+    """Spacing of the key frames that are matched all against all for loop closure (>= 1)."""
     max_num_features: int = 8192
+    """Most SIFT features per image."""
     max_image_size: int = 2000
+    """Longer side (px) an image is reduced to for feature extraction."""
     min_group_images: int = 3
+    """Images a camera group (one size and EXIF camera) needs for its camera to be estimated; smaller groups'
+    images are left out."""
     min_registered: int = MIN_REGISTERED
-    #: the first guess of the focal length, x the image's longer side, when EXIF has none: a phone's main
-    #: camera sees about 65-75 degrees across (COLMAP's own 1.2 guesses a 45 degree lens)
+    """Fewest images the model must register; fewer is a UserInputError."""
     focal_length_factor: float = 0.8
-    #: the mapper's first pair: COLMAP's defaults (100 inliers, 16 degrees) refuse every pair of a small
-    #: image (a few hundred features) or of close views of an orbit
+    """First guess of the focal length, times the image's longer side, when EXIF has none: a phone's main
+    camera sees about 65-75 degrees across (COLMAP's own 1.2 guesses a 45 degree lens)."""
     init_min_num_inliers: int = 50
+    """Inliers the mapper's first image pair needs (COLMAP's default: 100).
+    (why: docs/design-notes/capture.md#sfm-mapper)"""
     init_min_tri_angle_deg: float = 8.0
-    #: the matches to the model's points an image needs to be registered: COLMAP's 30 left 12 of 24
-    #: photos of a 320x240 handheld capture without the board (about 250 features each) out, 15 took 23
+    """Triangulation angle (degrees) the mapper's first image pair needs (COLMAP's default: 16).
+    (why: docs/design-notes/capture.md#sfm-mapper)"""
     abs_pose_min_num_inliers: int = 15
+    """Matches to the model's points an image needs to be registered (COLMAP's default: 30).
+    (why: docs/design-notes/capture.md#sfm-mapper)"""
     num_threads: int = -1
+    """COLMAP's threads; -1: every core."""
     seed: int = 0
+    """The mapper's random seed."""
 
 
 @dataclass(frozen=True)
@@ -109,71 +119,6 @@ def list_images(folder: Path) -> list[Path]:
                   and not p.name.startswith("."))
 
 
-def _exif_key(image) -> tuple:
-    exif = image.getexif()
-    focal = exif.get_ifd(0x8769).get(_EXIF_FOCAL) if hasattr(exif, "get_ifd") else None
-    return (str(exif.get(_EXIF_MAKE, "")).strip(), str(exif.get(_EXIF_MODEL, "")).strip(),
-            float(focal) if focal is not None else None)
-
-
-def camera_groups(paths: list[Path], min_group_images: int = 3) -> tuple[list[int], dict[str, str]]:
-    """Each image's camera group (by size after EXIF rotation and EXIF make/model/focal length;
-    -1: left out) and the images left out with the reason. UserInputError (one line) for an unreadable
-    image (each is decoded whole: a truncated one too, before any work), or when the groups too small to
-    estimate a camera hold more than half the images."""
-    from PIL import Image, UnidentifiedImageError
-
-    keys = []
-    for path in paths:
-        try:
-            with Image.open(path) as image:
-                w, h = image.size
-                if image.getexif().get(_EXIF_ORIENTATION, 1) in (5, 6, 7, 8):
-                    w, h = h, w  # stored sideways, shown upright
-                keys.append((w, h) + _exif_key(image))
-                # a JPEG at 1/8 scale still reads its whole stream (a cut one fails), in a fraction of the time
-                image.draft(None, (max(1, image.size[0] // 8), max(1, image.size[1] // 8)))
-                image.load()
-        except (OSError, UnidentifiedImageError, ValueError) as exc:
-            raise UserInputError(f"cannot read image {path}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
-    distinct = sorted(set(keys), key=lambda k: -keys.count(k))
-    small = {k for k in distinct if keys.count(k) < min_group_images}
-    stray = [i for i, k in enumerate(keys) if k in small]
-    if 2 * len(stray) > len(paths) or len(small) == len(distinct):
-        sizes = sorted({f"{k[0]}x{k[1]}" for k in keys})
-        raise UserInputError(f"{len(paths)} images of mixed sizes or cameras that do not form camera groups "
-                             f"({len(distinct)} groups, {len(stray)} images in groups of fewer than "
-                             f"{min_group_images}; sizes {', '.join(sizes[:6])}{', ...' if len(sizes) > 6 else ''}): "
-                             "take the photos with one camera at one setting")
-    group_of = {k: g for g, k in enumerate(k for k in distinct if k not in small)}
-    left_out = {paths[i].name: f"its size/camera ({keys[i][0]}x{keys[i][1]} {keys[i][2]} {keys[i][3]}) is shared "
-                               f"by fewer than {min_group_images} images" for i in stray}
-    return [group_of.get(k, -1) for k in keys], left_out
-
-
-def _stage_images(paths: list[Path], groups: list[int], folder: Path) -> list[str]:
-    """COLMAP's image names (``g<group>/<index>.png``), images written upright (EXIF orientation
-    applied): one sub-folder per camera group, which COLMAP's PER_FOLDER mode makes one camera each."""
-    from PIL import Image, ImageOps
-
-    names = []
-    for i, (path, group) in enumerate(zip(paths, groups)):
-        name = f"g{group}/{i:05d}{path.suffix.lower()}"
-        (folder / name).parent.mkdir(parents=True, exist_ok=True)
-        with Image.open(path) as image:
-            upright = image.getexif().get(_EXIF_ORIENTATION, 1) in (1, None)
-            if upright:
-                try:
-                    os.symlink(path.resolve(), folder / name)
-                except OSError:
-                    shutil.copyfile(path, folder / name)
-            else:
-                name = name.rsplit(".", 1)[0] + ".png"
-                ImageOps.exif_transpose(image).convert("RGB").save(folder / name)
-        names.append(name)
-    return names
-
-
 def match_pairs(count: int, overlap: int, loop_every: int) -> list[tuple[int, int]]:
     """Image pairs (i < j) for ordered frames: each frame with its ``overlap`` successors, and the key
     frames (every ``loop_every``-th) with each other, which closes an orbit's loop."""
@@ -197,7 +142,7 @@ def _features_and_matches(work: Path, image_dir: Path, names: list[str], sequent
     extraction.sift.max_num_features = config.max_num_features
     # small images: upsample once (octave -1) for enough features, as the pose refinement does
     extraction.sift.first_octave = -1 if max_side_px <= 400 else 0
-    if max_side_px <= 400:  # and a lower contrast threshold: ~370 features per 320x240 image at the default
+    if max_side_px <= 400:  # and a lower contrast threshold (docs/design-notes/capture.md#sfm-features)
         extraction.sift.peak_threshold = 0.004
     extraction.use_gpu = False
     progress("structure from motion: features", 0, 3)
@@ -254,9 +199,7 @@ def _opencv_adjustment(rec, config: SfmConfig) -> None:
     one bundle adjustment of poses, points and the distortion (k1, k2, p1, p2), the focal length kept.
 
     The mapper runs with one focal length (a phone's pixels are square) because fx and fy free are
-    degenerate for an orbit: on 20 views of a 320x240 ring the mapper with OPENCV lost half the views
-    (fx/fy 1.7), and on 30 views the mapper's f within 0.6 % of the truth went to fx 184, fy 129 px
-    (rotations 19 degrees off) when a final adjustment freed fx and fy."""
+    degenerate for an orbit (docs/design-notes/capture.md#sfm-mapper)."""
     import pycolmap
 
     for camera in rec.cameras.values():
@@ -318,19 +261,6 @@ def _camera_record(camera) -> dict:
             "params": params.tolist(), "param_names": "fx, fy, cx, cy, k1, k2, p1, p2"}
 
 
-def _undistort(image: np.ndarray, camera, target: CameraIntrinsics) -> np.ndarray:
-    """``image`` (taken by COLMAP ``camera``, OPENCV model) resampled into the pinhole ``target``."""
-    import cv2
-
-    fx, fy, cx, cy, k1, k2, p1, p2 = np.asarray(camera.params, float)[:8]
-    # COLMAP and the project put pixel (u, v)'s centre at (u + 0.5, v + 0.5), OpenCV at (u, v)
-    k_src = np.array([[fx, 0, cx - 0.5], [0, fy, cy - 0.5], [0, 0, 1.0]])
-    k_dst = target.matrix() - np.array([[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]])
-    maps = cv2.initUndistortRectifyMap(k_src, np.array([k1, k2, p1, p2]), None, k_dst,
-                                       (target.width, target.height), cv2.CV_32FC1)
-    return cv2.remap(image, *maps, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-
-
 def structure_from_motion(paths: list[Path], out_images: Path, config: SfmConfig = SfmConfig(), *,
                           sequential: bool = False, progress: ProgressFn | None = None,
                           board: BoardSpec | None = None) -> SfmResult:
@@ -356,7 +286,7 @@ def structure_from_motion(paths: list[Path], out_images: Path, config: SfmConfig
     work = Path(tempfile.mkdtemp(prefix="real2sim-sfm-"))
     try:
         image_dir = work / "images"
-        names = _stage_images([paths[i] for i in kept], [groups[i] for i in kept], image_dir)
+        names = stage_images([paths[i] for i in kept], [groups[i] for i in kept], image_dir)
         with Image.open(image_dir / names[0]) as first:
             max_side = max(first.size)
         with colmap_logging(quiet=True):
@@ -423,7 +353,7 @@ def _result(rec, image_dir: Path, names: list[str], source_of: dict[str, str], l
         if out_name in written:  # a.jpg and a.png: keep both
             out_name = f"{Path(source_of[n]).stem}_{k:05d}.png"
         written.add(out_name)
-        Image.fromarray(_undistort(rgb, rec.camera(image.camera_id), target)).save(out_images / out_name)
+        Image.fromarray(undistorted(rgb, rec.camera(image.camera_id), target)).save(out_images / out_name)
         image_dir_names.append(out_name)
         sources.append(source_of[n])
         progress("undistorting images", k + 1, len(order))

@@ -10,16 +10,14 @@ from __future__ import annotations
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterator
+from typing import Iterator
 
 import numpy as np
 
+from real2sim.capture.poses.refine_config import RefineConfig
 from real2sim.formats.dataset import CV_FROM_GL, Dataset
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.progress import ProgressFn, null_progress
-
-if TYPE_CHECKING:
-    from real2sim.capture.poses.refinement import RefineConfig
 
 
 def _camera_spec(ds: Dataset) -> tuple[str, str]:
@@ -50,9 +48,8 @@ def link_images(ds: Dataset, folder: Path) -> list[str]:
     """COLMAP's names of the dataset's images: ``folder/00000.png``, ... linked to each frame's image
     (copied where the file system has no symbolic links), in the dataset's order.
 
-    COLMAP's list of image pairs is a text file with one space-separated pair per line, so an image
-    whose name holds a space (or other characters that file cannot carry) was silently unmatched:
-    every pair failed and 0 frames were refined. Plain numbered names carry anything."""
+    Numbered names, because COLMAP's list of image pairs is space-separated text that cannot carry every file
+    name (docs/design-notes/capture.md#refine-colmap)."""
     import os
     import shutil
 
@@ -70,12 +67,12 @@ def link_images(ds: Dataset, folder: Path) -> list[str]:
     return names
 
 
-def refine_steps(cfg: "RefineConfig") -> int:
+def refine_steps(cfg: RefineConfig) -> int:
     """The refinement's counted steps: features, matching, each bundle-adjustment round, writing."""
     return 3 + cfg.ba_rounds
 
 
-def run_colmap(ds: Dataset, cfg: "RefineConfig", work: Path, pairs: list[tuple[int, int]],
+def run_colmap(ds: Dataset, cfg: RefineConfig, work: Path, pairs: list[tuple[int, int]],
                progress: ProgressFn | None = None
                ) -> tuple[dict[str, np.ndarray], dict[str, int], int, int, float | None, dict]:
     """Run COLMAP in ``work`` on the image ``pairs``; return refined cam_from_world (3x4, COLMAP
@@ -99,7 +96,7 @@ def run_colmap(ds: Dataset, cfg: "RefineConfig", work: Path, pairs: list[tuple[i
             float(rec.compute_mean_reprojection_error()), timings)
 
 
-def _features_and_matches(ds: Dataset, cfg: "RefineConfig", work: Path, image_dir: Path, names: list[str],
+def _features_and_matches(ds: Dataset, cfg: RefineConfig, work: Path, image_dir: Path, names: list[str],
                           pairs: list[tuple[int, int]], progress: ProgressFn, timings: dict) -> Path:
     """SIFT features of every image (``image_dir/names``, in the dataset's order) and verified matches
     of ``pairs``: COLMAP's database in ``work``."""
@@ -115,8 +112,7 @@ def _features_and_matches(ds: Dataset, cfg: "RefineConfig", work: Path, image_di
     extraction.num_threads = cfg.num_threads
     extraction.max_image_size = cfg.max_image_size
     extraction.sift.max_num_features = cfg.max_num_features
-    # Upsampling (octave -1) finds more features in small images but costs ~3x at 640x480,
-    # where octave 0 gave the same pose accuracy.
+    # Upsampling (octave -1) finds more features in small images but is slower on large ones.
     extraction.sift.first_octave = (cfg.sift_first_octave if cfg.sift_first_octave is not None
                                     else (-1 if max(ds.intrinsics.width, ds.intrinsics.height) <= 400 else 0))
     extraction.use_gpu = False
@@ -164,7 +160,7 @@ def _seeded_reconstruction(c2w_cv: dict[str, np.ndarray], db_path: Path, num_pai
     return rec
 
 
-def _triangulate_and_adjust(ds: Dataset, cfg: "RefineConfig", work: Path, image_dir: Path, db_path: Path, rec,
+def _triangulate_and_adjust(ds: Dataset, cfg: RefineConfig, work: Path, image_dir: Path, db_path: Path, rec,
                             progress: ProgressFn, timings: dict):
     """Rounds of triangulation (the poses fixed) and bundle adjustment (poses and points)."""
     import pycolmap
@@ -185,8 +181,7 @@ def _triangulate_and_adjust(ds: Dataset, cfg: "RefineConfig", work: Path, image_
     ba.ceres.loss_function_type = pycolmap.LossFunctionType.CAUCHY
     ba.ceres.loss_function_scale = cfg.robust_loss_scale_px
     ba.ceres.solver_options.num_threads = cfg.num_threads
-    # Ceres' defaults (no function tolerance, 100 iterations) keep iterating long after the
-    # poses stop moving; a relative cost tolerance of 1e-6 stops at the same poses.
+    # Ceres' defaults (no function tolerance, 100 iterations) keep iterating after the poses stop moving.
     ba.ceres.solver_options.function_tolerance = cfg.ba_function_tolerance
     ba.ceres.solver_options.max_num_iterations = cfg.ba_max_iterations
     t0 = time.perf_counter()

@@ -10,14 +10,10 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import replace
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from real2sim.capture.poses.refine_config import RefineResult
 from real2sim.formats.dataset import Dataset, pose_errors
-
-if TYPE_CHECKING:
-    from real2sim.capture.poses.refinement import RefineResult
 
 
 def _allowance(ds: Dataset, noise_mm: float, noise_deg: float, reproj_px: float | None
@@ -95,12 +91,7 @@ def with_errors(result: RefineResult, gt: Dataset | None, names: list[str], befo
 
 #: How many times COLMAP's own uncertainty (a pixel of reprojection error at the scene's distance) a
 #: refinement may move the frames beyond 3 x the given poses' stated accuracy before it is refused
-#: (:func:`judge_change`). Measured on 100-view captures with 5 mm / 1 deg noise (2026-11-27): refinements
-#: that helped moved the frames 4.3-6.1 mm (hemisphere, long lens, ring level with the can), COLMAP's bent
-#: models of a long-lens ring level with a can and no table 30.5 and 32.7 mm (the refusal then stood at 2 x
-#: the whole allowance, 31 mm: one was taken, and the can came out 4.7 mm off); from 1 mm / 0.1 deg poses,
-#: 52 and 27 mm. Poses stated exact: a move between one and two pixels' worth is warned about (COLMAP's
-#: jitter made exact poses about a millimetre worse on a 16-view bottle), beyond two refused.
+#: (:func:`judge_change`). (why: docs/design-notes/capture.md#refine-refusal)
 IMPLAUSIBLE_FACTOR = 2.0
 #: Worsening against ground truth below which a refinement is not called worse (COLMAP's jitter).
 WORSE_TOLERANCE_MM = 0.1

@@ -32,14 +32,15 @@ import shutil
 import tempfile
 import time
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from real2sim.capture.poses.colmap import ColmapFailure, colmap_logging, refine_steps, run_colmap
+from real2sim.capture.poses.refine_config import RefineConfig, RefineResult
 from real2sim.capture.poses.refine_quality import (IMPLAUSIBLE_FACTOR, judge_change, refusal_limit,
-                                             warn_beyond_given_accuracy, warn_if_worse_than_given, with_errors)
+                                                   warn_beyond_given_accuracy, warn_if_worse_than_given, with_errors)
 from real2sim.formats.dataset import (
     CV_FROM_GL,
     POSE_REFINED_KEY,
@@ -54,81 +55,6 @@ from real2sim.formats.dataset import (
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import check_replaceable
 from real2sim.plumbing.progress import ProgressFn
-
-
-@dataclass(frozen=True)
-class RefineConfig:
-    """Pose refinement settings.
-
-    ``sift_first_octave``: None picks -1 (upsampled) for images up to 400 px, else 0.
-    ``feature_region``: "all" (whole image, default) or "object" (only inside the
-    masks, dilated by ``mask_dilation_px``). ``max_change_deg`` / ``max_change_mm``:
-    a refined pose further than this from the given one is treated as a failure
-    for that frame. ``min_observations``: a frame with fewer triangulated
-    observations keeps its given pose. ``min_refined_fraction``: below this
-    fraction of refined frames, all poses are kept. ``align``: "centres" (Umeyama on
-    camera centres only, as COLMAP's model aligner) or "poses" (default: centres and
-    orientations, weighted by the robot's pose noise ``prior_noise_mm`` / ``prior_noise_deg``;
-    None reads them from the dataset's ``real2sim`` block, else 5 mm / 1 deg).
-    """
-
-    # 30, not 10: on a ring of views the 10 nearest span only 36 degrees, and a bottle's features (on the
-    # bottle alone when the cameras are level with the table) tie the views together too loosely; the
-    # model bent, the views' common point sat 3-4 mm off and the bottle was 1.71 mm off (0.73 with 30)
-    k_neighbors: int = 30
-    feature_region: str = "all"
-    mask_dilation_px: int = 15
-    max_num_features: int = 4096
-    sift_first_octave: int | None = None
-    max_image_size: int = 1600
-    min_num_inliers: int = 15
-    init_max_reproj_error_px: float | None = None
-    final_max_reproj_error_px: float = 4.0
-    robust_loss_scale_px: float = 2.0
-    ba_rounds: int = 2
-    ba_function_tolerance: float = 1e-6
-    ba_max_iterations: int = 50
-    min_observations: int = 60
-    max_change_deg: float = 10.0
-    max_change_mm: float = 100.0
-    min_refined_fraction: float = 0.5
-    align: str = "poses"
-    prior_noise_mm: float | None = None
-    prior_noise_deg: float | None = None
-    num_threads: int = -1
-    seed: int = 0
-    quiet: bool = True
-
-
-@dataclass(frozen=True)
-class RefineResult:
-    """What happened. Errors are means over frames vs ground_truth/ (None without it)."""
-
-    refined: bool
-    reason: str
-    num_frames: int
-    num_refined_frames: int
-    num_pairs: int
-    num_points3d: int
-    mean_reproj_error_px: float | None
-    sim3_scale: float | None
-    rot_error_before_deg: float | None = None
-    trans_error_before_mm: float | None = None
-    rot_error_after_deg: float | None = None
-    trans_error_after_mm: float | None = None
-    seconds: float = 0.0
-    timings_s: dict = field(default_factory=dict)
-    # per frame, in the dataset's order: whether COLMAP's pose replaced the given one (written into
-    # transforms.json per frame, not into the report)
-    frame_refined: tuple[bool, ...] = ()
-    # the median move of the refined frames from their given poses (after the alignment), mm and deg
-    median_correction_mm: float | None = None
-    median_correction_deg: float | None = None
-
-    def to_json(self) -> dict:
-        from dataclasses import asdict
-
-        return {k: v for k, v in asdict(self).items() if k != "frame_refined"}
 
 
 # ----------------------------------------------------------------------------- geometry helpers

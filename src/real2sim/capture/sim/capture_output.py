@@ -8,18 +8,14 @@ import json
 import shutil
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from real2sim.capture.sim.capture_config import CaptureConfig
 from real2sim.capture.sim.hard_rigs import apply_colour_gains, save_image
 from real2sim.capture.sim.render_scene import OBJECT_LABEL, RenderScene
 from real2sim.formats.dataset import (SUPPORT_Z_KEY, TABLE_PLANE_KEY, CameraIntrinsics, Dataset, Frame,
                                       write_transforms)
 from real2sim.plumbing.progress import ProgressFn
-
-if TYPE_CHECKING:
-    from real2sim.capture.sim.wrist_camera import CaptureConfig
 
 
 def save_png(path: Path, array: np.ndarray) -> None:

@@ -1,7 +1,7 @@
 """What real capture rigs do that the default simulated capture does not (issue #28, part 7).
 
 Each piece is a plain function of arrays, used by :func:`real2sim.capture.sim.wrist_camera.capture`
-when its :class:`~real2sim.capture.sim.wrist_camera.CaptureConfig` asks for it:
+when its :class:`~real2sim.capture.sim.capture_config.CaptureConfig` asks for it:
 
 - :func:`ring_poses`: a turntable rig -- one horizontal ring of cameras at a fixed elevation
   (0 = level with the object's middle), evenly spaced in azimuth;
@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from real2sim.capture.sim.look_at import look_at_c2w_gl
 from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics
 from real2sim.multiview.srgb import linear_to_srgb, srgb_to_linear
 
@@ -36,8 +37,6 @@ def ring_poses(views: int, elevation_deg: float, distance_m: float, target_m: np
     ``elevation_deg``: the cameras' elevation seen from the target (0 = level with it, negative =
     below it); ``distance_m``: their distance from it; azimuths 0, 360/views, ... degrees from +x.
     """
-    from real2sim.capture.sim.wrist_camera import look_at_c2w_gl
-
     e = np.radians(elevation_deg)
     az = 2 * np.pi * np.arange(views) / views
     pos = np.c_[distance_m * np.cos(e) * np.cos(az), distance_m * np.cos(e) * np.sin(az),

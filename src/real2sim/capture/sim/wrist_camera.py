@@ -31,169 +31,26 @@ import json
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from real2sim.capture.sim.capture_config import CaptureConfig, CaptureResult
 from real2sim.capture.sim.capture_output import render_views, save_png, write_transforms_files
 from real2sim.capture.sim.hard_rigs import colour_gains, cut_off_poses, ring_poses, stand_size_m
+from real2sim.capture.sim.look_at import look_at_c2w_gl
 from real2sim.capture.sim.render_scene import (OBJECT_LABEL, STAND_LABEL, TABLE_LABEL,  # noqa: F401 (labels: public here)
                                            RenderScene)
 from real2sim.capture.sim.textures import (export_textured_obj, has_texture, procedural_texture,  # noqa: F401
                                        with_procedural_texture)
-from real2sim.formats.dataset import CameraIntrinsics, realsense_d435_intrinsics
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import atomic_output_dir
 from real2sim.plumbing.progress import ProgressFn, null_progress
 
 
-@dataclass(frozen=True)
-class ReachabilityModel:
-    """Which camera positions a wrist camera on a table-side arm (Franka-like) can reach.
-
-    A camera position p (world frame, metres) is reachable when its distance from
-    the arm's shoulder (base + ``shoulder_height_m`` up) lies in [r_min_m, r_max_m]
-    and its elevation seen from the object's look-at point lies in
-    [min_elevation_deg, max_elevation_deg]. Orientation is not limited: the wrist
-    is assumed to point the camera at the object from anywhere it can reach.
-    """
-
-    base_xy_m: tuple[float, float] = (-0.55, 0.0)
-    shoulder_height_m: float = 0.33
-    r_min_m: float = 0.25
-    r_max_m: float = 0.85
-    min_elevation_deg: float = 8.0
-    max_elevation_deg: float = 88.0
-
-    def reachable(self, positions_m: np.ndarray, target_m: np.ndarray) -> np.ndarray:
-        """(N,) bool for (N, 3) camera positions in the world frame."""
-        shoulder = np.array([self.base_xy_m[0], self.base_xy_m[1], self.shoulder_height_m])
-        r = np.linalg.norm(positions_m - shoulder, axis=1)
-        rel = positions_m - target_m
-        elev = np.degrees(np.arctan2(rel[:, 2], np.linalg.norm(rel[:, :2], axis=1)))
-        return ((r >= self.r_min_m) & (r <= self.r_max_m)
-                & (elev >= self.min_elevation_deg) & (elev <= self.max_elevation_deg)
-                & (positions_m[:, 2] > 0.0))
-
-
-@dataclass(frozen=True)
-class CaptureConfig:
-    """How to capture. Image sizes in pixels; noise is the RMS magnitude per pose.
-
-    ``intrinsics`` default: a RealSense D435-like colour camera (fx = fy = 615 px at
-    640x480, scaled with the size), principal point at the image centre.
-    ``distance_factors`` scale the camera distance at which the object's bounding
-    sphere fills ``fill_fraction`` of the vertical field of view.
-    ``elevations_deg``: the rings of the camera path, seen from the look-at point.
-
-    Hard rigs (issue #28; the defaults leave the capture as it was, byte for byte):
-    ``ring_elevation_deg``: a turntable ring -- ``views`` cameras evenly around one horizontal ring
-    at this elevation (degrees) seen from the object's middle (0 = level with it), not the arm's
-    hemisphere. ``focal_px`` (pixels of the written images) or ``fov_deg`` (horizontal field of
-    view, degrees): a lens other than the D435's (square pixels, centred principal point); the
-    cameras stand back until the object fills ``fill_fraction`` of the view, on a tripod (the arm's
-    distance limits are lifted, its elevation limits kept). ``cut_off_fraction``: that fraction of
-    the views turned so that the image border cuts the object. ``no_table``: the object on a thin
-    post against a dark background; its lowest point stays at z = 0. ``exposure_jitter_stops``,
-    ``white_balance_jitter``: per-view gains (RMS stops; RMS relative gain of red and blue).
-    ``jpeg_quality``: images/*.jpg at that quality (masks stay PNG); None = PNG.
-    """
-
-    views: int = 200
-    width: int = 640
-    height: int = 480
-    intrinsics: CameraIntrinsics | None = None
-    pose_noise_mm: float = 5.0
-    pose_noise_deg: float = 1.0
-    seed: int = 0
-    with_background: bool = False
-    elevations_deg: tuple[float, ...] = (12.0, 25.0, 38.0, 51.0, 64.0, 76.0, 86.0)
-    distance_factors: tuple[float, ...] = (1.0, 1.35)
-    fill_fraction: float = 0.75
-    reach: ReachabilityModel = field(default_factory=ReachabilityModel)
-    table_size_m: float = 1.6
-    texture_seed: int = 7
-    ring_elevation_deg: float | None = None
-    focal_px: float | None = None
-    fov_deg: float | None = None
-    cut_off_fraction: float = 0.0
-    no_table: bool = False
-    exposure_jitter_stops: float = 0.0
-    white_balance_jitter: float = 0.0
-    jpeg_quality: int | None = None
-
-    def camera(self) -> CameraIntrinsics:
-        if self.focal_px is not None or self.fov_deg is not None:
-            fl = self.focal_px if self.focal_px is not None else 0.5 * self.width / np.tan(np.radians(self.fov_deg) / 2)
-            return CameraIntrinsics(width=self.width, height=self.height, fl_x=float(fl), fl_y=float(fl),
-                                    cx=self.width / 2.0, cy=self.height / 2.0)
-        if self.intrinsics is not None:
-            if (self.intrinsics.width, self.intrinsics.height) != (self.width, self.height):
-                return self.intrinsics.scaled(self.width, self.height)
-            return self.intrinsics
-        return realsense_d435_intrinsics(self.width, self.height)
-
-    def validate(self) -> None:
-        if int(self.views) < 1:
-            raise UserInputError(f"--views must be at least 1 (got {self.views})")
-        if self.width < 16 or self.height < 16 or self.width > 8192 or self.height > 8192:
-            raise UserInputError(f"image size {self.width}x{self.height} out of range (16..8192 px)")
-        for name in ("pose_noise_mm", "pose_noise_deg"):
-            v = getattr(self, name)
-            if not np.isfinite(v) or v < 0:
-                raise UserInputError(f"--{name.replace('_', '-')} must be >= 0 (got {v})")
-        _validate_hard_rig(self)
-
-
-def _validate_hard_rig(c: CaptureConfig) -> None:
-    """UserInputError (naming the flag) for hard-rig settings out of range; the CLI's types say the same."""
-    checks = [("--ring-elevation-deg", c.ring_elevation_deg, -85.0, 85.0), ("--focal-px", c.focal_px, 1.0, 1e5),
-              ("--fov-deg", c.fov_deg, 1.0, 170.0), ("--cut-off-fraction", c.cut_off_fraction, 0.0, 1.0),
-              ("--exposure-jitter", c.exposure_jitter_stops, 0.0, 3.0),
-              ("--white-balance-jitter", c.white_balance_jitter, 0.0, 1.0), ("--jpeg-quality", c.jpeg_quality, 1, 100)]
-    for flag, value, lo, hi in checks:
-        if value is not None and not (np.isfinite(value) and lo <= value <= hi):
-            raise UserInputError(f"{flag} must be in {lo:g}..{hi:g} (got {value})")
-    if c.focal_px is not None and c.fov_deg is not None:
-        raise UserInputError("give --focal-px or --fov-deg, not both")
-
-
-@dataclass(frozen=True)
-class CaptureResult:
-    out_dir: Path
-    num_views: int
-    render_seconds: float
-    total_seconds: float
-
-
 # ----------------------------------------------------------------------------- poses
-
-
-def look_at_c2w_gl(positions_m: np.ndarray, target_m: np.ndarray) -> np.ndarray:
-    """(N, 4, 4) camera-to-world poses (OpenGL axes) at ``positions_m`` looking at ``target_m``, no roll.
-
-    Image "up" is world +z where defined; for cameras straight above the target it
-    is the horizontal direction pointing away from the camera's azimuth.
-    """
-    fwd = target_m - positions_m
-    fwd /= np.linalg.norm(fwd, axis=1, keepdims=True)
-    z_up = np.array([0.0, 0.0, 1.0])
-    right = np.cross(fwd, z_up)
-    n = np.linalg.norm(right, axis=1)
-    degenerate = n < 1e-6
-    if np.any(degenerate):
-        right[degenerate] = [0.0, -1.0, 0.0]
-        n[degenerate] = 1.0
-    right /= n[:, None]
-    up = np.cross(right, fwd)
-    c2w = np.tile(np.eye(4), (len(positions_m), 1, 1))
-    c2w[:, :3, 0] = right
-    c2w[:, :3, 1] = up
-    c2w[:, :3, 2] = -fwd
-    c2w[:, :3, 3] = positions_m
-    return c2w
 
 
 def render_ready(mesh: trimesh.Trimesh | Path | str, texture_seed: int) -> trimesh.Trimesh:
