@@ -171,7 +171,7 @@ def test_check_replaceable(tmp_path):
 
 def test_public_paths_name_the_output_not_a_removed_temporary(tmp_path):
     """Issue 33 #10: a failed write named `.out.tmp-abcd1234/mesh.obj`, a folder removed on the way out."""
-    from real2sim.plumbing.outputs import public_paths
+    from real2sim.plumbing.temporary_names import public_paths
 
     gone = f"{tmp_path}/.model.tmp-k2j4_x9q/mesh.obj"
     assert public_paths(f"cannot write {gone}: no space") == f"cannot write {tmp_path}/model/mesh.obj: no space"

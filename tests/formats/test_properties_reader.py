@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from real2sim.asset.build import (COM_MARGIN_FRACTION, MASS_AGREEMENT_RTOL, AssetConfig, check_given_com,
-                                  mass_agreement_kg)
+from real2sim.asset.checks import COM_MARGIN_FRACTION, check_given_com
+from real2sim.asset.config import MASS_AGREEMENT_RTOL, AssetConfig, mass_agreement_kg
 from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.physical import (MAX_MASS_KG, PhysicalProperties, read_given_properties,
                                        read_physical_properties, write_physical_properties)

@@ -5,7 +5,7 @@ representation per SPEC through :mod:`real2sim.collision`, URDF / SDFormat write
 from real2sim._lazy import lazy_exports
 
 _EXPORTS = {
-    "AssetConfig": "build",
+    "AssetConfig": "config",
     "AssetResult": "build",
     "RepresentationResult": "build",
     "build_asset": "build",

@@ -191,10 +191,9 @@ def _sdf_grid_mesh(cropped: trimesh.Trimesh, voxel_m: float) -> trimesh.Trimesh:
 def closed_solid(mesh: trimesh.Trimesh, voxel_m: float | None = None) -> trimesh.Trimesh:
     """``mesh`` itself when it is a closed oriented 2-manifold; otherwise the solid it bounds, closed.
 
-    Scans have holes. CoACD and V-HACD read an open mesh as a shell: on a cylinder with its top cap
-    missing V-HACD's 64 pieces held 2 % of the solid's volume and CoACD's 17 pieces 14 %, and a
-    sphere with one triangle missing took CoACD 264 s. The closed solid is the remesh path of
-    :func:`close_flat_bottom` without the plane: the generalized winding number says what is inside
+    Scans have holes, and CoACD and V-HACD read an open mesh as a shell, not as the solid it bounds
+    (why: docs/design-notes/asset.md#closed-solids-for-decomposition). The closed solid is the remesh
+    path of :func:`close_flat_bottom` without the plane: the generalized winding number says what is inside
     (robust to holes), and marching cubes on a signed distance grid of ``voxel_m`` (default 1/100 of
     the largest extent) closes it. ``metadata["closed_by"]``: ``"as is"`` or ``"remesh"``."""
     try:
@@ -283,13 +282,10 @@ def close_flat_bottom(
       already in the asset frame, pass the table plane mapped by the canonical
       transform (``up = R @ [0, 0, 1]``, height ``table_z + up . t``).
     * ``slab_m``: thickness of the floor slab (remesh path), default 3 voxels. The
-      remeshed solid is rounded off within about a voxel of the opening (measured
-      on a holed can: no flat floor at all without a slab, and 0.85 % of the
-      volume missing; a full flat floor with a slab of 1 voxel or more).
+      remeshed solid is rounded off within about a voxel of the opening, so without
+      a slab there is no flat floor (why: docs/design-notes/asset.md#flat-bottom-slab-and-voxel).
     * ``voxel_m``: grid spacing of the remesh path, default 1/100 of the largest
-      extent of the cropped mesh (about 2 mm on a 19 cm bottle, which then took
-      ~3.5 s with a hole and debris, volume within 0.5 %, Chamfer 0.15 mm to the
-      true bottle, on the loaded 2-core machine).
+      extent of the cropped mesh (about 2 mm on a 19 cm bottle).
     * ``floor``: how the remesh path closes the floor, ``"section"`` or
       ``"vhacd"`` (see the module docstring); ``max_hulls`` bounds V-HACD.
 

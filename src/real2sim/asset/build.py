@@ -17,17 +17,18 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 import numpy as np
 import trimesh
 
+from real2sim.asset.checks import check_given_com, check_mesh_for_config
+from real2sim.asset.config import AssetConfig, config_record
 from real2sim.asset.reuse import reuse_collision, reusable_representations
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
 from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.contact import ContactProperties
-from real2sim.plumbing.errors import UserInputError
-from real2sim.geometry.mesh_io import MAX_EXTENT_M, check_object_size, export_textured_mesh, load_mesh, validate_mesh  # noqa: F401
+from real2sim.geometry.mesh_io import export_textured_mesh, load_mesh, validate_mesh
 from real2sim.plumbing.digests import file_sha256
 from real2sim.plumbing.outputs import atomic_output_dir
 from real2sim.formats.physical import MESH_FRAME, PhysicalProperties, write_physical_properties
@@ -35,129 +36,6 @@ from real2sim.plumbing.progress import ProgressFn, null_progress, prefixed
 from real2sim.formats.spec import CollisionSpec
 
 VISUAL_RELPATH = "visual/model.obj"
-
-#: Largest object per resolution hint: Drake meshes compliant curved primitives with edges about
-#: the hint long. Measured (Drake 1.51, compliant sphere): 100 hints across took 0.4 GB and 7 s
-#: to mesh, 300 hints 1.4 GB and 41 s; past that a single primitive costs gigabytes.
-MAX_EXTENT_PER_RESOLUTION_HINT = 300.0
-#: How far below the mesh the support plane may lie, as a fraction of the mesh's height:
-#: a reconstruction's bottom may stop a little above the table.
-SUPPORT_BELOW_TOLERANCE = 0.05
-#: How far outside the object's axis-aligned bounds a given centre of mass may lie, as a fraction of
-#: the object's largest extent: room for a reconstruction that misses a little of the object and an
-#: identified CoM's millimetres of error; a file in another frame or unit lies far further out.
-COM_MARGIN_FRACTION = 0.1
-#: Relative tolerance of ``--mass`` against a properties file's mass when the file gives no standard
-#: error of it (or a smaller one): the rounding of a mass typed to three or four digits.
-MASS_AGREEMENT_RTOL = 1e-3
-
-
-def mass_agreement_kg(given: PhysicalProperties) -> float:
-    """How far ``--mass`` may lie from ``given.mass_kg`` and still agree with it: the larger of 3 x the
-    file's standard error of the mass (when it gives one) and :data:`MASS_AGREEMENT_RTOL` of the mass."""
-    return max(3.0 * (given.mass_standard_error_kg or 0.0), MASS_AGREEMENT_RTOL * given.mass_kg)
-
-
-def check_given_com(config: AssetConfig, vertices: np.ndarray, label: str) -> None:
-    """Refuse given properties whose centre of mass lies outside the object: beyond the axis-aligned
-    bounds of ``vertices`` (the object in the frame the properties are given in, m) grown on every side by
-    :data:`COM_MARGIN_FRACTION` of the bounds' largest side. UserInputError naming ``--properties``."""
-    if config.given_properties is None:
-        return
-    vertices = np.asarray(vertices, dtype=float)
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    margin = COM_MARGIN_FRACTION * float((hi - lo).max())
-    com = np.asarray(config.given_properties.com_m, dtype=float)
-    if np.all(com >= lo - margin) and np.all(com <= hi + margin):
-        return
-    frame = "the mesh's frame" if config.given_properties_frame == MESH_FRAME else "the asset frame"
-
-    def shown(v: np.ndarray) -> str:
-        return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
-
-    raise UserInputError(
-        f"--properties {config.given_properties_source or '(given properties)'}: the centre of mass "
-        f"{shown(com)} m ({frame}) lies outside {label}, whose bounds {shown(lo)} .. {shown(hi)} m grown by "
-        f"{100 * COM_MARGIN_FRACTION:g} % of its largest extent ({margin:.3g} m) must hold it: a file in another "
-        "frame or unit?")
-
-
-def support_below_mesh(bottom_m: float, top_m: float, support_m: float) -> bool:
-    """Whether a support plane at height ``support_m`` lies below a mesh spanning ``bottom_m`` ..
-    ``top_m`` (same frame, +z up) by more than :data:`SUPPORT_BELOW_TOLERANCE` of its height: there
-    is nothing to crop there and no bottom to close."""
-    return support_m < bottom_m - SUPPORT_BELOW_TOLERANCE * (top_m - bottom_m)
-
-
-@dataclass(frozen=True)
-class AssetConfig:
-    """Everything ``real2sim asset`` needs besides the mesh and the output folder.
-
-    support_height_m: height of the table plane in the input mesh frame (+z up),
-        used by ``flat_bottom``; a capture stands the object on z = 0.
-    mesh_units: the units the mesh file's coordinates are in (m, cm, mm, in); everything
-        else, ``support_height_m`` included, is in metres.
-    keep_up: keep the input's +z as the asset's +z (PCA only picks x in the
-        horizontal plane); without it the longest principal axis becomes +z, as the
-        paper does, which tilts squat objects such as a mug.
-    fit_config / coacd_config / vhacd_config: None means each stage's defaults
-        (the paper's settings, documented in those modules).
-    given_properties: mass, CoM and inertia measured rather than assumed (`real2sim identify`,
-        ``--properties``), in the input mesh's frame when ``given_properties_frame`` is "mesh", else
-        in the asset frame; ``mass_kg`` must agree with their mass within :func:`mass_agreement_kg`, and
-        their CoM lie inside the object (:func:`check_given_com`). None: uniform density.
-    sdf_cache_dir: where signed-distance samples are cached across builds ("auto":
-        $REAL2SIM_CACHE or ~/.cache/real2sim); None caches them for this build only,
-        so several primitive SPECs of one build sample the mesh once.
-    fill_cavities_m: None, or the radius (m) of a ball the collision fits see the solid closed with
-        (:func:`real2sim.geometry.envelope.filled_envelope`): a cup's cavity or a handle's hole
-        narrower than the ball is filled before any SPEC is fitted or decomposed. For pushing,
-        tilting and placing, where nothing enters them; not for grasping by a rim. Mass
-        properties, the visual and the fidelity reference stay those of the true solid.
-    """
-
-    mass_kg: float
-    specs: tuple[CollisionSpec, ...]
-    flat_bottom: bool = False
-    support_height_m: float = 0.0
-    keep_up: bool = False
-    mesh_units: str = "m"
-    formats: tuple[str, ...] = ("urdf",)
-    seed: int = 0
-    device: str = "cpu"
-    contact: ContactProperties = field(default_factory=ContactProperties)
-    fit_config: object | None = None
-    coacd_config: object | None = None
-    vhacd_config: object | None = None
-    sdf_cache_dir: Path | str | None = None
-    given_properties: PhysicalProperties | None = None
-    given_properties_frame: str = "asset"
-    given_properties_source: str = ""
-    fill_cavities_m: float | None = None
-
-    def __post_init__(self) -> None:
-        if not (np.isfinite(self.mass_kg) and self.mass_kg > 0):
-            raise UserInputError(f"mass must be a finite number > 0 kg, got {self.mass_kg}")
-        if not self.specs:
-            raise UserInputError("no collision SPEC given (e.g. --collision cylinders:10)")
-        given = self.given_properties
-        if given is not None and abs(self.mass_kg - given.mass_kg) > mass_agreement_kg(given):
-            se = given.mass_standard_error_kg
-            raise UserInputError(
-                f"--mass {self.mass_kg:g} kg disagrees with the properties' mass {given.mass_kg:g} kg: they differ by "
-                f"{abs(self.mass_kg - given.mass_kg):.3g} kg, more than {mass_agreement_kg(given):.3g} kg (the larger of "
-                f"3 x its standard error, {'%.3g kg' % se if se is not None else 'none given'}, and "
-                f"{100 * MASS_AGREEMENT_RTOL:g} % of it); give one of them")
-        if self.fill_cavities_m is not None and not (np.isfinite(self.fill_cavities_m) and self.fill_cavities_m > 0):
-            raise UserInputError(f"--fill-cavities must be a radius > 0 m, got {self.fill_cavities_m}")
-        names = [s.name for s in self.specs]
-        if len(set(names)) != len(names):
-            raise UserInputError(f"a collision SPEC is given twice: {names}")
-        from real2sim.asset.export.writers import ASSET_FORMATS
-
-        bad = set(self.formats) - set(ASSET_FORMATS)
-        if bad:
-            raise UserInputError(f"unknown --format {sorted(bad)}; known: {', '.join(ASSET_FORMATS)}")
 
 
 @dataclass(frozen=True)
@@ -175,47 +53,6 @@ class AssetResult:
     representations: tuple[RepresentationResult, ...]
 
 
-def _software_versions() -> dict[str, str]:
-    from importlib import metadata
-
-    versions = {}
-    for package in ("real2sim", "numpy", "torch", "trimesh", "drake", "coacd", "vhacdx", "manifold3d", "libigl"):
-        try:
-            versions[package] = metadata.version(package)
-        except metadata.PackageNotFoundError:
-            versions[package] = "not installed"
-    return versions
-
-
-def config_record(config: AssetConfig) -> dict:
-    """What asset_config.json holds: every setting of the build, the stages' effective defaults
-    included, and the package versions (so that an asset can be rebuilt and compared)."""
-    import platform
-
-    from real2sim.collision.decomposition import CoacdConfig, VhacdConfig
-    from real2sim.collision.fit.config import FitConfig
-
-    return {
-        "mass_kg": config.mass_kg,
-        "collision": [spec.text for spec in config.specs],
-        "flat_bottom": config.flat_bottom,
-        "support_height_m": config.support_height_m,
-        "keep_up": config.keep_up,
-        "mesh_units": config.mesh_units,
-        "formats": list(config.formats),
-        "seed": config.seed,
-        "device": config.device,
-        "contact": config.contact,
-        "fit_config": config.fit_config or FitConfig(),
-        "fill_cavities_m": config.fill_cavities_m,
-        "coacd_config": config.coacd_config or CoacdConfig(),
-        "vhacd_config": config.vhacd_config or VhacdConfig(),
-        "properties": ({"source": config.given_properties_source, "frame": config.given_properties_frame,
-                        "method": config.given_properties.method} if config.given_properties else "uniform density"),
-        "software": {"python": platform.python_version(), **_software_versions()},
-    }
-
-
 def given_in_asset_frame(config: AssetConfig, transform: np.ndarray) -> PhysicalProperties:
     """``config.given_properties`` in the asset frame (``transform``: asset from input mesh)."""
     from real2sim.formats.physical import moved_properties
@@ -225,44 +62,6 @@ def given_in_asset_frame(config: AssetConfig, transform: np.ndarray) -> Physical
     if config.given_properties_frame == MESH_FRAME:
         return moved_properties(given, transform, method)
     return moved_properties(given, np.eye(4), method)
-
-
-def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str = "mesh") -> None:
-    """Refuse, before any work, a mesh this configuration cannot turn into a usable asset.
-
-    UserInputError (one line): an object smaller than :data:`MIN_EXTENT_M` or larger than :data:`MAX_EXTENT_M`
-    after ``mesh_units`` (the message names the units that fit); an object more than
-    :data:`MAX_EXTENT_PER_RESOLUTION_HINT` resolution hints across when its shapes are
-    hydroelastic (Drake would mesh them with millions of elements); with ``flat_bottom``, a
-    support plane that is not finite, that leaves nothing of the mesh above it, or that lies
-    below the mesh by more than :data:`SUPPORT_BELOW_TOLERANCE` of its height (nothing to crop,
-    no bottom to close there).
-    """
-    vertices = np.asarray(mesh.vertices, dtype=float)
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    extent = check_object_size(mesh, label, config.mesh_units)
-    hint = config.contact.resolution_hint_m
-    if config.contact.hydroelastic != "none" and extent > MAX_EXTENT_PER_RESOLUTION_HINT * hint:
-        raise UserInputError(f"{label} is {extent:.4g} m across, over {MAX_EXTENT_PER_RESOLUTION_HINT:g} x "
-                             f"--resolution-hint {hint:g} m = {MAX_EXTENT_PER_RESOLUTION_HINT * hint:.4g} m: Drake would "
-                             f"mesh its shapes with millions of elements; use --resolution-hint "
-                             f">= {extent / MAX_EXTENT_PER_RESOLUTION_HINT:.3g}")
-    if config.fill_cavities_m is not None:
-        from real2sim.geometry.envelope import check_fill_radius
-
-        check_fill_radius(config.fill_cavities_m, extent, label)
-    if config.flat_bottom:
-        height = config.support_height_m
-        bottom, top = float(lo[2]), float(hi[2])
-        if not np.isfinite(height):
-            raise UserInputError(f"--support-height must be a finite number of metres, got {height}")
-        if height >= top:
-            raise UserInputError(f"--support-height {height:g} m leaves nothing of {label} above it "
-                                 f"(the mesh spans z = {bottom:.4g} .. {top:.4g} m)")
-        if support_below_mesh(bottom, top, height):
-            raise UserInputError(f"--support-height {height:g} m lies {bottom - height:.4g} m below {label} "
-                                 f"(the mesh spans z = {bottom:.4g} .. {top:.4g} m): nothing to crop and no bottom to "
-                                 "close there; give the table's height in the mesh frame")
 
 
 def geometry_only(mesh: trimesh.Trimesh) -> trimesh.Trimesh:

@@ -1,9 +1,8 @@
 """Debris that floats apart from the object: scans and reconstructions carry it, the asset must not.
 
 Inertia already ignores it (:mod:`real2sim.asset.inertia` drops small clusters of interior
-samples), but collision geometry is fitted to the whole mesh: a 2 mm speck of a scan 10 cm from
-a can took one of ``cylinders:4``'s four cylinders (IoU 0.87 against the mesh) and one of CoACD's
-pieces, a collider where the object has nothing.
+samples), but collision geometry is fitted to the whole mesh: a speck of debris takes a piece of
+a fit and becomes a collider where the object has nothing (why: docs/design-notes/asset.md#floaters).
 
 Parts are told apart by where they are, not by how the mesh is stitched: a CAD export's handle
 may be its own shell, overlapping the body, and belongs to it. The mesh's connected parts are

@@ -1,5 +1,6 @@
 """The on-disk contracts between stages: dataset, collision SPEC, collision geometry,
-physical properties, contact material, results CSVs, atomic outputs, mesh I/O, user errors.
+physical properties, contact material, results CSVs, trajectories, joint logs (atomic outputs and
+user errors are :mod:`real2sim.plumbing`'s, mesh I/O :mod:`real2sim.geometry.mesh_io`'s).
 
 Importable without torch or Drake (an import-linter contract keeps it so): every
 stage reads and writes its files through these modules, never through another
@@ -22,9 +23,6 @@ _EXPORTS = {
     "Dataset": "dataset",
     "Frame": "dataset",
     "read_dataset": "dataset",
-    "load_mesh": "mesh_io",
-    "validate_mesh": "mesh_io",
-    "export_textured_mesh": "mesh_io",
 }
 __all__ = sorted(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

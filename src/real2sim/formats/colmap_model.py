@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics, Dataset, Frame, check_frame_files
+from real2sim.formats.posed_images import CV_FROM_GL, CameraIntrinsics, Dataset, Frame, check_frame_files
 from real2sim.plumbing.errors import UserInputError
 
 

@@ -21,55 +21,47 @@ CONTACT_MODELS = ("point", "hydroelastic")
 
 @dataclass(frozen=True)
 class ContactProperties:
-    """Contact material of the object's collision geometry.
-
-    hydroelastic: "compliant" (primitives become compliant volume meshes, the
-        paper's setting), "rigid", or "none" (point contact only).
-    hydroelastic_modulus_pa: Drake's hydroelastic modulus, Pa. 1e7 is stiff plastic-like
-        for a hand-sized object and keeps penetrations well under a millimetre.
-    point_contact_stiffness_n_per_m: stiffness of point contact, N/m. 1e4 lets a
-        0.5 kg object rest about 0.5 mm deep, as compliant as the hydroelastic
-        reference; Drake's default (from a 1 mm penetration allowance) is stiffer
-        and made the bundled bottle bounce on the floor and ramp under point
-        contact, tripling its OCAE (docs/benchmarks.md, "Point-contact stiffness").
-    point_stiffness_per_piece: True (default): ``point_contact_stiffness_n_per_m`` is the body's, and
-        each piece gets it divided by the mean number of pieces that touch a plane laid on the hull
-        (:mod:`real2sim.asset.export.point_contact`), so every representation rests as stiffly as the object
-        in one piece. False: every piece gets all of it, and a union of N pieces resting on all N is
-        N times stiffer. Shared, every multi-piece primitive point row measured moved closer to the
-        reference (ten on the bundled bottle and can, e.g. ellipsoids_64 0.0171 -> 0.0139 m OCAE;
-        five on a carton and a mug on its side) and CoACD's one- or two-piece hulls stayed as they
-        were (docs/benchmarks/point_contact_split20_idle.md, point_contact_split20_shapes.md).
-    hunt_crossley_dissipation_s_per_m: Hunt-Crossley dissipation, s/m.
-    point_dissipation_s_per_m: None, or the Hunt-Crossley dissipation of the representations'
-        point-contact models, s/m: each representation then also gets ``model_point.urdf``, the
-        same as ``model.urdf`` but for this dissipation, and the evaluation simulates its
-        point-contact rows with it. Point contact presses one point per touching piece where the
-        object presses a patch; a point that chatters on and off the floor leaves a one-point
-        model hopping unless it is damped. At 20 s/m every point-contact row of Table I moved
-        closer to the hydroelastic reference (docs/benchmarks/point_contact.md), while the
-        hydroelastic rows got worse with it, so it applies to point contact only.
-    mu_static, mu_dynamic: Coulomb friction coefficients (Drake combines pairs).
-    resolution_hint_m: edge length Drake aims for when it meshes curved
-        primitives (spheres, cylinders, ellipsoids, capsules) for compliant contact.
-    cylinder_flat_depth_m: None, or how far inside its circle each flat of a compliant
-        cylinder's mesh may lie, m. Drake cuts a cylinder's circle into
-        ceil(2 pi r / hint) sections, so at the default hint a 34 mm cylinder is a
-        22-gon with flats 0.35 mm deep, and a body rolling on it rolls on them
-        (docs/truth.md). When set, each cylinder gets its own hint,
-        the smaller of ``resolution_hint_m`` and one that keeps its flats this shallow.
-    """
+    """Contact material of the object's collision geometry: the Drake proximity properties written into
+    every collision element of every model file."""
 
     hydroelastic: str = "compliant"
+    """Hydroelastic type of the shapes: "compliant" (primitives become compliant volume meshes, the
+    paper's setting), "rigid", or "none" (point contact only)."""
     hydroelastic_modulus_pa: float = 1.0e7
+    """Drake's hydroelastic modulus, Pa, > 0: 1e7 is stiff plastic-like for a hand-sized object and keeps
+    penetrations well under a millimetre."""
     point_contact_stiffness_n_per_m: float = 1.0e4
+    """Stiffness of point contact, N/m, > 0: 1e4 lets a 0.5 kg object rest about 0.5 mm deep, as compliant
+    as the hydroelastic reference; softer than Drake's default, which comes from a 1 mm penetration
+    allowance (why: docs/design-notes/asset.md#point-contact-stiffness)."""
     point_stiffness_per_piece: bool = True
+    """True: :attr:`point_contact_stiffness_n_per_m` is the body's, and each piece gets it divided by the
+    mean number of pieces that touch a plane laid on the hull (:mod:`real2sim.asset.export.point_contact`),
+    so every representation rests as stiffly as the object in one piece. False: every piece gets all of
+    it, and a union of N pieces resting on all N is N times stiffer
+    (why: docs/design-notes/asset.md#point-stiffness-per-piece)."""
     hunt_crossley_dissipation_s_per_m: float = 1.0
+    """Hunt-Crossley dissipation of every contact, s/m, >= 0."""
     point_dissipation_s_per_m: float | None = 20.0
+    """None, or the Hunt-Crossley dissipation (s/m, >= 0) of the representations' point-contact models:
+    each representation then also gets ``model_point.urdf``, the same as ``model.urdf`` but for this
+    dissipation, and the evaluation simulates its point-contact rows with it. Point contact presses one
+    point per touching piece where the object presses a patch, and a point that chatters on and off the
+    floor leaves a one-point model hopping unless it is damped; hydroelastic rows keep
+    :attr:`hunt_crossley_dissipation_s_per_m` (why: docs/design-notes/asset.md#point-dissipation)."""
     mu_static: float = 0.5
+    """Static Coulomb friction coefficient, >= 0 (Drake combines the two of a pair)."""
     mu_dynamic: float = 0.5
+    """Dynamic Coulomb friction coefficient, >= 0 (Drake combines the two of a pair)."""
     resolution_hint_m: float = 0.01
+    """Edge length Drake aims for when it meshes curved primitives (spheres, cylinders, ellipsoids,
+    capsules) for compliant contact, m, > 0."""
     cylinder_flat_depth_m: float | None = None
+    """None, or how far inside its circle each flat of a compliant cylinder's mesh may lie, m, > 0: each
+    cylinder then gets its own hint, the smaller of :attr:`resolution_hint_m` and one that keeps its flats
+    this shallow. Drake cuts a cylinder's circle into ceil(2 pi r / hint) sections, so at the default hint
+    a 34 mm cylinder is a 22-gon with flats 0.35 mm deep, and a body rolling on it rolls on them
+    (docs/truth.md)."""
 
     def __post_init__(self) -> None:
         if self.hydroelastic not in ("compliant", "rigid", "none"):

@@ -24,90 +24,33 @@ latter on the fly (its poses are then in COLMAP's arbitrary frame and scale).
 nerfstudio's ``ns-process-data`` output is a ``transforms.json`` in such a frame
 too (COLMAP's, axes swapped): it carries ``applied_transform`` and the SfM points
 in ``ply_file_path`` (:func:`is_model_frame`).
+
+The dataset in memory, real2sim's keys and the checks of its files are
+:mod:`real2sim.formats.posed_images`; the COLMAP reader is :mod:`real2sim.formats.colmap_model`.
+Both sit below this module, which re-exports their names.
 """
 
 from __future__ import annotations
 
 import json
-import os
-from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-# the transforms.json keys real2sim adds to nerfstudio's layout, importable from here as before
-from real2sim.formats.dataset_keys import (MODEL_FRAME_KEYS, POSE_REFINED_KEY, SUPPORT_Z_KEY,  # noqa: F401
-                                           TABLE_PLANE_KEY, describe_model_frame, has_table_plane,
-                                           is_model_frame, stated_support_z_m)
+from real2sim.formats.colmap_model import read_colmap_model
+# the in-memory dataset, its keys and its file checks live below, in posed_images; importable from here
+from real2sim.formats.posed_images import (CV_FROM_GL, MODEL_FRAME_KEYS, POSE_REFINED_KEY,  # noqa: F401
+                                           SUPPORT_Z_KEY, TABLE_PLANE_KEY, CameraIntrinsics, Dataset, Frame,
+                                           check_frame_files, check_image_file, check_inside,
+                                           describe_model_frame, has_table_plane, is_model_frame,
+                                           realsense_d435_intrinsics, stated_support_z_m)
 from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import check_output_path
 from real2sim.plumbing.outputs import write_json_atomic as _write_json_atomic
-
-# OpenCV camera (x right, y down, z forward) <-> OpenGL camera (x right, y up, z backward):
-# both are a flip of the camera's y and z axes, applied on the right of camera-to-world.
-CV_FROM_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+from real2sim.plumbing.paths import missing
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
-
-
-@dataclass(frozen=True)
-class CameraIntrinsics:
-    """Pinhole intrinsics in pixels (pixel centres at u + 0.5), with OpenCV radial-tangential distortion."""
-
-    width: int
-    height: int
-    fl_x: float
-    fl_y: float
-    cx: float
-    cy: float
-    k1: float = 0.0
-    k2: float = 0.0
-    p1: float = 0.0
-    p2: float = 0.0
-
-    def matrix(self) -> np.ndarray:
-        """3x3 calibration matrix K (continuous pixel coordinates, centre of pixel u at u + 0.5)."""
-        return np.array([[self.fl_x, 0.0, self.cx], [0.0, self.fl_y, self.cy], [0.0, 0.0, 1.0]])
-
-    def scaled(self, width: int, height: int) -> "CameraIntrinsics":
-        sx, sy = width / self.width, height / self.height
-        return replace(self, width=width, height=height, fl_x=self.fl_x * sx, fl_y=self.fl_y * sy,
-                       cx=self.cx * sx, cy=self.cy * sy)
-
-
-def realsense_d435_intrinsics(width: int = 640, height: int = 480) -> CameraIntrinsics:
-    """A RealSense D435-like colour camera: fx = fy = 615 px at 640x480, principal point at the centre."""
-    fl = 615.0 * width / 640.0
-    return CameraIntrinsics(width=width, height=height, fl_x=fl, fl_y=615.0 * height / 480.0,
-                            cx=width / 2.0, cy=height / 2.0)
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One posed image. ``transform_matrix``: 4x4 camera-to-world, OpenGL camera axes, metres."""
-
-    file_path: str
-    transform_matrix: np.ndarray
-    mask_path: str | None = None
-    extra: dict = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class Dataset:
-    """A posed-image dataset rooted at ``root`` (paths in frames are relative to it)."""
-
-    root: Path
-    intrinsics: CameraIntrinsics
-    frames: tuple[Frame, ...]
-    extra: dict = field(default_factory=dict)
-
-    def poses_c2w_gl(self) -> np.ndarray:
-        """(N, 4, 4) camera-to-world poses, OpenGL camera axes."""
-        return np.stack([f.transform_matrix for f in self.frames])
-
-    def poses_c2w_cv(self) -> np.ndarray:
-        """(N, 4, 4) camera-to-world poses, OpenCV camera axes (x right, y down, z forward)."""
-        return self.poses_c2w_gl() @ CV_FROM_GL
 
 
 def check_rigid(matrix: Any, label: str, tol: float = 1e-3) -> np.ndarray:
@@ -186,8 +129,6 @@ def write_transforms(path: Path, ds: Dataset) -> None:
 def _not_a_file(path: Path, kind: str) -> str:
     """Why ``path`` (an image or a mask) cannot be read as a file: a folder, a FIFO or a device is
     there (reading a FIFO would wait forever), or nothing is (:func:`~real2sim.plumbing.paths.missing`)."""
-    from real2sim.plumbing.paths import missing
-
     if path.is_dir():
         return f"{kind} {path} is a folder, not a file"
     if path.exists():
@@ -206,8 +147,6 @@ def read_transforms(path: Path, root: Path | None = None, check_files: bool = Tr
     try:
         data = json.loads(path.read_text())
     except FileNotFoundError:
-        from real2sim.plumbing.paths import missing
-
         raise UserInputError(missing(path, "dataset file")) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise UserInputError(f"{label} is not readable JSON: {str(exc).splitlines()[0]}") from None
@@ -255,66 +194,12 @@ def read_transforms(path: Path, root: Path | None = None, check_files: bool = Tr
     return ds
 
 
-def check_inside(root: Path, relpath: str, label: str) -> None:
-    """UserInputError unless ``relpath`` (relative to ``root``, or absolute) names a path inside ``root``.
-
-    Lexical: ``..`` and absolute paths elsewhere are refused; a symbolic link inside the
-    folder may still point anywhere (whoever made the folder chose it)."""
-    base = os.path.abspath(root)
-    full = os.path.normpath(os.path.join(base, relpath))
-    if os.path.commonpath([base, full]) != base:
-        raise UserInputError(f"{label} {relpath!r} points outside the dataset folder {root}")
-
-
-def check_image_file(path: Path, size: tuple[int, int], label: str) -> None:
-    """UserInputError unless ``path`` is a non-empty, readable image of ``size`` (width, height) px.
-
-    Reads the header and checks the file's structure (PIL ``verify``: chunk checksums of a PNG),
-    without decoding the pixels: milliseconds per image."""
-    from PIL import Image
-
-    try:
-        if path.stat().st_size == 0:
-            raise UserInputError(f"{label} {path} is empty (0 bytes)")
-        with Image.open(path) as im:
-            width, height = im.size
-            im.verify()
-    except UserInputError:
-        raise
-    except Exception as exc:  # noqa: BLE001 -- PIL raises OSError, SyntaxError, struct.error... on bad files
-        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise UserInputError(f"{label} {path} is not a readable image ({reason})") from None
-    if width == 0 or height == 0:
-        raise UserInputError(f"{label} {path} is empty ({width}x{height} px)")
-    if (width, height) != tuple(size):
-        raise UserInputError(f"{label} {path} is {width}x{height} px, but the dataset's camera is "
-                             f"{size[0]}x{size[1]} (w, h): all images and masks must be of that one size")
-
-
-def check_frame_files(ds: Dataset, label: str | None = None) -> None:
-    """Every frame's image and mask: inside the folder, non-empty, readable, of the camera's size.
-
-    One line (UserInputError) naming the first bad file; nothing is decoded, so a dataset of
-    hundreds of images is checked in well under a second."""
-    label = label or str(ds.root)
-    size = (ds.intrinsics.width, ds.intrinsics.height)
-    for i, frame in enumerate(ds.frames):
-        flabel = f"{label} frame {i}:"
-        check_inside(ds.root, frame.file_path, f"{flabel} file_path")
-        check_image_file(Path(ds.root) / frame.file_path, size, f"{flabel} image")
-        if frame.mask_path is not None:
-            check_inside(ds.root, frame.mask_path, f"{flabel} mask_path")
-            check_image_file(Path(ds.root) / frame.mask_path, size, f"{flabel} mask")
-
-
 def check_dataset_outputs(root: Path | str, files: tuple[str, ...] = (), folders: tuple[str, ...] = (),
                           what: str = "output") -> None:
     """Before a stage writes ``files`` / ``folders`` into a dataset folder: each can be made there.
 
     UserInputError (one line) for a folder where a file goes or a file where a folder goes,
     a folder that cannot be written (permission), or a name the file system refuses."""
-    from real2sim.plumbing.outputs import check_output_path
-
     root = Path(root)
     for name, folder in [(n, False) for n in files] + [(n, True) for n in folders]:
         path = root / name
@@ -335,16 +220,12 @@ def read_dataset(path: Path | str, check_files: bool = True) -> Dataset:
     if path.is_file() and path.suffix == ".json":
         return read_transforms(path, check_files=check_files)
     if not path.exists():
-        from real2sim.plumbing.paths import missing
-
         raise UserInputError(missing(path, "dataset"))
     if not path.is_dir():
         raise UserInputError(f"dataset {path} is not a folder or a transforms.json")
     if (path / "transforms.json").exists():
         return read_transforms(path / "transforms.json", check_files=check_files)
     if (path / "sparse" / "0").is_dir():
-        from real2sim.formats.colmap_model import read_colmap_model
-
         return read_colmap_model(path)
     raise UserInputError(f"{path} holds neither transforms.json nor a COLMAP model sparse/0")
 
@@ -392,11 +273,3 @@ def read_ground_truth(root: Path | str) -> Dataset | None:
         return None
     return read_transforms(path, root=Path(root), check_files=False)
 
-
-def __getattr__(name: str):
-    # read_colmap_model lives in formats.colmap_model (it imports this module); still importable from here.
-    if name == "read_colmap_model":
-        from real2sim.formats.colmap_model import read_colmap_model
-
-        return read_colmap_model
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -160,9 +160,8 @@ def union_mesh(geometry: CollisionGeometry, rep_dir: Path | None = None, round_s
 
     One manifold3d batch union of all pieces; a ``mesh`` piece that is not a
     closed 2-manifold is appended as it is (see :func:`union_of_meshes`).
-    ``round_segments`` trades the tessellation of round primitives for speed: the
-    union of 500 spheres took ~13 s at 64 segments and ~2 s at 16 on the loaded
-    2-core development machine.
+    ``round_segments`` trades the tessellation of round primitives for speed
+    (why: docs/design-notes/asset.md#union-tessellation-and-speed).
     """
     solids, loose = [], []
     for shape in geometry.shapes:

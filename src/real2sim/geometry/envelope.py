@@ -2,8 +2,8 @@
 
 A cup's cavity, the hole through a mug's handle or a bowl's hollow are open to the outside, so a
 closed mesh keeps them; fitted primitives then spend their pieces on walls a few millimetres thick
-(the bundled mug on its side: IoU 0.09-0.36) although nothing in a push or a tilt ever touches the
-inside. :func:`filled_envelope` closes the solid morphologically with a ball: every place the ball
+although nothing in a push or a tilt ever touches the inside (why: docs/design-notes/asset.md#filled-envelope).
+:func:`filled_envelope` closes the solid morphologically with a ball: every place the ball
 cannot reach without entering the solid becomes solid. Cavities narrower than the ball fill;
 convex parts and concave parts wider than it stay as they are. The lid over an opening of radius a
 is where the ball rests on its rim, so it sags into the opening by R - sqrt(R^2 - a^2) (a 45 mm ball

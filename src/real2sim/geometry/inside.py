@@ -8,9 +8,8 @@ turn (|w| ~ 2, still inside); an open internal sheet shifts w by less than 0.5
 away from the sheet. Taking |w| also accepts meshes whose faces all point inward.
 
 Speed: queries go to libigl in z-order (:func:`morton_order`), so that
-consecutive queries walk the same tree nodes; on 600k near-surface points this
-is about 2-3x faster than random order, with identical results (measured in
-``docs/benchmarks/sdf_sampling.md``).
+consecutive queries walk the same tree nodes; the answers are the same in any
+order (why: docs/design-notes/asset.md#inside-tests-z-order-and-short-edges).
 """
 
 from __future__ import annotations
@@ -96,9 +95,8 @@ def compact_triangles(mesh: trimesh.Trimesh, edges_per_extent: float = 25.0) -> 
     """The same surface with no edge longer than 1/``edges_per_extent`` of the largest extent.
 
     libigl's fast winding number slows down badly on long sliver triangles (the
-    fan caps of a cylinder, the caps manifold3d makes when it trims): on the
-    576-face test can, 200k queries took 14 s as is and 2.2 s after splitting the
-    long edges (identical inside/outside answers; loaded 2-core machine).
+    fan caps of a cylinder, the caps manifold3d makes when it trims;
+    why: docs/design-notes/asset.md#inside-tests-z-order-and-short-edges).
     Splitting edges at their midpoints does not move the surface.
     """
     max_edge = float(np.max(mesh.extents)) / edges_per_extent

@@ -31,13 +31,9 @@ _TEXTURE_PX = 512
 # texture spans u in [0, _U_SPAN] and is drawn periodic in angle over that span.
 _U_SPAN = 1.25
 
-# A body that rolls on its side rolls on the flats of its tessellation, and the ramp task
-# sees them far below what a camera resolves: the bundled 72-section can (flats 32 um inside
-# the circle) and the same can with 1032 sections end about 0.01 m OCAE apart on the ramp
-# (docs/benchmarks/tessellation.md). ``make_object(..., rolling_sagitta_m=...)`` builds the
-# can and the bottle's body round to a given sagitta for measuring that; at ROUND_SAGITTA_M
-# the same comparison gives about 0.001 m. The bundled objects keep their tessellation, the
-# one every published figure was measured on.
+# Flats (m inside the circle) of a can or bottle body tessellated round enough for a body that rolls
+# on its side: ``make_object(..., rolling_sagitta_m=ROUND_SAGITTA_M)``. The bundled objects keep their
+# own tessellation (why: docs/design-notes/asset.md#bundled-objects-tessellation).
 ROUND_SAGITTA_M = 2.5e-6
 
 
@@ -46,12 +42,19 @@ class BundledObject:
     """A bundled object: its name, a suggested mass and how it looks."""
 
     name: str
+    """Name the CLI and the benchmarks know it by."""
     mass_kg: float
+    """Suggested mass, kg."""
     description: str
-    build: Callable[[float | None], trimesh.Trimesh]  # rolling sagitta (m), None: as bundled -> mesh
+    """One line of what it is, for listings."""
+    build: Callable[[float | None], trimesh.Trimesh]
+    """Its mesh (metres, standing on z = 0) given a rolling sagitta in metres, or None: as bundled."""
     body_rgb: tuple[int, int, int]
+    """Colour of the body, 0-255 per channel."""
     accent_rgb: tuple[int, int, int]
-    accent_above_m: float  # z above which the accent colour (cap, rim) is used
+    """Colour of the cap or rim, 0-255 per channel."""
+    accent_above_m: float
+    """Height (z, metres) above which :attr:`accent_rgb` is used."""
 
 
 def _revolve(radius_m: np.ndarray, z_m: np.ndarray, sections: int) -> trimesh.Trimesh:
@@ -137,7 +140,7 @@ def make_object(name: str, rolling_sagitta_m: float | None = None) -> trimesh.Tr
 
     ``rolling_sagitta_m``: None for the bundled object; a value tessellates the bottle's body
     or the can so that their flats lie at most that far inside the round surface they stand
-    for (``benchmarks/bench_tessellation.py`` measures what that does). The mug's handle
+    for (why: docs/design-notes/asset.md#bundled-objects-tessellation). The mug's handle
     keeps it from rolling; it is not changed."""
     mesh = _lookup(name).build(rolling_sagitta_m)
     mesh = trimesh.Trimesh(mesh.vertices, mesh.faces, process=True)

@@ -17,16 +17,22 @@ import trimesh
 
 @dataclass(frozen=True)
 class PictureCamera:
-    """A pinhole camera in the mesh's frame (metres): position, unit forward/right/up axes,
-    horizontal field of view (degrees) and image size (pixels)."""
+    """A pinhole camera in the mesh's frame that a picture is cast from."""
 
     position_m: tuple[float, float, float]
+    """Centre of projection, metres, in the mesh's frame."""
     forward: tuple[float, float, float]
+    """Unit viewing direction, in the mesh's frame."""
     right: tuple[float, float, float]
+    """Unit image x axis (towards increasing column), perpendicular to :attr:`forward`."""
     up: tuple[float, float, float]
+    """Unit image up axis (towards decreasing row), perpendicular to :attr:`forward` and :attr:`right`."""
     fov_deg: float = 35.0
+    """Horizontal field of view, degrees, in (0, 180)."""
     width_px: int = 320
+    """Image width, pixels, >= 1."""
     height_px: int = 240
+    """Image height, pixels, >= 1."""
 
 
 def look_at_camera(bounds_m: np.ndarray, azimuth_deg: float = 35.0, elevation_deg: float = 25.0,

@@ -3,7 +3,7 @@
 A silhouette of an object the cameras look at leaves some of the image to the table and
 the room around it. A mask that covers (nearly) the whole image says nothing about the
 object's shape: a visual hull or a field trained on it fills the whole working volume
-(an all-white mask set came out 94 mm off, issue 33). Shared by the mask stage (which
+(why: docs/design-notes/asset.md#full-masks). Shared by the mask stage (which
 writes or accepts masks) and reconstruction (which reads them).
 """
 

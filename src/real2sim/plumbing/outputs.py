@@ -10,8 +10,9 @@ Every verb writes through this module (docs/reliability.md):
   output that is, contains or lies inside an input, that is or contains the working
   folder, or that is a non-empty folder real2sim did not make (no :data:`MARKER_NAME`
   file); and it checks the path itself (kind, writable parent, name length);
-- :func:`output_lock` gives one writer per output: a second one gets a clear
-  :class:`UserInputError` instead of two processes sharing a temporary folder;
+- :func:`~real2sim.plumbing.locks.output_lock` (importable from here too) gives one writer per
+  output: a second one gets a clear :class:`UserInputError` instead of two processes sharing a
+  temporary folder;
 - what is written respects the user's umask (``tempfile`` alone makes folders 0700 and
   files 0600, which a colleague cannot read).
 """
@@ -22,7 +23,6 @@ import errno
 import fcntl
 import json
 import os
-import re
 import shutil
 import tempfile
 import threading
@@ -32,6 +32,7 @@ from typing import Iterable, Iterator
 
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.inputs import check_outputs_spare_inputs, resolve_path
+from real2sim.plumbing.locks import output_lock
 
 #: File inside every output folder real2sim makes; ``--overwrite`` replaces only folders that hold it.
 MARKER_NAME = ".real2sim"
@@ -226,90 +227,6 @@ def make_output_dir(path: Path, made_by: str = "real2sim") -> Path:
 
 
 # ---------------------------------------------------------------------------------------------
-# one writer per output
-
-
-_held_locks: dict[Path, list] = {}
-_held_guard = threading.Lock()
-
-
-def _lock_path(target: Path, inside: bool) -> Path:
-    return target / ".real2sim.lock" if inside else target.with_name(f".{target.name}.lock")
-
-
-@contextmanager
-def output_lock(target: Path | str, *, inside: bool = False) -> Iterator[None]:
-    """Hold the lock of output ``target`` for the block: a ``.NAME.lock`` file beside it, or
-    with ``inside`` (a folder edited in place, such as a dataset) a file in it.
-
-    Re-entrant within a process. A second process gets ``UserInputError`` at once rather
-    than waiting: two writers of one output are a mistake to report, not to queue.
-    """
-    target = Path(os.path.abspath(target))
-    path = _lock_path(target, inside)
-    with _held_guard:
-        held = _held_locks.get(path)
-        if held is not None:
-            held[1] += 1
-    if held is not None:
-        try:
-            yield
-        finally:
-            with _held_guard:
-                held[1] -= 1
-        return
-    if inside and not target.is_dir():
-        from real2sim.plumbing.paths import missing
-
-        raise UserInputError(f"{target} is not a folder" if target.exists() else missing(target, "folder"))
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except (FileExistsError, NotADirectoryError):
-        raise UserInputError(f"cannot write {target}: {path.parent} is not a folder") from None
-    except OSError as exc:
-        raise UserInputError(f"cannot write {target}: {os.strerror(exc.errno).lower()}") from None
-    while True:
-        try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
-        except PermissionError:
-            raise UserInputError(f"cannot write {target}: {path.parent} is read-only for you") from None
-        except OSError as exc:  # /proc and the like: the folder exists, but nothing can be made in it
-            raise UserInputError(f"cannot write {target}: nothing can be made in {path.parent} "
-                                 f"({os.strerror(exc.errno).lower()})") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            os.close(fd)
-            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-                raise UserInputError(f"another real2sim process is writing {target} (lock {path}); "
-                                     "wait for it to finish or choose another output") from None
-            raise
-        # The holder before us may have unlinked the file between our open and flock: then
-        # we hold a lock nobody else can see; take the lock on the file that is there now.
-        try:
-            same = os.fstat(fd).st_ino == os.stat(path).st_ino
-        except FileNotFoundError:
-            same = False
-        if same:
-            break
-        os.close(fd)
-    with _held_guard:
-        _held_locks[path] = [fd, 1]
-    try:
-        yield
-    finally:
-        with _held_guard:
-            entry = _held_locks[path]
-            entry[1] -= 1
-            release = entry[1] == 0
-            if release:
-                del _held_locks[path]
-        if release:
-            path.unlink(missing_ok=True)
-            os.close(fd)
-
-
-# ---------------------------------------------------------------------------------------------
 # folders
 
 
@@ -357,29 +274,6 @@ def publish_dir(finished: Path, target: Path, made_by: str = "real2sim") -> None
         shutil.rmtree(old, ignore_errors=True)
     else:
         finished.rename(target)
-
-
-# ---------------------------------------------------------------------------------------------
-# temporary names in messages
-
-
-#: A temporary name made here (``.NAME.tmp-XXXXXXXX`` and, for a file, its suffix again): group 1 is NAME.
-_TEMPORARY_NAME = re.compile(r"\.([^/\s'\"]+?)\.tmp-[a-z0-9_]{8}(?:\.[A-Za-z0-9]{1,8})?(?=$|[/\s'\":,;)])")
-
-
-def public_paths(text: str) -> str:
-    """``text`` with each temporary name (``.NAME.tmp-XXXXXXXX``) that no longer exists replaced by
-    the NAME it was going to become: a message about a failed write names the output the user asked
-    for, not a temporary path that was removed on the way out. Temporary paths that still exist
-    (a result kept on purpose) stay as they are."""
-    def public(match: re.Match) -> str:
-        start = text.rfind(" ", 0, match.start()) + 1
-        prefix = text[start:match.start()].lstrip("'\"(")
-        if Path(prefix + match.group(0)).exists():
-            return match.group(0)
-        return match.group(1)
-
-    return _TEMPORARY_NAME.sub(public, text)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -31,7 +31,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from real2sim.asset.export.round_pieces import round_polytope
-from real2sim.asset.export.writers import _num, _nums, standard_urdf_geometry, urdf_link
+from real2sim.asset.export.urdf_common import num, nums, standard_urdf_geometry, urdf_link
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.physical import PhysicalProperties
@@ -81,12 +81,12 @@ def build_portable_urdf(geometry: CollisionGeometry, props: PhysicalProperties, 
     robot, link = urdf_link(props, visual_mesh_relpath, model_name, link_name)
     for k, shape in enumerate(geometry.shapes):
         col = ET.SubElement(link, "collision", name=f"collision_{k:04d}")
-        ET.SubElement(col, "origin", xyz=_nums(shape.position_m), rpy=_nums(quaternion_to_rpy(shape.quaternion_wxyz)))
+        ET.SubElement(col, "origin", xyz=nums(shape.position_m), rpy=nums(quaternion_to_rpy(shape.quaternion_wxyz)))
         geom = ET.SubElement(col, "geometry")
         if not standard_urdf_geometry(geom, shape):
             ET.SubElement(geom, "mesh", filename=portable_mesh_file(shape, k))
     contact_el = ET.SubElement(link, "contact")
-    ET.SubElement(contact_el, "lateral_friction", value=_num(contact.mu_dynamic))
+    ET.SubElement(contact_el, "lateral_friction", value=num(contact.mu_dynamic))
     return robot
 
 

@@ -8,8 +8,8 @@ schema has no ellipsoid. Such shapes are handed over as convex mesh pieces, writ
   ``AROUND`` vertices per ring), **without pole vertices**: the ring nearest each pole
   is a flat polygon perpendicular to the shape's axis. An upright ellipsoid or capsule
   then rests on that facet, upright, as the smooth shape does; a pole vertex would make
-  it balance on a point and rock onto one of the facets around it (MuJoCo measured that
-  with the superquadric polytopes: 1.7 degrees off, tests/asset/test_mjcf.py).
+  it balance on a point and rock onto one of the facets around it
+  (why: docs/design-notes/asset.md#round-pieces-without-poles).
 * scaled about its centre until its volume equals the smooth shape's closed-form volume,
   as :mod:`real2sim.collision.superquadric` does for superquadrics: the inscribed polytope
   would otherwise be a few percent smaller than the fitted shape.

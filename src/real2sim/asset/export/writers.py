@@ -43,9 +43,8 @@ written as *rigid* hydroelastic whenever the contact properties ask for
 compliant (a rigid non-convex mesh against a compliant environment keeps its
 shape). A tetrahedral ``.vtk`` mesh keeps its shape when compliant and is written
 as asked. Point contact is different: Drake's point contact treats a non-convex
-``.obj`` mesh as its convex hull (checked on 1.51: a probe in the empty corner of
-an L-shaped mesh touches it under point contact, not under rigid hydroelastic), so
-the ``mesh`` representation is only non-convex under hydroelastic contact.
+``.obj`` mesh as its convex hull (Drake 1.51; why: docs/design-notes/asset.md#drake-point-contact-and-meshes),
+so the ``mesh`` representation is only non-convex under hydroelastic contact.
 
 ``drake:point_contact_stiffness`` is written from ContactProperties (see there why
 it is softer than Drake's default); ``drake:relaxation_time`` (SAP's dissipation) is
@@ -55,8 +54,8 @@ Environment caveat (Drake 1.51): a *compliant* half-space has no hydroelastic
 contact with *compliant* shapes of any kind; Drake silently falls back to point
 contact for those pairs. Give a compliant object a compliant box (or rigid) floor.
 
-Numbers are written with ``repr`` (shortest round-trip float text), so a file
-read back gives the same doubles that were written.
+Numbers are written with ``repr`` (shortest round-trip float text,
+:mod:`real2sim.asset.export.urdf_common`), so a file read back gives the same doubles that were written.
 """
 
 from __future__ import annotations
@@ -67,6 +66,8 @@ from pathlib import Path
 
 import numpy as np
 
+from real2sim.asset.export.portable_urdf import write_portable_urdf
+from real2sim.asset.export.urdf_common import num, nums, standard_urdf_geometry, urdf_link, urdf_origin
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import POINT_URDF_NAME, ContactProperties
 from real2sim.formats.rotations import quaternion_to_rpy
@@ -96,14 +97,6 @@ ET.register_namespace("drake", DRAKE_NS)
 def _d(tag: str) -> str:
     """Qualified name of a Drake extension element."""
     return f"{{{DRAKE_NS}}}{tag}"
-
-
-def _num(x: float) -> str:
-    return repr(float(x))
-
-
-def _nums(values) -> str:
-    return " ".join(_num(v) for v in values)
 
 
 def _hydroelastic_type(shape: CollisionShape, contact: ContactProperties) -> str:
@@ -148,30 +141,15 @@ def _urdf_proximity(parent: ET.Element, hydro: str, contact: ContactProperties, 
     prox = ET.SubElement(parent, _d("proximity_properties"))
     if hydro == "compliant":
         ET.SubElement(prox, _d("compliant_hydroelastic"))
-        ET.SubElement(prox, _d("hydroelastic_modulus"), value=_num(contact.hydroelastic_modulus_pa))
-        ET.SubElement(prox, _d("mesh_resolution_hint"), value=_num(hint_m))
+        ET.SubElement(prox, _d("hydroelastic_modulus"), value=num(contact.hydroelastic_modulus_pa))
+        ET.SubElement(prox, _d("mesh_resolution_hint"), value=num(hint_m))
     elif hydro == "rigid":
         ET.SubElement(prox, _d("rigid_hydroelastic"))
-        ET.SubElement(prox, _d("mesh_resolution_hint"), value=_num(hint_m))
-    ET.SubElement(prox, _d("point_contact_stiffness"), value=_num(contact.point_contact_stiffness_n_per_m))
-    ET.SubElement(prox, _d("hunt_crossley_dissipation"), value=_num(contact.hunt_crossley_dissipation_s_per_m))
-    ET.SubElement(prox, _d("mu_dynamic"), value=_num(contact.mu_dynamic))
-    ET.SubElement(prox, _d("mu_static"), value=_num(contact.mu_static))
-
-
-def standard_urdf_geometry(geom: ET.Element, shape: CollisionShape) -> bool:
-    """Write ``shape`` into ``<geometry>`` ``geom`` if URDF itself has it (box, sphere, cylinder);
-    whether it did."""
-    s = shape.size_m
-    if shape.kind == "box":
-        ET.SubElement(geom, "box", size=_nums(s))
-    elif shape.kind == "sphere":
-        ET.SubElement(geom, "sphere", radius=_num(s[0]))
-    elif shape.kind == "cylinder":
-        ET.SubElement(geom, "cylinder", radius=_num(s[0]), length=_num(s[1]))
-    else:
-        return False
-    return True
+        ET.SubElement(prox, _d("mesh_resolution_hint"), value=num(hint_m))
+    ET.SubElement(prox, _d("point_contact_stiffness"), value=num(contact.point_contact_stiffness_n_per_m))
+    ET.SubElement(prox, _d("hunt_crossley_dissipation"), value=num(contact.hunt_crossley_dissipation_s_per_m))
+    ET.SubElement(prox, _d("mu_dynamic"), value=num(contact.mu_dynamic))
+    ET.SubElement(prox, _d("mu_static"), value=num(contact.mu_static))
 
 
 def _urdf_geometry(parent: ET.Element, shape: CollisionShape) -> None:
@@ -180,41 +158,13 @@ def _urdf_geometry(parent: ET.Element, shape: CollisionShape) -> None:
     if standard_urdf_geometry(geom, shape):
         return
     if shape.kind == "ellipsoid":
-        ET.SubElement(geom, _d("ellipsoid"), a=_num(s[0]), b=_num(s[1]), c=_num(s[2]))
+        ET.SubElement(geom, _d("ellipsoid"), a=num(s[0]), b=num(s[1]), c=num(s[2]))
     elif shape.kind == "capsule":
-        ET.SubElement(geom, _d("capsule"), radius=_num(s[0]), length=_num(s[1]))
+        ET.SubElement(geom, _d("capsule"), radius=num(s[0]), length=num(s[1]))
     else:  # convex / mesh
         mesh = ET.SubElement(geom, "mesh", filename=str(shape.mesh_file))
         if shape.kind == "convex":
             ET.SubElement(mesh, _d("declare_convex"))
-
-
-def _urdf_origin(parent: ET.Element, xyz, rpy) -> None:
-    ET.SubElement(parent, "origin", xyz=_nums(xyz), rpy=_nums(rpy))
-
-
-def urdf_link(props: PhysicalProperties, visual_mesh_relpath: str | None, model_name: str,
-              link_name: str) -> tuple[ET.Element, ET.Element]:
-    """``(<robot>, <link>)``: the one link with its inertial (module docstring) and, given a path, the
-    visual mesh; collision elements are the caller's."""
-    robot = ET.Element("robot", name=model_name)
-    link = ET.SubElement(robot, "link", name=link_name)
-    inertial = ET.SubElement(link, "inertial")
-    _urdf_origin(inertial, props.com_m, (0.0, 0.0, 0.0))
-    ET.SubElement(inertial, "mass", value=_num(props.mass_kg))
-    i = props.inertia
-    ET.SubElement(
-        inertial,
-        "inertia",
-        ixx=_num(i[0, 0]), ixy=_num(i[0, 1]), ixz=_num(i[0, 2]),
-        iyy=_num(i[1, 1]), iyz=_num(i[1, 2]), izz=_num(i[2, 2]),
-    )  # fmt: skip
-    if visual_mesh_relpath:
-        visual = ET.SubElement(link, "visual", name="visual")
-        _urdf_origin(visual, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-        vgeom = ET.SubElement(visual, "geometry")
-        ET.SubElement(vgeom, "mesh", filename=visual_mesh_relpath)
-    return robot, link
 
 
 def build_urdf(
@@ -231,7 +181,7 @@ def build_urdf(
 
     for k, shape in enumerate(geometry.shapes):
         col = ET.SubElement(link, "collision", name=f"collision_{k:04d}")
-        _urdf_origin(col, shape.position_m, quaternion_to_rpy(shape.quaternion_wxyz))
+        urdf_origin(col, shape.position_m, quaternion_to_rpy(shape.quaternion_wxyz))
         _urdf_geometry(col, shape)
         _urdf_proximity(col, _hydroelastic_type(shape, contact), contact, resolution_hint_m(shape, contact))
     return robot
@@ -265,30 +215,30 @@ def _sdf_proximity(parent: ET.Element, hydro: str, contact: ContactProperties, h
     prox = ET.SubElement(parent, _d("proximity_properties"))
     if hydro == "compliant":
         ET.SubElement(prox, _d("compliant_hydroelastic"))
-        _text(prox, _d("hydroelastic_modulus"), _num(contact.hydroelastic_modulus_pa))
-        _text(prox, _d("mesh_resolution_hint"), _num(hint_m))
+        _text(prox, _d("hydroelastic_modulus"), num(contact.hydroelastic_modulus_pa))
+        _text(prox, _d("mesh_resolution_hint"), num(hint_m))
     elif hydro == "rigid":
         ET.SubElement(prox, _d("rigid_hydroelastic"))
-        _text(prox, _d("mesh_resolution_hint"), _num(hint_m))
-    _text(prox, _d("point_contact_stiffness"), _num(contact.point_contact_stiffness_n_per_m))
-    _text(prox, _d("hunt_crossley_dissipation"), _num(contact.hunt_crossley_dissipation_s_per_m))
-    _text(prox, _d("mu_dynamic"), _num(contact.mu_dynamic))
-    _text(prox, _d("mu_static"), _num(contact.mu_static))
+        _text(prox, _d("mesh_resolution_hint"), num(hint_m))
+    _text(prox, _d("point_contact_stiffness"), num(contact.point_contact_stiffness_n_per_m))
+    _text(prox, _d("hunt_crossley_dissipation"), num(contact.hunt_crossley_dissipation_s_per_m))
+    _text(prox, _d("mu_dynamic"), num(contact.mu_dynamic))
+    _text(prox, _d("mu_static"), num(contact.mu_static))
 
 
 def _sdf_geometry(parent: ET.Element, shape: CollisionShape) -> None:
     geom = ET.SubElement(parent, "geometry")
     s = shape.size_m
     if shape.kind == "box":
-        _text(ET.SubElement(geom, "box"), "size", _nums(s))
+        _text(ET.SubElement(geom, "box"), "size", nums(s))
     elif shape.kind == "sphere":
-        _text(ET.SubElement(geom, "sphere"), "radius", _num(s[0]))
+        _text(ET.SubElement(geom, "sphere"), "radius", num(s[0]))
     elif shape.kind in ("cylinder", "capsule"):
         el = ET.SubElement(geom, shape.kind)
-        _text(el, "radius", _num(s[0]))
-        _text(el, "length", _num(s[1]))
+        _text(el, "radius", num(s[0]))
+        _text(el, "length", num(s[1]))
     elif shape.kind == "ellipsoid":
-        _text(ET.SubElement(geom, "ellipsoid"), "radii", _nums(s))
+        _text(ET.SubElement(geom, "ellipsoid"), "radii", nums(s))
     else:
         mesh = ET.SubElement(geom, "mesh")
         _text(mesh, "uri", str(shape.mesh_file))
@@ -311,12 +261,12 @@ def build_sdf(
     link = ET.SubElement(model, "link", name=link_name)
 
     inertial = ET.SubElement(link, "inertial")
-    _text(inertial, "pose", _nums(tuple(props.com_m) + (0.0, 0.0, 0.0)))
-    _text(inertial, "mass", _num(props.mass_kg))
+    _text(inertial, "pose", nums(tuple(props.com_m) + (0.0, 0.0, 0.0)))
+    _text(inertial, "mass", num(props.mass_kg))
     inertia = ET.SubElement(inertial, "inertia")
     i = props.inertia
     for tag, (r, c) in zip(("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
-        _text(inertia, tag, _num(i[r, c]))
+        _text(inertia, tag, num(i[r, c]))
 
     if visual_mesh_relpath:
         visual = ET.SubElement(link, "visual", name="visual")
@@ -325,7 +275,7 @@ def build_sdf(
 
     for k, shape in enumerate(geometry.shapes):
         col = ET.SubElement(link, "collision", name=f"collision_{k:04d}")
-        _text(col, "pose", _nums(tuple(shape.position_m) + quaternion_to_rpy(shape.quaternion_wxyz)))
+        _text(col, "pose", nums(tuple(shape.position_m) + quaternion_to_rpy(shape.quaternion_wxyz)))
         _sdf_geometry(col, shape)
         _sdf_proximity(col, _hydroelastic_type(shape, contact), contact, resolution_hint_m(shape, contact))
     return sdf
@@ -386,8 +336,6 @@ def write_representation(
                                                                         model_name, link_name))
     else:  # rewritten without a point-contact model: none may stay behind from an earlier material
         (rep_dir / POINT_URDF_NAME).unlink(missing_ok=True)
-    from real2sim.asset.export.portable_urdf import write_portable_urdf
-
     write_portable_urdf(rep_dir, *args)
     if "sdf" in formats:
         (rep_dir / "model.sdf").write_text(write_model_sdf_string(*args))
