@@ -172,7 +172,7 @@ def frame_bound(dataset: Path, noise: tuple[float, float], trials: int = 200) ->
 
     from real2sim.capture.sim.wrist_camera import perturb_poses
     from real2sim.formats.dataset import read_ground_truth
-    from real2sim.reconstruct.poses.silhouette import common_point, mask_centres
+    from real2sim.reconstruct.poses.centring import common_point, mask_centres
     from real2sim.multiview.views import load_views
 
     views = load_views(dataset)

@@ -28,7 +28,7 @@ def cut_ring(tmp_path_factory):
     from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.formats.dataset import read_ground_truth
     from real2sim.geometry.objects import make_textured_object
-    from real2sim.reconstruct.poses.silhouette import mask_centres
+    from real2sim.reconstruct.poses.centring import mask_centres
     from real2sim.reconstruct.truth import load_truth
 
     out = tmp_path_factory.mktemp("cut_ring") / "bottle"
@@ -52,8 +52,9 @@ def test_views_cut_by_the_border_are_not_rolled_off(cut_ring):
     true camera sees it. Measured (the worst pixel of each view, 36 fits): p90 3.5 px, max 7.7 px; with
     ``SPILL_WEIGHT`` (0.03) p90 12.6 px, max 22.8 px."""
     from real2sim.capture.sim.wrist_camera import perturb_poses
-    from real2sim.reconstruct.poses.silhouette import ALL_OUTLIER_FRACTION, ALL_SPILL_WEIGHT, align_view, \
-        leave_one_out_surfaces
+    from real2sim.reconstruct.poses.others_hull import leave_one_out_surfaces
+    from real2sim.reconstruct.poses.silhouette import ALL_OUTLIER_FRACTION, ALL_SPILL_WEIGHT
+    from real2sim.reconstruct.poses.view_fit import align_view
 
     views, cut, points = cut_ring
     assert len(cut) >= 10

@@ -252,7 +252,7 @@ def test_photo_carving_is_left_out_after_aligning_every_view(tiny_config):
     11k voxels from inside it): the field's config loses photo carving, loudly; other configs are kept."""
     from dataclasses import replace
 
-    from real2sim.reconstruct.stage import CARVING_OFF_ALIGNED, carving_after_alignment
+    from real2sim.reconstruct.config import CARVING_OFF_ALIGNED, carving_after_alignment
 
     with pytest.warns(RuntimeWarning, match="photo carving skipped"):
         config, said = carving_after_alignment(tiny_config)
@@ -270,7 +270,7 @@ def test_field_pose_corrections_are_left_out_after_aligning_every_view(tiny_conf
     are kept."""
     from dataclasses import replace
 
-    from real2sim.reconstruct.stage import FIELD_POSES_OFF_ALIGNED, field_poses_after_alignment
+    from real2sim.reconstruct.config import FIELD_POSES_OFF_ALIGNED, field_poses_after_alignment
 
     assert tiny_config.field.pose_refinement  # the default
     with pytest.warns(RuntimeWarning, match="field pose corrections skipped"):
@@ -288,7 +288,8 @@ def test_field_pose_corrections_are_left_out_after_aligning_every_view(tiny_conf
 def test_field_on_aligned_poses_runs_without_photo_carving(can_capture, tmp_path, tiny_config):
     """The stage end to end with the field backend: every pose the robot's and marked not refined; the
     views are aligned, carving is skipped with a WARNING, and the report and its config say so."""
-    from real2sim.reconstruct.stage import CARVING_OFF_ALIGNED, reconstruct
+    from real2sim.reconstruct.config import CARVING_OFF_ALIGNED
+    from real2sim.reconstruct.stage import reconstruct
     from tests.reconstruct.conftest import copy_dataset, edit_transforms
 
     dataset = edit_transforms(copy_dataset(can_capture, tmp_path / "marked", ground_truth=True),
@@ -319,7 +320,7 @@ def test_views_far_off_are_first_turned_onto_a_common_point(can_capture, truth):
     land less than half as far from where the true cameras see them; with the robot's own noise (1 degree,
     5 mm: a few per cent of the can) nothing is turned, since the mask's centre is itself only a few
     pixels right."""
-    from real2sim.reconstruct.poses.silhouette import CENTRE_MIN_OFFSET, centre_views
+    from real2sim.reconstruct.poses.centring import CENTRE_MIN_OFFSET, centre_views
 
     views = load_views(can_capture)
     points = np.asarray(truth.vertices)
@@ -341,7 +342,7 @@ def test_views_far_off_are_first_turned_onto_a_common_point(can_capture, truth):
 def test_a_mask_cut_by_the_border_is_turned_only_along_its_whole_axis(can_capture):
     """A view whose mask runs off the image's left edge has no centre across the image: its camera is
     turned so the common point keeps its place across and lands on the mask's centre up and down."""
-    from real2sim.reconstruct.poses.silhouette import common_point, mask_centres, turned_onto
+    from real2sim.reconstruct.poses.centring import common_point, mask_centres, turned_onto
 
     views = _turned(load_views(can_capture), 4.0, seed=6)
     mask = views.mask.copy()
@@ -364,7 +365,7 @@ def test_a_far_camera_is_not_moved_along_its_optical_axis(can_capture):
     one-sided fit walked them toward the object): the camera's move lies across its axis only, and it still
     brings the view back onto the others' hull."""
     from real2sim.reconstruct.poses.others_hull import leave_one_out_surfaces
-    from real2sim.reconstruct.poses.silhouette import align_view
+    from real2sim.reconstruct.poses.view_fit import align_view
 
     views = load_views(can_capture)
     noisy = _all_moved(views, seed=4)

@@ -9,15 +9,14 @@ or the point lies behind it. The score kept is a low order statistic of the vote
 rather than their minimum, so that a few bad masks or pose errors
 (``outlier_fraction`` of the views that see the voxel) cannot cut the object. The
 fraction is of the voxels' own voters, not of all views: counted over all views, a
-point only a few cameras see kept the non-voters' "inside" whatever those few said,
-and a wide bowl's search box never closed (its corners, seen by three close-up views,
-all counted as object). The hull is where the score is >= 0.5.
+point only a few cameras see would keep the non-voters' "inside" whatever those few said
+(docs/design-notes/reconstruct.md#visual-hull). The hull is where the score is >= 0.5.
 
 A point is *constrained* only when at least ``MIN_VOTES`` views see it from directions
 at least ``MIN_SPREAD_DEG`` apart (:func:`view_spread_deg`). A few neighbouring
 cameras of a ring, or of a long lens, see a thin, long cone together: their masks
-cannot say where along it the object is, and counting such points as inside let a
-real capture's region run off a metre past a 9 cm object. Points not constrained
+cannot say where along it the object is, and counting such points as inside lets the
+region run off far past the object (docs/design-notes/reconstruct.md#visual-hull). Points not constrained
 score 0, whatever their masks say; the same rule bounds the region the views see
 together (:func:`seen_together`), which no result may leave.
 
@@ -54,7 +53,7 @@ MIN_AGREEING = 2
 TRUSTED_SKIN_FRACTION = 0.5
 #: ... but only where a point lies more than this far outside its mask (pixels): closer in, the
 #: silhouettes of many views with poses a fraction of a pixel off disagree, and the strictest of
-#: them would erode the object (a bottle's hull from 100 refined views: 0.36 -> 0.79 mm Chamfer)
+#: them would erode the object (why: docs/design-notes/reconstruct.md#visual-hull)
 TRUSTED_MARGIN_PX = 1.5
 
 
@@ -84,7 +83,6 @@ def _middle_eigenvalue(a: torch.Tensor) -> torch.Tensor:
     p = torch.sqrt((torch.diagonal(centred, dim1=1, dim2=2) ** 2).sum(dim=1) + 2.0 * off) / np.sqrt(6.0)
     b = centred / p.clamp_min(1e-30)[:, None, None]
     # the 3x3 determinant written out: torch.linalg.det on CUDA loads its solver library on first use
-    # (0.9 s of the mug's hull on an H200)
     det = (b[:, 0, 0] * (b[:, 1, 1] * b[:, 2, 2] - b[:, 1, 2] * b[:, 2, 1])
            - b[:, 0, 1] * (b[:, 1, 0] * b[:, 2, 2] - b[:, 1, 2] * b[:, 2, 0])
            + b[:, 0, 2] * (b[:, 1, 0] * b[:, 2, 1] - b[:, 1, 1] * b[:, 2, 0]))
@@ -132,10 +130,11 @@ def _constrained(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tensor, m
     return ok
 
 
-def _mask_votes(views: PosedViews, points_m: np.ndarray, chunk: int, device: str | torch.device = "cpu"):
-    """Per chunk of ``chunk`` world points (metres): its first index, the points (tensor), their
-    grid_sample coordinates in every view, which views vote on them (:func:`_votes`), and each view's
-    bilinear mask value there, (V, chunk). Callers hold ``torch.no_grad()``."""
+def mask_votes(views: PosedViews, points_m: np.ndarray, chunk: int, device: str | torch.device = "cpu"):
+    """Per chunk of ``chunk`` world points (metres), a tuple: its first index, the points (tensor), their
+    grid_sample coordinates in every view, which views vote on them (V, chunk bool; :func:`_votes`), and
+    each view's bilinear mask value there (V, chunk). Callers hold ``torch.no_grad()``; the hull's scores
+    and the others' hull of :mod:`real2sim.reconstruct.poses.others_hull` count their votes from it."""
     masks = torch.from_numpy(views.mask[:, None]).to(device)  # (V, 1, H, W)
     touched = torch.from_numpy(border_touched(views.mask)).to(device)
     w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float().to(device)
@@ -164,7 +163,7 @@ def silhouette_scores(views: PosedViews, points_m: np.ndarray, outlier_fraction:
         outside_px = torch.from_numpy(_outside_distance_px(views.mask, trusted))[:, None].to(device)
     out = np.empty(len(points_m), dtype=np.float32)
     with torch.no_grad():
-        for start, pts, grid, seen, vals in _mask_votes(views, points_m, chunk, device):
+        for start, pts, grid, seen, vals in mask_votes(views, points_m, chunk, device):
             count = seen.sum(dim=0)
             floor = torch.where(count >= 2 * min_votes, MIN_AGREEING - 1, 0)
             rank = torch.maximum(torch.floor(outlier_fraction * count).long(), floor)
@@ -207,7 +206,7 @@ def lone_carving(views: PosedViews, points_m: np.ndarray, chunk: int = 100_000,
     """(V,) how many of ``points_m`` (world, metres) each view alone puts outside its mask (a vote below 0.5)."""
     counts = torch.zeros(views.count, dtype=torch.long, device=device)
     with torch.no_grad():
-        for _, _, _, seen, vals in _mask_votes(views, points_m, chunk, device):
+        for _, _, _, seen, vals in mask_votes(views, points_m, chunk, device):
             counts += (seen & (vals < 0.5)).sum(dim=1)
     return counts.cpu().numpy()
 

@@ -42,7 +42,7 @@ class PosedViews:
     c2w_cv: np.ndarray
     intrinsics: CameraIntrinsics
     names: tuple[str, ...]
-    # the views whose poses refine-poses could not refine (the robot's, millimetres off): see silhouette_poses
+    # the views whose poses refine-poses could not refine (the robot's, millimetres off): see reconstruct.poses
     unrefined: tuple[str, ...] = ()
 
     @property
@@ -94,7 +94,8 @@ def load_views(dataset: Dataset | Path | str, *, need_masks: bool = True,
     cameras that look at a common region (:func:`common_look_at_point`).
 
     Frames refine-poses marked as not refined are named in ``unrefined`` (kept; the reconstruct stage
-    moves their cameras, :mod:`silhouette_poses`). Images longer than ``max_side_px`` are reduced (area average; masks become soft at their
+    moves their cameras, :mod:`real2sim.reconstruct.poses.silhouette`).
+    Images longer than ``max_side_px`` are reduced (area average; masks become soft at their
     edges) and the camera with them, one image at a time: a phone capture of 200 photos at
     4032x3024 would need 29 GB as float images, and the field's grid cannot use the detail.
     """

@@ -10,7 +10,7 @@ capture's true object).
 from real2sim._lazy import lazy_exports
 
 _EXPORTS = {
-    "ReconstructConfig": "stage",
+    "ReconstructConfig": "config",
     "Reconstruction": "stage",
     "reconstruct": "stage",
     "import_external": "stage",

@@ -20,7 +20,7 @@ import sys
 import time
 import warnings
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Iterator
 
@@ -31,54 +31,8 @@ import trimesh
 from real2sim.formats.dataset import has_table_plane, read_dataset, stated_support_z_m
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.progress import ProgressFn
-from real2sim.reconstruct.field.train import FieldConfig
+from real2sim.reconstruct.config import ReconstructConfig, carving_after_alignment, field_poses_after_alignment
 from real2sim.multiview.views import MIN_VIEWS, PosedViews, held_out_split, load_views, refined_mask_edges
-
-BACKENDS = ("field", "hull")
-EXTRACTIONS = ("density", "tsdf")
-# where the density extraction cuts: the level the masks' edges choose, or ln 2 per voxel
-SURFACE_LEVELS = ("silhouettes", "half-light")
-MASK_EDGES = ("auto", "colour", "as-given")
-
-
-@dataclass(frozen=True)
-class ReconstructConfig:
-    """Settings of the reconstruct stage. Lengths in metres; the table top is the plane z = ``table_z_m``."""
-
-    backend: str = "field"
-    extraction: str = "density"
-    surface_level: str = "silhouettes"
-    # "colour": masks' edges moved to the images' colour edges within a few pixels (see refined_mask_edges);
-    # "auto" (default): as "colour", except that `run` keeps parallax masks as given
-    mask_edges: str = "auto"
-    # frames refine-poses could not refine are aligned by their silhouettes (silhouette_poses.py); False:
-    # taken as they are
-    silhouette_poses: bool = True
-    field: FieldConfig = field(default_factory=FieldConfig)
-    hull_voxels: int = 192
-    hull_outlier_fraction: float = 0.03
-    texture_px: int = 1024
-    max_faces: int = 40_000
-    held_out_every: int = 10
-    table_z_m: float = 0.0
-    min_part_volume_fraction: float = 0.05
-    # images are reduced to this many px on their longer side (None: as captured); see load_views
-    max_image_side_px: int | None = 640
-
-    def validate(self) -> None:
-        if self.backend not in BACKENDS:
-            raise UserInputError(f"unknown backend {self.backend!r} (choose from {', '.join(BACKENDS)})")
-        if self.extraction not in EXTRACTIONS:
-            raise UserInputError(f"unknown extraction {self.extraction!r} (choose from {', '.join(EXTRACTIONS)})")
-        if self.mask_edges not in MASK_EDGES:
-            raise UserInputError(f"unknown mask edges {self.mask_edges!r} (choose from {', '.join(MASK_EDGES)})")
-        if self.surface_level not in SURFACE_LEVELS:
-            raise UserInputError(f"unknown surface level {self.surface_level!r} (choose from {', '.join(SURFACE_LEVELS)})")
-        if not 16 <= self.hull_voxels <= 1024 or not 64 <= self.texture_px <= 8192:
-            raise UserInputError("hull voxels must be in 16..1024 and texture size in 64..8192 px")
-        if self.max_image_side_px is not None and self.max_image_side_px < 16:
-            raise UserInputError(f"images must keep at least 16 px on their longer side (got {self.max_image_side_px})")
-        self.field.validate()
 
 
 @dataclass(frozen=True)
@@ -89,49 +43,6 @@ class Reconstruction:
     mesh: trimesh.Trimesh
     report: dict
     field: object | None = None
-
-
-#: Why photo carving is left out when every pose came from the silhouettes (report.json's ``photo_carving``).
-CARVING_OFF_ALIGNED = ("off: every pose came from aligning the silhouettes (1-2 px apart on our captures), too "
-                       "coarse to compare colours between views; concavities the silhouettes cannot see stay filled")
-
-
-def carving_after_alignment(config: ReconstructConfig) -> tuple[ReconstructConfig, str]:
-    """``config`` without photo-consistent carving, when it had it, and what was done (for the report).
-
-    Photo carving removes hull voxels where the views disagree about their colour, which needs the
-    views registered to a fraction of a pixel; poses aligned by silhouettes alone are 1-2 px apart
-    (``silhouette_poses``: 1.5 px on the 60-view can below, 2.2 px on the no-table can), and on a textured
-    surface the views then disagree everywhere. Measured on the can
-    with no table at 5 mm / 1 deg (COLMAP registered 8 of 100 views, 2.2 px after alignment): carving
-    ate 11k voxels from inside the convex can that the masks' re-check could not put back, and the
-    field's mesh was 3.26 mm off (IoU 0.81) against 1.34 mm (0.90) without carving; on the 60-view
-    can at 256x192 the masks put back everything carving took (same 0.50 mm either way)."""
-    if config.backend != "field" or not config.field.photo_carving:
-        return config, "off" if config.backend == "field" else "not used by the hull backend"
-    warnings.warn("photo carving skipped: the poses were aligned by their silhouettes alone, too coarse to compare "
-                  "colours between views; concavities the silhouettes cannot see stay filled", RuntimeWarning,
-                  stacklevel=2)
-    return replace(config, field=config.field.with_carving(False)), CARVING_OFF_ALIGNED
-
-
-FIELD_POSES_OFF_ALIGNED = ("off: every pose came from aligning the silhouettes; learnt on top of that they made "
-                           "the shape worse on the one capture measured")
-
-
-def field_poses_after_alignment(config: ReconstructConfig) -> tuple[ReconstructConfig, str]:
-    """``config`` without the field's per-view pose corrections, when it had them, and what was done.
-
-    Measured on the can under every hard condition at once (a 1650 px lens 1.3 m away, level ring, cut-off
-    views, exposure jitter, JPEG; 5 mm / 1 deg on every pose, all aligned by their silhouettes; 2026-11-27):
-    the shape after the best translation 0.61 mm (IoU 0.95) without them, 1.23 mm (0.90) with them learnt on
-    the coarse grid (docs/benchmarks/hard_captures_can_all_field_poses.md). One capture, and why is not
-    known; the corrections stay the default where refine-poses refined the views."""
-    if config.backend != "field" or not config.field.pose_refinement:
-        return config, "off" if config.backend == "field" else "not used by the hull backend"
-    warnings.warn("field pose corrections skipped: every pose came from aligning the silhouettes, and on top of "
-                  "that they made the shape worse where measured", RuntimeWarning, stacklevel=2)
-    return replace(config, field=replace(config.field, pose_refinement=False)), FIELD_POSES_OFF_ALIGNED
 
 
 def resolve_device(device: str) -> str:
@@ -259,7 +170,7 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         report["photo_carved_voxels"] = trained.carved_voxels
         report["photo_carving_restored_voxels"] = trained.restored_voxels  # many: poses not refined?
         report["photo_carving_opened_voxels"] = trained.opened_voxels
-        if config.field.photo_carving:  # how it decided which views see a voxel (carving_views.py)
+        if config.field.photo_carving:  # how it decided which views see a voxel (carving/views.py)
             from real2sim.reconstruct.carving.views import visibility_method
 
             report["photo_carving_visibility"] = visibility_method(config.field.carving.visibility, device)

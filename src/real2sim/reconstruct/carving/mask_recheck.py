@@ -1,9 +1,9 @@
 """The silhouettes' re-check of a carved solid: a ray through a mask pixel that met the visual hull
 must still meet the solid, since the mask says something is on it.
 
-Photo-consistent carving (``photo_carving``) removes voxels whose views disagree in colour. Views
-also disagree where the poses are a few millimetres off, and there carving eats the object's
-outside from the top down (a 35 mm box on an unrefined 5 mm / 1 degree capture kept 2.5 mm of it).
+Photo-consistent carving (:mod:`real2sim.reconstruct.carving.photo`) removes voxels whose views
+disagree in colour. Views also disagree where the poses are a few millimetres off, and there carving
+eats the object's outside from the top down (docs/design-notes/reconstruct.md#mask-recheck).
 The masks catch that: the rays through it no longer meet anything. They say only *that* something
 is on such a ray, not where, so what is put back is chosen by how the carving went wrong
 (:func:`put_back_for_masks`).
@@ -44,12 +44,8 @@ def put_back_for_masks(views: PosedViews, grid: VoxelGrid, original: np.ndarray,
     through the skin, which the masks have now put back, so what the skin closes off (no way out to
     the grid's sides or top wider than ``2 * void_gap_voxels``: one mask ray per voxel footprint
     leaves gaps that no ray checks) is filled too, unless it was closed off before the put-back;
-    filled last, after the whole rays (a box on unrefined poses ran out of rounds with its skin
-    unfinished, and filling before the whole rays closed it left its inside hollow).
-    Measured on the can with 5 mm / 1 degree pose noise (``test_photo_carving``): without the fill
-    36 % of the hull stayed carved, shutting gaps of 2 voxels 24 %, of 4 voxels none. A band of one
-    voxel rather than two left fewer wrong voxels on an open bin's carving (33926 against 36907,
-    from 52819 putting back whole rays) and on the mug's (10052 against 10162)."""
+    filled last, after the whole rays have closed a skin the rounds left unfinished: filled before
+    them, its inside would stay hollow (why: docs/design-notes/reconstruct.md#mask-recheck)."""
     cube = np.ones((3, 3, 3), bool)
     now, deep, emptied = solid.copy(), True, None
     rays = _mask_rays(views, grid)
@@ -117,9 +113,9 @@ def _mask_ray_check(views: PosedViews, grid: VoxelGrid, original: np.ndarray, so
 
     Each ray is walked only across the box around ``original`` (outside it nothing can change a
     verdict), as one flat list of samples for all rays of a view rather than a padded (rays, steps)
-    array: the same samples, 3-5x faster on the mug and bowl (and on ``device``). ``rays``:
-    :func:`_mask_rays` of ``views`` and ``grid``, made once for many calls (a profile of the mug's carving on an
-    H200 counted 749 binary erosions, 2.4 s, most of them every mask eroded again on each call)."""
+    array: the same samples, several times faster (on ``device``). ``rays``: :func:`_mask_rays` of
+    ``views`` and ``grid``, made once for many calls, so that the masks are not eroded again on each
+    (why: docs/design-notes/reconstruct.md#carving-speed)."""
     carved = original & ~solid
     if within is not None:
         carved = carved & within

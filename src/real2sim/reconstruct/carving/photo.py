@@ -18,15 +18,15 @@ The test, per surface voxel: the colours at its projection in the views that
 see it (images blurred over half a voxel's footprint), their per-channel
 median, and each view's distance from it (RGB in [0, 1]); the *spread* is the
 ``spread_quantile`` of those distances, and the voxel disagrees when it exceeds
-``max_spread`` and at least ``min_views`` views see it. Three guards keep true
-surfaces, measured on the bundled objects:
+``max_spread`` and at least ``min_views`` views see it. These guards keep true
+surfaces:
 
 * brightness alone differs between views of a shiny or curved surface (the
   can's lid): a carve *starts* only where the hues disagree too (colour over
   brightness), and then grows through voxels next to what it removed, but not
   into a wall: a voxel that some views reach through the carved space and others
-  from outside has two true faces whose colours differ (without this guard the
-  carve ate through the mug's wall into its handle and rim);
+  from outside has two true faces whose colours differ (why:
+  docs/design-notes/reconstruct.md#carving-guards);
 * texture edges make isolated disagreeing voxels: a voxel goes only when most
   of the surface voxels around it disagree too;
 * what is carved in the end is kept only in connected parts of at least
@@ -54,15 +54,8 @@ surface here, however much the image varies around (the *depth test*: a cup's pl
 lower wall seen through its mouth, where the rim and a printed band make the contrast
 high). Walls keep what
 the silhouettes vouch for; the masks then judge the second pass on its own (a ray it
-emptied gets back what it took). On the bundled mug (100 views, 320x240, 80
-voxels, `bench_reconstruct`'s capture) the carved solid's wrong voxels (centres
-outside the true mesh kept + inside it removed) fell from 46039 + 12 after the
-first pass to 7480 + 2842 after the second (ratio 1.5). The ratio is 1.25: measured on four
-captures (the robot mug, a 60-photo handheld mug with parallax masks, `bench_shapes`' bowl and
-bin; `docs/benchmarks/carving_ratio_cuda.md`), 1.25 lowered the Chamfer distance of every one
-against 1.5 (mug 0.77 -> 0.66 mm, handheld mug 1.88 -> 1.79, bowl 1.27 -> 1.14, bin 1.01 -> 0.94)
-with no IoU lower by more than 0.005, while 1.0 opened the mugs further but ate the bowl's
-wall (IoU 0.73 -> 0.61) and 1.1 part of it (0.67). A concavity
+emptied gets back what it took). What each pass leaves, and how the ratio and the depth
+test were chosen: docs/design-notes/reconstruct.md#hollow-prior. A concavity
 the first pass never opens (no colour disagreement anywhere) stays filled.
 World frame, metres; the lowest layer of voxels (standing on the table) is never carved.
 """
@@ -77,56 +70,12 @@ from scipy.ndimage import distance_transform_edt, gaussian_filter
 
 from real2sim.plumbing.progress import ProgressFn
 from real2sim.multiview.views import bilinear
+from real2sim.reconstruct.carving.config import CarvingConfig
 from real2sim.reconstruct.carving.verdict import CarvingScene, Verdict, voxel_verdicts
 from real2sim.reconstruct.carving.views import cameras_on, occluder, sightings
 from real2sim.multiview.voxel_grid import VoxelGrid, voxel_footprint_px, voxel_parts
 from real2sim.reconstruct.carving.mask_recheck import put_back_for_masks
 from real2sim.multiview.views import PosedViews
-
-
-@dataclass(frozen=True)
-class CarvingConfig:
-    """Photo-consistent carving settings; see the module docstring."""
-
-    voxels: int = 80  # the carving grid has at least this many voxels along the longest side
-    max_spread: float = 0.15
-    spread_quantile: float = 0.75
-    max_hue_spread: float = 0.15
-    hue_quantile: float = 0.75
-    hue_floor: float = 0.3
-    min_views: int = 4
-    neighbour_fraction: float = 0.5
-    blur_voxels: float = 0.5
-    max_rounds: int = 150
-    visibility_tolerance_voxels: float = 1.0
-    # how a view's line of sight to a voxel is tested against the solid: "mesh" (Embree on its
-    # marching-cubes surface, rebuilt each round), "voxels" (the ray walked through the solid's
-    # trilinear interpolation with torch, voxel_rays.segments_clear), or "auto": the mesh on a CPU,
-    # the voxels on a GPU (carving_views.py)
-    visibility: str = "auto"
-    min_component_fraction: float = 0.1
-    # the second pass, the hollow prior (see module docstring); the image contrast (RGB std over a
-    # window of ``contrast_window_voxels`` footprints) below which a view cannot place a surface
-    hollow_prior: bool = True
-    featureless_contrast: float = 0.03
-    contrast_window_voxels: float = 2.0
-    # ... or where its views disagree at least this many times as much as its images vary locally
-    min_spread_to_contrast: float = 1.25
-    # ... or where the views would agree as well (within ``depth_test_margin``) about a surface this many
-    # voxels deeper (0: no such test). On the handheld mug 1.83 -> 1.02 mm; the bowl 1.14 -> 1.06 mm and the
-    # bin 0.94 -> 0.95 mm, both with IoU 0.08 lower (docs/benchmarks/carving_ratio_depth_cpu.md)
-    depth_test_voxels: float = 2.0
-    depth_test_margin: float = 0.02
-    # the hollow prior keeps every voxel within this many voxels of the visual hull's outside (or the table)
-    min_wall_voxels: float = 2.0
-    # each view's exposure and white balance taken out of its images first (view_exposure.py)
-    exposure_correction: bool = True
-    # the masks' re-check puts back first what lies within this many voxels of the carved solid, round
-    # by round (at most ``max_restore_rounds``), and then fills the voids its skin closes off: openings
-    # at most 2 * ``void_gap_voxels`` wide do not count as a way out (``mask_recheck.put_back_for_masks``)
-    restore_band_voxels: int = 1
-    max_restore_rounds: int = 20
-    void_gap_voxels: int = 2
 
 
 @dataclass(frozen=True)
@@ -150,7 +99,7 @@ def photo_carve(views: PosedViews, grid: VoxelGrid, solid: np.ndarray, config: C
                 progress: ProgressFn | None = None, device: str = "cpu") -> CarvingResult:
     """Carve the photo-inconsistent surface voxels of ``solid`` (bool, ``grid.shape``) round by round.
     ``device``: where the rounds run (torch: the colour tests, the lines of sight and the grids' morphology;
-    on a GPU the rounds were host-bound in numpy, 7 s of the mug's 13 s carving on an H200)."""
+    why: docs/design-notes/reconstruct.md#carving-speed)."""
     footprint_px = voxel_footprint_px(views, grid)
     images = _blurred(views.rgb, config.blur_voxels * footprint_px)
     cameras = cameras_on(views, device)
@@ -334,10 +283,8 @@ def _surface(solid: torch.Tensor) -> torch.Tensor:
 
 def _near(removed: torch.Tensor) -> torch.Tensor:
     """Voxels within two (26-neighbour steps) of ``removed``: only those can change verdict after a
-    round: the newly exposed ones and those that now see more views. Both passes use it; re-testing
-    only the face neighbours in the second pass left more wrong voxels (kept outside the true solid
-    plus removed inside it, 80 voxels, the benchmark captures: mug 11315 against 10322, bowl 27660
-    against 27349)."""
+    round: the newly exposed ones and those that now see more views. Both passes use it, rather than
+    the face neighbours alone (why: docs/design-notes/reconstruct.md#retesting)."""
     grown = removed.to(torch.uint8)
     for axis in range(3):  # the 5x5x5 box, one axis at a time
         grown = _shifted_along(grown, axis, 2, torch.maximum)

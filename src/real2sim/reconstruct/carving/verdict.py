@@ -6,16 +6,14 @@ the carving's device; world frame, metres; RGB in [0, 1].
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import torch
 
+from real2sim.reconstruct.carving.config import CarvingConfig
 from real2sim.reconstruct.carving.views import Cameras, Occluder, in_image, sightings
-from real2sim.multiview.views import project_torch
+from real2sim.multiview.views import bilinear, project_torch
 from real2sim.multiview.voxel_grid import VoxelGrid
-
-if TYPE_CHECKING:
-    from real2sim.reconstruct.carving.photo import CarvingConfig
 
 
 class CarvingScene(NamedTuple):
@@ -120,7 +118,7 @@ def _colour_spread(values: torch.Tensor, view_of: torch.Tensor, point_of: torch.
 def row_nanquantile(values: torch.Tensor, quantile: float) -> torch.Tensor:
     """``np.nanquantile(values, quantile, axis=1)`` (linear interpolation) for rows (P, V) with at
     least one number each, as a float64 tensor. numpy's own runs a Python function per row when there
-    are NaNs: 10 s of a 21 s mug carving."""
+    are NaNs (why: docs/design-notes/reconstruct.md#carving-speed)."""
     ordered = torch.sort(values, dim=1).values  # NaNs last
     count = (~torch.isnan(values)).sum(dim=1)
     position = quantile * (count - 1).to(torch.float64)

@@ -1,12 +1,9 @@
 """Each view's exposure and white balance, from how the views agree on the object's surface.
 
 Photographs taken with automatic exposure or white balance differ in brightness and tint from
-view to view. Photo-consistent carving (:mod:`photo_carving`) compares colours across views,
-so it reads such differences as a surface that is not there: on the can captured with
-0.5 stops of exposure and 10 % white-balance jitter per view (`capture --exposure-jitter 0.5
---white-balance-jitter 0.1`, 100 views at 320x240), it carved 102k voxels of a solid convex object
-and the reconstruction ended 1.7 mm off with IoU 0.39 (0.15 mm and 0.99 from the same views without
-the jitter); with the gains below taken out first, nothing was carved: 0.18 mm, IoU 0.99.
+view to view. Photo-consistent carving (:mod:`real2sim.reconstruct.carving.photo`) compares colours
+across views, so it reads such differences as a surface that is not there, and carves into a solid
+convex object (docs/design-notes/reconstruct.md#exposure).
 
 Cameras change exposure and white balance by gains in linear light, before the sRGB encoding.
 So the colours the views see of the visual hull's surface points are decoded to linear light
@@ -16,12 +13,11 @@ with the current gains taken out), four times over, each time on the half of the
 views agree on best. Pixels near black or clipped carry no gain and are left out. The gains are
 scaled so that their geometric mean over the views is 1 in each channel: the images keep their
 overall level, which the carving's thresholds assume. They are used only where they make the
-views agree clearly better (:data:`GAIN_EVIDENCE`); on the 160x120 test capture they follow the
-capture's own gains with a median error of 9 % (the texture's misregistration on a voxel grid is
-the noise), against a spread of 22 %.
+views agree clearly better (:data:`GAIN_EVIDENCE`); the texture's misregistration on a voxel grid is
+what limits them (docs/design-notes/reconstruct.md#exposure).
 
-The field learns its own per-view colour corrections (:mod:`view_corrections`); this is for
-the steps before it that compare raw colours.
+The field learns its own per-view colour corrections (:mod:`real2sim.reconstruct.field.view_corrections`);
+this is for the steps before it that compare raw colours.
 """
 
 from __future__ import annotations

@@ -1,13 +1,13 @@
-"""Which views see which voxels of a solid, for photo-consistent carving (``photo_carving``): a view
-sees a point when nothing of the solid lies on the ray from its camera nearer than the point.
+"""Which views see which voxels of a solid, for photo-consistent carving
+(:mod:`real2sim.reconstruct.carving.photo`): a view sees a point when nothing of the solid lies on the
+ray from its camera nearer than the point.
 
 Two tests of that ray (``CarvingConfig.visibility``): Embree on the solid's marching-cubes surface
 ("mesh"), or the ray walked through the solid's trilinear interpolation with torch ("voxels",
 :func:`real2sim.reconstruct.carving.voxel_rays.segments_blocked`). "auto" takes the mesh on a CPU, where
-Embree's BVH is 4x faster than walking every ray on 2 cores, and the voxels on a GPU, where the walk
-is a few gathers and rebuilding a mesh and a BVH every round is what costs (the mug's hull and
-carving 28.5 -> 12.3 s on an H200, the same carving). The sightings are torch tensors on the
-carving's device. World frame, metres.
+Embree's BVH beats walking every ray, and the voxels on a GPU, where the walk is a few gathers and
+rebuilding a mesh and a BVH every round is what costs (docs/design-notes/reconstruct.md#carving-visibility).
+The sightings are torch tensors on the carving's device. World frame, metres.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 lengths as one flat list, in chunks of bounded size.
 
 Two users: the masks' re-check (``mask_recheck``: does a mask pixel's ray still meet the solid?) and
-photo carving's visibility test on a GPU (``photo_carving``: does anything of the solid stand between
+photo carving's visibility test on a GPU (``carving.views``: does anything of the solid stand between
 a camera and a voxel?). On a CPU carving asks Embree instead, on the solid's marching-cubes surface:
 there a BVH over a few thousand triangles beats walking every ray; on a GPU the walk is a few
 gathers and rebuilding a mesh and a BVH every carving round is what costs.
@@ -102,16 +102,13 @@ def segments_blocked(solid: torch.Tensor, grid: VoxelGrid, origins: torch.Tensor
     end = torch.minimum(leave, length)
     count = torch.where(end >= enter, torch.floor((end - enter) / step_m).to(torch.int64) + 1, 0)
     # trilinear, as the marching-cubes surface Embree would test against: its level-0.5 surface cuts
-    # the voxels' corners where a cube's would stand proud (the nearest voxel saw 6 % fewer of the
-    # mug's sightings, and the carving it drove left the mug's Chamfer 8 % worse on an H200)
+    # the voxels' corners where a cube's would stand proud (why: docs/design-notes/reconstruct.md#voxel-rays)
     occupancy = solid.permute(2, 1, 0)[None, None].to(torch.float64).contiguous()  # (1, 1, Z, Y, X)
     to_unit = 2.0 / torch.clamp(index.shape - 1, min=1).to(torch.float64)
     centre_0 = index.lo + 0.5 * index.voxel_m
     blocked = torch.zeros(len(o), dtype=torch.bool, device=device)
     # counted back from the segment's end, so that its last sample is the end itself: a surface just
-    # short of it is met whatever the box's entry. Measured with the walk's first, nearest-voxel lookup:
-    # counted from the entry, the mug's hull (48 voxels, 100 views) agreed with Embree on 86.5 % of the
-    # (view, voxel) sightings, from the end 94.3 % (trilinear, from the end: 97.7 %)
+    # short of it is met whatever the box's entry (why: docs/design-notes/reconstruct.md#voxel-rays)
     start = end - (count - 1).clamp_min(0).to(end.dtype) * step_m
     for rays, ray_of, t in flat_samples(start, count, step_m, samples_per_chunk):
         at = ((o[rays][ray_of] + t[:, None] * d[rays][ray_of] - centre_0) / index.voxel_m) * to_unit - 1.0

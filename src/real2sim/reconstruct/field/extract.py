@@ -76,11 +76,9 @@ def unseen_voids(solid: np.ndarray, gap_voxels: int = UNSEEN_VOID_GAP_VOXELS,
 
     Rays stop at the first opaque surface, so the field's inside is never trained: where its surface
     lets a few rays through (a blurred video frame, a pose a little off), training empties the space
-    behind and the mesh gets a cave through a pinhole, with walls inside the object. On the bottle
-    from a 20 s video (80 frames, 1.19 mm voxels) such a cave ran through most of the object's depth:
-    with the fill (4724 voxels, 8.1 ml) the same capture's reconstruction went 1.70 -> 0.84 mm Chamfer.
-    The mug from 60 photos, whose cavity and handle are open wide, had none of this size (crevices of at
-    most 150 voxels, 0.04 % of it, stay as trained), nor had the robot-captured mug."""
+    behind and the mesh gets a cave through a pinhole, with walls inside the object; cavities open
+    wide (a mug's) are not closed off, and crevices below ``min_fraction`` stay as trained (why:
+    docs/design-notes/reconstruct.md#unseen-voids)."""
     from real2sim.multiview.voxel_grid import closed_off, voxel_parts
 
     voids = closed_off(~solid, gap_voxels)
@@ -99,8 +97,8 @@ def silhouette_surface_level(field: VoxelRadianceField, views: PosedViews, *, ba
     Half the light through one voxel (``SURFACE_DENSITY_PER_VOXEL``) is where a ray crossing the
     surface head-on stops, but the masks are made by rays that graze it, and a trained field's
     surface is a layer a voxel or two thick: a grazing ray crosses that layer over many voxels and
-    turns opaque at a lower density than a head-on one. On a can (0.64 mm voxels) the ``ln 2``
-    surface lay 0.19 mm inside the true one. So the pixels near each mask's edge (within
+    turns opaque at a lower density than a head-on one, so the ``ln 2`` surface lies inside the true
+    one (docs/design-notes/reconstruct.md#surface-level). So the pixels near each mask's edge (within
     ``band_px``) are cast as rays; a ray hits the solid at level L when the density sampled along
     it (the same node values marching cubes interpolates, every ``step_voxels``) reaches L. The
     level is the one that misclassifies fewest of those pixels, searched within ``search`` times

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from real2sim.multiview.views import ray_box
 from real2sim.multiview.voxel_grid import VoxelGrid
 
 
@@ -199,9 +200,9 @@ class VoxelRadianceField(torch.nn.Module):
         """
         device = origins.device
         if chunk is None:
-            # A CPU pays for every sample, so short chunks stop sooner at opaque points (fine can
-            # grid, 100 steps: 19 s at 32, 23 s at 64). A GPU pays per chunk, for the kernel launches
-            # and the host sync of each pass (H100, same steps: 3.2 s at 32, 0.8 s at 256).
+            # A CPU pays for every sample, so short chunks stop sooner at opaque points. A GPU pays per
+            # chunk, for the kernel launches and the host sync of each pass (why:
+            # docs/design-notes/reconstruct.md#field-speed).
             chunk = 32 if device.type == "cpu" else 256
         per_ray = torch.ceil((t_far - t_near) / step_m).long().clamp_min(0)
         optical = torch.zeros(len(origins), device=device, dtype=torch.float64)

@@ -30,10 +30,10 @@ def unwrap(mesh: trimesh.Trimesh, faces_per_piece: int = 5000) -> tuple[np.ndarr
 
     The mesh is cut into slabs of about ``faces_per_piece`` faces along its longest side and
     the slabs are charted as separate meshes of one atlas: xatlas charts each mesh on its own
-    thread, and its charting cost grows faster than the face count. A 40k-face can on 2
-    cores: 14-21 s as one mesh, 7 s as four slabs, 3.7 s as eight. The cuts only add chart
-    seams, which the atlas has everywhere anyway (about 1200 charts on that can). The number
-    of slabs depends on the mesh alone, so the atlas does not change with the machine.
+    thread, and its charting cost grows faster than the face count (why:
+    docs/design-notes/reconstruct.md#texture-atlas). The cuts only add chart seams, which the
+    atlas has everywhere anyway. The number of slabs depends on the mesh alone, so the atlas
+    does not change with the machine.
     """
     import xatlas
 

@@ -37,72 +37,75 @@ from real2sim.multiview.views import PosedViews
 
 @dataclass(frozen=True)
 class FieldConfig:
-    """How the radiance field is trained. Grid sizes are voxels along the object's longest side.
-
-    The density grid learns five times slower than the colour features
-    (``lr_density``): the field starts as the visual hull (``init_density`` per voxel
-    of the coarse grid inside it), which is already within a fraction of a millimetre
-    of a convex object's surface, and a fast density lets the view-dependent colour
-    trade geometry for shading. During development, on the bottle (100 views,
-    320x240, an earlier build), density rates of 0.1 / 0.02 / 0.005 gave Chamfer
-    0.74 / 0.51 / 0.47 mm; ``benchmarks/bench_reconstruct.py`` measures the defaults.
-    ``view_dependent=False`` gives a Lambertian field.
-
-    ``photo_carving``: before training, the visual hull is carved where the views disagree
-    about its colour (:mod:`real2sim.reconstruct.carving.photo`), and
-    the field starts empty there. Training cannot open a concavity the hull filled (a
-    mug's cavity) by itself: a lid across it with a painted top renders nearly as well.
-    The field may fill carved space again only within ``carved_margin_voxels`` (of the
-    coarse grid) of what carving kept; deeper carved space is not part of the field, so
-    rays into an opened cavity skip it (a negative margin keeps all of it in the field).
-
-    ``pose_refinement`` (on): each training view's pose is corrected with the field while it is on its
-    coarse grid, then kept (it brings a few bad views among good ones back; on the bundled can and
-    bottle after refine-poses, field PSNR +0.9 and +0.2 dB, Chamfer 0.146 -> 0.141 and 0.291 -> 0.287
-    mm, for 14 % and -3 % CPU time, docs/benchmarks/reconstruct_field_poses.md; learnt on the fine
-    grid as well it had cost a quarter more time); ``colour_correction`` (on): each view's exposure
-    and white balance, all through training. Both with the rates and priors of ``corrections``; see
-    :mod:`real2sim.reconstruct.field.view_corrections`.
-
-    ``device_batch_scale`` (2): on a GPU, each step draws this many times ``rays_per_step`` and the
-    steps (and the poses' warm-up) are as many times fewer, so training sees the same rays. A GPU step
-    is bound by the host launching its few hundred operators, not by its rays: on an H200 a mug's step
-    took 16 ms on the coarse grid and 12 ms on the fine one at 4096 and at 8192 rays alike
-    (``benchmarks/bench_field_step.py``, docs/benchmarks/field_step_cuda.md), so its steps took 11.7-12.6 s
-    instead of 20.1. The geometry stays about the CPU's: these batches trained on a CPU gave the mug
-    0.514 mm, IoU 0.729 against 0.505 mm, 0.733, the can 0.140 against 0.141 mm; the field's held-out PSNR
-    was 0.36-0.46 dB lower (docs/benchmarks/reconstruct_gpu_batches_cpu.md). A scale of 4 lost 1.2 dB on
-    the mug (by script, not kept). 1 trains on a GPU as on a CPU.
-    """
+    """How the radiance field is trained: its two grids, its steps and rates, what it starts from (the
+    visual hull, photo-carved) and the per-view corrections learnt with it."""
 
     coarse_voxels: int = 80
+    """Voxels along the object's longest side of the coarse grid, trained first; >= 4."""
     fine_voxels: int = 160
+    """Voxels along the object's longest side of the fine grid, the coarse field resampled onto it; >= 4."""
     coarse_steps: int = 400
+    """Training steps on the coarse grid; >= 0, 0 skips it."""
     fine_steps: int = 800
+    """Training steps on the fine grid; >= 1."""
     rays_per_step: int = 4096
+    """Rays drawn for each step (on a CPU; ``device_batch_scale`` times as many on a GPU); >= 4."""
     lr_density: float = 0.02
+    """Adam's learning rate of the density grid at the start of each grid (it decays tenfold over it); > 0.
+    Five times slower than the features: the field starts as the visual hull, and a fast density lets the
+    view-dependent colour trade geometry for shading (why: docs/design-notes/reconstruct.md#density-rate)."""
     lr_features: float = 0.1
+    """Adam's learning rate of the colour features, decaying as ``lr_density``'s; > 0."""
     lr_decoder: float = 3e-3
+    """Adam's learning rate of the colour decoder (a small network of the features and the viewing
+    direction); > 0."""
     init_density: float = 4.0
+    """The starting density inside the visual hull, per voxel length of the coarse grid (about 1e-3 of it
+    outside and where photo carving removed the hull); > 0."""
     feature_channels: int = 12
+    """Colour features stored per voxel; >= 4."""
     step_voxels: float = 0.5
+    """The rays' sampling step, in voxels of the grid being trained; > 0."""
     hull_outlier_fraction: float = 0.03
+    """The share of the views that see a point that may put it outside their masks while the starting
+    visual hull keeps it; in [0, 1)."""
     carve_outlier_fraction: float = 0.1
+    """The same share for the relaxed visual hull that bounds where the field may fill (its occupancy);
+    in [0, 1)."""
     carve_dilation_voxels: int = 2
+    """That relaxed hull is dilated by this many voxels; >= 1."""
     view_dependent: bool = True
+    """The colour depends on the viewing direction (shading); False: a Lambertian field."""
     mask_dilation_px: int = 3
+    """Training rays go through every pixel within this many pixels of the mask; >= 0."""
     background_ray_fraction: float = 0.05
+    """... and through this share of the other pixels, drawn at random; in [0, 1]."""
     photo_carving: bool = True
+    """Carve the visual hull where the views disagree about its colour before training
+    (:mod:`real2sim.reconstruct.carving.photo`), the field starting empty there: training cannot open a
+    concavity the hull filled by itself (a lid across a mug's cavity with a painted top renders nearly as well)."""
     carved_margin_voxels: int = 2
+    """The field may fill carved space again only within this many voxels (of the coarse grid) of what
+    carving kept; deeper carved space is left out of the field, so rays into an opened cavity skip it;
+    < 0 keeps all of it in the field."""
     carving: CarvingConfig = dataclass_field(default_factory=CarvingConfig)
+    """How photo carving runs, when ``photo_carving``."""
     pose_refinement: bool = True
+    """Correct each training view's pose with the field while it is on its coarse grid, then keep it
+    (:mod:`real2sim.reconstruct.field.view_corrections`): it brings a few bad views among good ones back
+    (why: docs/design-notes/reconstruct.md#field-pose-refinement)."""
     colour_correction: bool = True
+    """Learn each view's exposure and white balance (a gain and a bias per channel) all through training."""
     corrections: CorrectionConfig = dataclass_field(default_factory=CorrectionConfig)
+    """The rates and priors of the pose and colour corrections."""
     device_batch_scale: int = 2
+    """On a GPU, each step draws this many times ``rays_per_step`` and the steps (and the poses' warm-up) are
+    as many times fewer, so training sees the same rays; >= 1, 1 trains on a GPU as on a CPU. A GPU step is
+    bound by launching its operators, not by its rays (why: docs/design-notes/reconstruct.md#device-batches)."""
 
     def on_device(self, device: str | torch.device) -> "FieldConfig":
         """These settings as trained on ``device``: on anything but a CPU, ``device_batch_scale`` times the
-        rays per step in as many times fewer steps (see the class docstring)."""
+        rays per step in as many times fewer steps (``device_batch_scale``)."""
         scale = 1 if torch.device(device).type == "cpu" else int(self.device_batch_scale)
         if scale == 1:
             return self
@@ -199,7 +202,7 @@ def _photo_carved(views: PosedViews, grid: VoxelGrid, hull: np.ndarray, config: 
 
     Carving runs on a grid of at least ``config.carving.voxels`` along the longest side: on
     coarser voxels a true surface's voxel centres lie so far inside it that the views of
-    them disagree (a 24-voxel can lost a quarter of its volume)."""
+    them disagree (why: docs/design-notes/reconstruct.md#carving-grid)."""
     if max(grid.shape) >= config.carving.voxels:
         result = photo_carve(views, grid, hull, config.carving, progress=progress, device=device)
         return hull & ~result.solid, result
@@ -272,8 +275,8 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
             if corrections is not None and corrections.poses_learning:
                 # The poses learn on the coarse grid only, whose big voxels give a misplaced pixel a gradient
                 # that reaches millimetres; on the fine grid they would chase its detail, and learning them
-                # there cost a quarter more time (rays cast again as they move, gradients through every
-                # sample's position) for no gain measured.
+                # there costs time (rays cast again as they move, gradients through every sample's position)
+                # for no gain (why: docs/design-notes/reconstruct.md#field-pose-refinement).
                 corrections.freeze_poses()
         t_steps = time.perf_counter()
         done = _optimise(field, pool, config, steps, done, total, gen, progress, curve, learner)
@@ -332,7 +335,8 @@ def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, ste
     ranges = PoolRanges(field, pool, corrections)
     optimisers = []
     if learn_field:
-        # fused: one kernel over the whole grid; the per-tensor loop took a quarter of each step
+        # fused: one kernel over the whole grid rather than a loop over its tensors (why:
+        # docs/design-notes/reconstruct.md#field-speed)
         grid_opt = torch.optim.Adam([{"params": [field.density_table], "lr": config.lr_density,
                                       "base": config.lr_density},
                                      {"params": [field.feature_table], "lr": config.lr_features,

@@ -2,7 +2,7 @@
 
 **Pose.** A robot's camera poses are a few millimetres and about a degree off; when
 `refine-poses` cannot fix them the field would blur the object over the spread of the
-views (a can at 256x192: 2.1 mm Chamfer). So every training view gets a small rigid
+views (docs/design-notes/reconstruct.md#field-pose-refinement). So every training view gets a small rigid
 correction, learnt by the same gradient steps as the field: a rotation vector
 ``rotation_rad`` (world axes, about the camera's centre) and a move ``translation_m`` of
 the camera's centre (world axes, metres). The corrected camera-to-world pose is
@@ -46,21 +46,30 @@ import torch
 
 @dataclass(frozen=True)
 class CorrectionConfig:
-    """How the per-view corrections learn. Learning rates are Adam's, per step; rotation in radians,
-    translation in metres (the rotation's rate times the median camera distance, so that both move a
-    pixel alike); colour gain in log units."""
+    """How the per-view pose and colour corrections learn with the field: Adam's rates and their schedule,
+    and the Gaussian prior that holds the corrections toward none."""
 
     lr_rotation_rad: float = 1e-3
+    """Adam's learning rate of the rotation corrections, radians per step; the camera moves learn at this
+    times the median camera distance (metres per step), so that both move a pixel alike; > 0."""
     lr_colour: float = 2e-2
+    """Adam's learning rate of the colour gains (log units) and biases; > 0."""
     lr_final_fraction: float = 0.01
+    """The rates decay exponentially to this share of their start by the last step; in (0, 1]."""
     warmup_steps: int = 40
+    """Steps before the pose corrections start to learn, so that the field's colours roughly match the
+    images first (before that every gradient says "change colour"); >= 0. The colours have no warm-up."""
     prior_deg: float = 2.0
+    """The scale of the prior on the rotation corrections, degrees; > 0."""
     prior_mm: float = 10.0
+    """The scale of the prior on the camera moves, millimetres; > 0."""
     prior_gain: float = 1.0
-    # offsets are held closer to zero than gains: on a low-contrast surface an offset imitates a gain,
-    # and an exposure change is a gain
+    """The scale of the prior on the colour gains, log units; > 0."""
     prior_bias: float = 0.1
+    """The scale of the prior on the colour biases (RGB in [0, 1]); > 0. Held closer to zero than the gains:
+    on a low-contrast surface an offset imitates a gain, and an exposure change is a gain."""
     prior_weight: float = 1e-2
+    """The prior's weight, added to the photometric loss (mean squared error) as a mean over the views; >= 0."""
 
     def validate(self) -> None:
         from real2sim.plumbing.errors import UserInputError

@@ -1,7 +1,7 @@
 """The others' hull: the visual hull each view is aligned to when every pose comes from the silhouettes
 (:func:`real2sim.reconstruct.poses.silhouette.align_all`), carved by all the other views, and how fine it is.
 
-Split from :mod:`real2sim.reconstruct.poses.silhouette`, which fits the views to it. World frame, metres.
+The views are fitted to it by :mod:`real2sim.reconstruct.poses.view_fit`. World frame, metres.
 """
 
 from __future__ import annotations
@@ -14,18 +14,15 @@ from real2sim.multiview.views import PosedViews
 ALL_VOXELS = 96
 #: ... and, for cameras too far to be moved along their axes (``FAR_RATIO``), finer where a voxel would span
 #: more than this many pixels in a typical view, up to ALL_MAX_VOXELS: the rounds cannot align a view closer
-#: than the others' hull is fine. The bottle through the 1650 px lens (230 mm tall with the pad, 1.3 m away:
-#: 2.8 px a voxel at 96) came out of the rounds with its hull 6 mm short at 96 voxels and 0.8 mm at 160 (world
-#: Chamfer of the hull 1.38 -> 1.02 mm), for no more time measured. Near cameras keep 96: on a stand seen by
-#: the robot at 320x240 (123-135 voxels by the pixel rule) the bottle gave 1.22 mm through `run` with them,
-#: 0.69 mm with 96 (the world frame 2.4 mm off against 1.0), the can 0.39 and 0.46 mm.
+#: than the others' hull is fine. Near cameras keep ALL_VOXELS (why: docs/design-notes/reconstruct.md#others-hull).
 ALL_VOXEL_PX = 1.5
 ALL_MAX_VOXELS = 160
 
 #: Cameras farther from the object than this many times its size (median view) are not moved along their
 #: optical axes by the rounds: through a long lens that move only scales the silhouette a little, and the
-#: one-sided fit, which lets a camera come closer to cover its mask at almost no cost, walked them 8-11 mm
-#: a round (up to 74 mm) on the can at fx = 1650 px, 1.3 m away. Nearer cameras see depth by perspective.
+#: one-sided fit, which lets a camera come closer to cover its mask at almost no cost, walks them toward the
+#: object round after round (why: docs/design-notes/reconstruct.md#others-hull). Nearer cameras see depth by
+#: perspective.
 FAR_RATIO = 8.0
 
 
@@ -77,7 +74,7 @@ def leave_one_out_surfaces(views: PosedViews, *, outlier_fraction: float, table_
     import torch
     from scipy.ndimage import binary_erosion
 
-    from real2sim.multiview.hull import _mask_votes, object_region
+    from real2sim.multiview.hull import mask_votes, object_region
     from real2sim.multiview.voxel_grid import VoxelGrid
 
     if region is None:
@@ -87,7 +84,7 @@ def leave_one_out_surfaces(views: PosedViews, *, outlier_fraction: float, table_
     centres = grid.centres()
     outside, seen = [], []
     with torch.no_grad():
-        for _, _, _, sees, vals in _mask_votes(views, centres, 200_000):
+        for _, _, _, sees, vals in mask_votes(views, centres, 200_000):
             outside.append((sees & (vals < 0.5)).numpy())
             seen.append(sees.numpy())
     outside_v, seen_v = np.concatenate(outside, axis=1), np.concatenate(seen, axis=1)

@@ -1,12 +1,12 @@
 """Where the object stands among far cameras whose every pose came from their silhouettes: from how
-large it looks in each view (used by :func:`silhouette_poses.align_all`).
+large it looks in each view (used by :func:`real2sim.reconstruct.poses.silhouette.align_all`).
 
-The views agree with each other in any frame (`silhouette_poses`), and the rig motion taken out after each round keeps
-the cameras where the given poses put them; but where the object stands *among* them is not a motion of the
+The views agree with each other in any frame (:mod:`real2sim.reconstruct.poses.silhouette`), and the rig
+motion taken out after each round keeps the cameras where the given poses put them; but where the object stands *among* them is not a motion of the
 rig. Through a long lens each view's turn hides it: a degree's turn and a 22 mm sideways shift of the object
 give the same image 1.3 m away, so the common point the views are turned onto is only as sure as the mean of
-their given orientations (2.7 mm median at 5 mm / 1 deg on the long-lens ring; `bench_hard_captures`'
-`frame_bound`), and the rounds do not move it (cameras that far are not moved along their axes).
+their given orientations (docs/design-notes/reconstruct.md#size-placement), and the rounds do not move it
+(cameras that far are not moved along their axes).
 What the turns do not hide is the distance: the object looks larger from a camera it is nearer to, and the
 camera centres are known to millimetres. With the placed object at truth + d, log(mask size / size of the
 placed hull's projection) in view i is -d . u_i / r_i (u_i the unit vector from the object to camera i, r_i
@@ -16,26 +16,26 @@ mirror image have one size), so they are fitted as even functions of u_i and the
 left. Directions the cameras do not spread over (the vertical of a single ring, whatever its elevation:
 u_i . z is the same for every view) cannot be told from the constant and are not searched.
 The hull is carved from the views as they stand, so it follows a move in part: moving the object takes
-out only a share of the offset the sizes saw (0.2 on a 32-view ring at 160x120, 0.9 on 100 views at
-320x240). That share is measured, not assumed: the object is moved by a probe along each searched direction
-and the change of the offset read (a Jacobian by finite differences); the move is the offset over the
-mean share. Sizes that do not follow the moves (masks larger from one side whatever the placement) are not
+out only a share of the offset the sizes saw, and that share varies with the capture
+(docs/design-notes/reconstruct.md#size-placement). So it is measured, not assumed: the object is moved by
+a probe along each searched direction and the change of the offset read (a Jacobian by finite
+differences); the move is the offset over the mean share. Sizes that do not follow the moves (masks larger from one side whatever the placement) are not
 believed, and the cameras are left as they came.
 
-World frame, metres; cameras are camera-to-world with OpenCV axes, as in :mod:`views`.
+World frame, metres; cameras are camera-to-world with OpenCV axes, as in :mod:`real2sim.multiview.views`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from real2sim.reconstruct.poses.silhouette import (hull_surface_points, mask_centres, splatted_silhouette,
-                                                    turned_onto)
+from real2sim.reconstruct.poses.centring import mask_centres, turned_onto
+from real2sim.reconstruct.poses.view_fit import hull_surface_points, splatted_silhouette
 from real2sim.multiview.views import PosedViews, project
 
 SIZE_VOXELS = 160
 #: The hull the sizes are compared with is carved with this tolerance: with the 0.15 of the rounds it spills
-#: further from some sides than others, and the long-lens can ended 0.9 mm off instead of 0.2 along x.
+#: further from some sides than others (why: docs/design-notes/reconstruct.md#size-placement).
 SIZE_OUTLIER_FRACTION = 0.03
 #: Fewer views with the whole object in frame than this: the sizes are not used.
 SIZE_MIN_VIEWS = 12
@@ -50,9 +50,7 @@ MIN_RESPONSE, MAX_RESPONSE = 0.1, 2.0
 SIZE_STEPS = 2
 #: The sizes may move the object this many times as far as the given poses leave it uncertain. Not 3: that
 #: uncertainty is estimated from a median miss, and the move (the offset over the probes' share) carries the
-#: share's own error (a fifth): at 3 the long-lens can of seed 0, 6.1 mm off (2.7 times the estimate), was
-#: refused a 7.2 mm move and stayed at 3.11 mm Chamfer; moved, 0.71 mm. Masks grown 2 px on one side of a
-#: rig (a few per cent) still ask for centimetres (tests/reconstruct/test_object_placement.py).
+#: share's own error (why: docs/design-notes/reconstruct.md#size-placement).
 SIZE_MAX_SIGMAS = 4.0
 
 
@@ -161,8 +159,7 @@ def placed_by_size(views: PosedViews, *, max_move_m: float, voxels: int = SIZE_V
             f"{100 * response.max():.0f} % of itself, {100 * MIN_RESPONSE:.0f}-{100 * MAX_RESPONSE:.0f} % expected): "
             "left as aligned")}
     # the share is the mean over the probes: by a ring's symmetry it is one number across it, and the
-    # probes' own scatter (0.65-1.12 on the long-lens can at 2 % of its size) made the full Jacobian's
-    # step 8 mm where the sizes saw 5.2 (and it was then refused)
+    # probes' own scatter makes the full Jacobian's step too long (why: docs/design-notes/reconstruct.md#size-placement)
     share = float(np.mean(response))
     first = axes @ (offset / share)
     if np.linalg.norm(first) > max_move_m:
