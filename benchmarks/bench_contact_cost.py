@@ -61,7 +61,7 @@ def step_cost(asset: Path, rep: str, contact: str, task: str) -> list:
     """(ms per step, mean pieces touching, mean polygons, max polygons) of run 0 of ``task``."""
     from real2sim.evaluate.scene.scene_config import SceneConfig
     from real2sim.evaluate.simulate import _advance, _started, candidate_initial_state
-    from real2sim.evaluate.scene.tasks import make_run_specs
+    from real2sim.evaluate.scene.tasks import make_run_specs, run_steps
     from real2sim.evaluate.scene.world import build_scene, urdf_object_adder
 
     cfg = SceneConfig()
@@ -69,7 +69,7 @@ def step_cost(asset: Path, rep: str, contact: str, task: str) -> list:
     urdf = asset / rep / ("model.urdf" if contact == "hydroelastic" else "model_point.urdf")
     scene = build_scene(task, contact, urdf_object_adder(urdf), spec, cfg)
     initial = candidate_initial_state(scene, urdf, spec, cfg)
-    steps = cfg.num_steps(task)
+    steps = run_steps(task, cfg)
     simulator, _ = _started(scene, initial, rep)
     start = time.perf_counter()
     _advance(simulator, steps, cfg.time_step_s, rep)

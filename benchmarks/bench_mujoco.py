@@ -91,12 +91,12 @@ def mujoco_rates(model_xml: Path, pusher_radius_m: float, pusher_speed_m_per_s: 
 def drake_push_rate(urdf: Path) -> float:
     from real2sim.evaluate.scene.scene_config import SceneConfig
     from real2sim.evaluate.simulate import simulate_candidate
-    from real2sim.evaluate.scene.tasks import make_run_specs
+    from real2sim.evaluate.scene.tasks import make_run_specs, run_duration_s
 
     cfg = SceneConfig()
     run = make_run_specs("push", 1, 0)[0]
     traj = simulate_candidate(urdf, "point", run, cfg)
-    return traj.sim_time_s / cfg.duration_s("push")
+    return traj.sim_time_s / run_duration_s("push", cfg)
 
 
 def main() -> int:
@@ -104,6 +104,7 @@ def main() -> int:
     parser.add_argument("--asset", type=Path, default=None, help="an asset folder built with --format mjcf")
     args = parser.parse_args()
     from real2sim.evaluate.scene.scene_config import SceneConfig
+    from real2sim.evaluate.scene.tasks import run_duration_s
 
     cfg = SceneConfig()
     with tempfile.TemporaryDirectory() as tmp:
@@ -111,7 +112,7 @@ def main() -> int:
         rows = []
         for rep in sorted(p.parent for p in Path(asset).glob("*/model.xml")):
             mj = mujoco_rates(rep / "model.xml", cfg.pusher_radius_m, cfg.pusher_speed_m_per_s,
-                              cfg.duration_s("push"), cfg.time_step_s)
+                              run_duration_s("push", cfg), cfg.time_step_s)
             drake = drake_push_rate(rep / "model.urdf")
             print(f"{rep.name}: MuJoCo rest {mj['rest']:.4f}, push {mj['push']:.4f}; Drake point push {drake:.4f} "
                   "wall s per sim s", flush=True)
@@ -121,7 +122,7 @@ def main() -> int:
         "(flat bottom, the demo's SPECs plus `mesh`), both simulators at a 1 ms step. MuJoCo resting: "
         "dropped 1 mm onto a plane, 1 s. MuJoCo pushed: a kinematic sphere of the evaluation's pusher "
         f"radius ({cfg.pusher_radius_m} m) moving at {cfg.pusher_speed_m_per_s} m/s for the push task's "
-        f"{cfg.duration_s('push'):g} s. Drake: the evaluation's push task (run 0, point contact, one rollout). "
+        f"{run_duration_s('push', cfg):g} s. Drake: the evaluation's push task (run 0, point contact, one rollout). "
         "MuJoCo's `mesh` row is the mesh's convex hull (MuJoCo collides meshes as hulls).\n\n"
         + markdown_table(["representation", "MuJoCo rest", "MuJoCo push", "Drake push (point)",
                           "Drake / MuJoCo (push)", "MuJoCo push travel (mm)"], rows)

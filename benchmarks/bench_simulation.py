@@ -37,7 +37,7 @@ from real2sim.geometry.inside import inside_mask
 from real2sim.geometry.objects import OBJECTS, make_object
 from real2sim.formats.physical import PhysicalProperties
 from real2sim.evaluate.scene.scene_config import SceneConfig
-from real2sim.evaluate.scene.tasks import make_run_specs
+from real2sim.evaluate.scene.tasks import make_run_specs, run_duration_s
 from real2sim.evaluate.simulate import simulate_candidate, simulate_reference
 
 IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
@@ -154,7 +154,7 @@ Object: the bundled squeeze bottle (0.6 kg, canonical frame), reference = its me
 ({n_faces} faces) as a rigid hydroelastic body. Stand-in representations of the paper's sizes
 (voxel boxes and spheres, 10 z-slab cylinders, the mesh itself) instead of fitted ones, so
 the numbers measure Drake, not the fitter. One run per task; scene durations
-{cfg.duration_s('push'):.2f} s (push) and {cfg.duration_s('ramp'):.2f} s (ramp); time step
+{run_duration_s('push', cfg):.2f} s (push) and {run_duration_s('ramp', cfg):.2f} s (ramp); time step
 {cfg.time_step_s * 1e3:g} ms, `{cfg.discrete_contact_approximation}` approximation, equation error
 (resets every {cfg.reset_interval_s} s).
 

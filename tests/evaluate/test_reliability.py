@@ -481,9 +481,9 @@ def test_signals_end_the_workers_and_a_second_sweep_is_locked_out(tmp_path):
 
 
 def test_pool_abort_ends_busy_workers_at_once():
-    from real2sim.evaluate.executors import _PoolExecutor
+    from real2sim.evaluate.executors import PoolExecutor
 
-    executor = _PoolExecutor(2)
+    executor = PoolExecutor(2)
     handles = [executor.submit(time.sleep, 60.0) for _ in range(3)]
     deadline = time.monotonic() + 60
     while len(executor._pool._processes or {}) < 2 and time.monotonic() < deadline:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from real2sim.evaluate.scene.scene_config import SceneConfig
-from real2sim.evaluate.scene.tasks import make_run_specs
+from real2sim.evaluate.scene.tasks import make_run_specs, run_steps
 from real2sim.evaluate.simulate import SimulationError, simulate_candidate, simulate_reference
 
 from tests.evaluate.test_world import CAN_H, CAN_R, write_can_asset
@@ -38,7 +38,7 @@ def test_push_moves_the_object_along_the_approach(can_asset):
     mesh_path, urdf, _ = can_asset
     spec = make_run_specs("push", 1, seed=0)[0]
     traj = simulate_candidate(urdf, "point", spec, SHORT_PUSH, initial_mesh_path=mesh_path)
-    n = SHORT_PUSH.num_steps("push")
+    n = run_steps("push", SHORT_PUSH)
     assert traj.times_s.shape == (n + 1,) and traj.times_s[-1] == pytest.approx(0.3)
     assert traj.object_position_m.shape == (n + 1, 3) and traj.object_quaternion_wxyz.shape == (n + 1, 4)
     assert len(traj.contact_points_object_m) == n + 1 and len(traj.reset_steps) == 0

@@ -29,6 +29,7 @@ from real2sim.formats.results import CHECK_COLUMN, RUN_COLUMNS, read_runs_csv
 from real2sim.formats.trajectory import load_trajectory, save_trajectory
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
 from real2sim.evaluate.scene.scene_config import SceneConfig
+from real2sim.evaluate.scene.tasks import run_duration_s
 from tests.progress_check import Recorder
 
 BOX_EXTENTS_M = np.array([0.04, 0.05, 0.08])
@@ -208,7 +209,7 @@ def test_sweep_writes_rows_summary_plots_report(sweep):
             assert r["error"] and math.isnan(r["ate_m"])
         else:
             assert not r["error"], r["error"]
-            assert r["sim_duration_s"] == pytest.approx(SHORT_SCENE.duration_s("push"))
+            assert r["sim_duration_s"] == pytest.approx(run_duration_s("push", SHORT_SCENE))
             assert r["sim_time_s"] > 0 and r["real_time_factor"] > 0
             assert all(math.isfinite(r[c]) for c in ("ate_m", "ocae_m"))
     summary = {s["representation"]: s for s in result.summary}
@@ -400,9 +401,9 @@ def test_pool_survives_a_worker_dying_in_native_code():
     keep the spawned workers from importing this test module."""
     import os as _os
 
-    from real2sim.evaluate.executors import _PoolExecutor, _Retry
+    from real2sim.evaluate.executors import PoolExecutor, Retry
 
-    executor = _PoolExecutor(2)
+    executor = PoolExecutor(2)
     jobs = [(math.sqrt, 4.0), (_os._exit, 13), (math.sqrt, 9.0), (math.sqrt, 16.0)]
     pending = {executor.submit(fn, arg): i for i, (fn, arg) in enumerate(jobs)}
     results = {}
@@ -411,7 +412,7 @@ def test_pool_survives_a_worker_dying_in_native_code():
             for h in executor.wait(set(pending)):
                 i = pending.pop(h)
                 out = executor.result(h)
-                if isinstance(out, _Retry):
+                if isinstance(out, Retry):
                     pending[executor.submit(out.fn, out.arg, out.attempt)] = i
                 else:
                     results[i] = out

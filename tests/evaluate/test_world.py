@@ -14,7 +14,7 @@ from real2sim.formats.contact import ContactProperties
 from real2sim.formats.physical import PhysicalProperties, write_physical_properties
 from real2sim.evaluate.scene.placement import initial_object_pose
 from real2sim.evaluate.scene.scene_config import SceneConfig
-from real2sim.evaluate.scene.tasks import make_run_specs, tilt_angle_rad
+from real2sim.evaluate.scene.tasks import make_run_specs, run_steps, tilt_angle_rad
 from real2sim.evaluate.scene.world import build_scene, reference_object_adder, urdf_object_adder
 
 CAN_R, CAN_H, CAN_KG = 0.034, 0.10, 0.35
@@ -62,7 +62,7 @@ def test_scene_config_rejects_fractional_reset_interval():
     with pytest.raises(ValueError):
         SceneConfig(time_step_s=1e-3, reset_interval_s=0.00025)
     cfg = SceneConfig(settle_s=0.1, push_duration_s=0.25)
-    assert cfg.num_steps("push") == 350 and cfg.reset_interval_steps() == 100
+    assert run_steps("push", cfg) == 350 and cfg.reset_interval_steps() == 100
     assert SceneConfig(reset_interval_s=None).reset_interval_steps() is None
 
 

@@ -150,7 +150,7 @@ def check_first(args: argparse.Namespace) -> tuple[list[str], dict[str, float], 
     """The checks that read no dataset: the options, the objects' names, the masses file and CATALOGUE;
     returns (names, masses, CATALOGUE resolved). UserInputError for bad input."""
     from real2sim.plumbing.errors import UserInputError
-    from real2sim.pipeline.batch import check_catalogue, check_names
+    from real2sim.pipeline.catalogue import check_catalogue, check_names
 
     if args.address is not None and args.executor != "ray":
         raise UserInputError("--address is for --executor ray")
@@ -168,7 +168,8 @@ def plan(args: argparse.Namespace, first: tuple[list[str], dict[str, float], Pat
 
     from real2sim.cli.run import config_from_args
     from real2sim.plumbing.errors import UserInputError
-    from real2sim.pipeline.batch import BatchConfig, ObjectJob, cpu_count, dataset_folder
+    from real2sim.pipeline.batch import BatchConfig, ObjectJob, cpu_count
+    from real2sim.pipeline.catalogue import dataset_folder
 
     names, table, out = first or check_first(args)
     batch = BatchConfig(executor=args.executor, address=args.address, workers=args.workers,

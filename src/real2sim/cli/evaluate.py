@@ -94,7 +94,7 @@ def config_from_args(args: argparse.Namespace):
     import math
 
     from real2sim.plumbing.errors import UserInputError
-    from real2sim.evaluate.executors import _default_jobs
+    from real2sim.evaluate.executors import default_jobs as _default_jobs
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.evaluate.scene.scene_config import SceneConfig
 

@@ -22,14 +22,15 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from real2sim.evaluate.jobs import _one_line, _row, run_reference_job
+from real2sim.evaluate.jobs import one_line, run_reference_job, runs_row
 from real2sim.plumbing.errors import UserInputError
 
 
 EXECUTORS = ("local", "ray")
 
 
-def _default_jobs() -> int:
+def default_jobs() -> int:
+    """The sweep's default number of parallel simulations: the CPUs this process may run on (at least 1)."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:
@@ -115,7 +116,7 @@ def _terminate_pool(pool) -> None:
             p.join(timeout=1.0)
 
 
-class _PoolExecutor:
+class PoolExecutor:
     """A spawn-context process pool (spawn: Drake and rich's refresh thread do not mix with fork).
 
     A worker that dies in native code breaks the whole pool, failing every job in
@@ -169,7 +170,7 @@ class _PoolExecutor:
             self._renew_pool()
             if attempt >= 1:
                 return self._run_isolated(fn, arg)
-            return _Retry(fn, arg, attempt + 1)
+            return Retry(fn, arg, attempt + 1)
 
     def _run_isolated(self, fn: Callable, arg: Any) -> Any:
         """Run one job alone in a one-worker pool: if that dies too, the job is the culprit."""
@@ -203,7 +204,7 @@ class _PoolExecutor:
                 pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _probe_address(address: str, timeout_s: float) -> None:
+def probe_address(address: str, timeout_s: float) -> None:
     """Fail fast when a ``host:port`` (or ``ray://host:port``) address does not accept connections."""
     import socket
 
@@ -274,7 +275,7 @@ def sigterm_through_ray(call: Callable[[], Any]) -> Any:
         signal.signal(signal.SIGTERM, ours)
 
 
-def _init_ray_bounded(ray, address: str | None, kwargs: dict, timeout_s: float) -> None:
+def init_ray_bounded(ray, address: str | None, kwargs: dict, timeout_s: float) -> None:
     """``ray.init`` with a wall-clock bound: it retries an unreachable address for minutes.
 
     It runs in a daemon thread so that the caller can give up; a call still stuck then is
@@ -301,7 +302,7 @@ def _init_ray_bounded(ray, address: str | None, kwargs: dict, timeout_s: float) 
         error.exit_now = True
         raise error
     if outcome.get("error") is not None:
-        raise UserInputError(f"could not start or reach Ray at {where}: {_one_line(outcome['error'])}")
+        raise UserInputError(f"could not start or reach Ray at {where}: {one_line(outcome['error'])}")
 
 
 class _RayExecutor:
@@ -330,8 +331,8 @@ class _RayExecutor:
                 kwargs["num_cpus"] = jobs
                 keeping_sigterm(lambda: ray.init(**kwargs))
             else:
-                _probe_address(address, timeout_s)
-                _init_ray_bounded(ray, address, kwargs, timeout_s)
+                probe_address(address, timeout_s)
+                init_ray_bounded(ray, address, kwargs, timeout_s)
             self._owns_ray = True
         else:
             self._owns_ray = False
@@ -359,7 +360,7 @@ class _RayExecutor:
         try:
             return sigterm_through_ray(lambda: self._ray.get(ref))
         except Exception as exc:  # the worker died (our functions catch their own errors)
-            return _failed_result(fn, arg, f"ray task failed: {_one_line(exc)}")
+            return _failed_result(fn, arg, f"ray task failed: {one_line(exc)}")
 
     def shutdown(self, abort: bool = False) -> None:
         if abort:
@@ -374,7 +375,9 @@ class _RayExecutor:
 
 
 @dataclass(frozen=True)
-class _Retry:
+class Retry:
+    """What ``result`` returns for a job whose pool broke under it: submit ``fn(arg)`` again with ``attempt``."""
+
     fn: Callable
     arg: Any
     attempt: int
@@ -384,12 +387,13 @@ def _failed_result(fn: Callable, arg: Any, message: str) -> Any:
     if fn is run_reference_job:
         return "error", message
     key = getattr(arg, "key", None)
-    return _row(key, error=message) if key is not None else {"error": message}
+    return runs_row(key, error=message) if key is not None else {"error": message}
 
 
-def _make_executor(config):
+def make_executor(config):
+    """The executor ``config`` (an EvaluationConfig) asks for: Ray, this process (``jobs`` 1) or a process pool."""
     if config.executor == "ray":
         return _RayExecutor(config.jobs, config.ray_address, getattr(config, "ray_timeout_s", 30.0))
     if config.jobs == 1:
         return _SerialExecutor()
-    return _PoolExecutor(config.jobs)
+    return PoolExecutor(config.jobs)

@@ -28,9 +28,10 @@ from real2sim.evaluate.discovery import Asset, Representation, read_canonical_tr
 from real2sim.plumbing.errors import UserInputError
 from real2sim.formats.physical import PhysicalProperties, read_physical_properties
 
-#: Largest bounding-box side of an object the scenes can take, m: the ramp's table is 0.8 m
-#: wide and the pusher's sphere 0.05 m in radius; a 1000 m object made Drake's contact
-#: geometry grow past 5 GB. Below 5 mm the 1 ms step and the 1 mm drop clearance dominate.
+#: Smallest and largest bounding-box side of an object the scenes can take, m: the ramp's table
+#: is 0.8 m wide and the pusher's sphere 0.05 m in radius (why an upper bound at all:
+#: docs/design-notes/evaluate.md#object-size); below 5 mm the 1 ms step and the 1 mm drop
+#: clearance dominate.
 OBJECT_SIZE_RANGE_M = (0.005, 1.0)
 
 

@@ -58,8 +58,9 @@ class CandidateJob:
         return (self.object, self.representation, self.contact_model, self.task, self.run)
 
 
-def _one_line(exc: BaseException) -> str:
-    # A timeout's message starts with "timeout:", the reason the row records; others name their type.
+def one_line(exc: BaseException) -> str:
+    """``exc`` as one line of at most 500 characters, for a row's error text: a timeout's own message
+    (it starts with "timeout:", the reason the row records), any other prefixed by its type."""
     text = str(exc) if isinstance(exc, SimulationTimeout) else f"{type(exc).__name__}: {exc}"
     return text.strip().replace("\r", " ").replace("\n", " | ")[:500]
 
@@ -82,10 +83,12 @@ def run_reference_job(job: ReferenceJob) -> tuple[str, Any]:
             save_trajectory(traj, job.cache_path)
         return "ok", traj
     except Exception as exc:  # recorded in the rows of every candidate of this run
-        return "error", _one_line(exc)
+        return "error", one_line(exc)
 
 
-def _row(job_key: tuple, **values) -> dict:
+def runs_row(job_key: tuple, **values) -> dict:
+    """A runs.csv row: ``job_key``'s key columns, every float column (NaN where ``values`` has none)
+    and the ``error`` text ("" where none)."""
     row = dict(zip(KEY_COLUMNS, job_key))
     for col in FLOAT_COLUMNS:
         row[col] = float(values.get(col, math.nan))
@@ -106,9 +109,9 @@ def run_candidate_job(job: CandidateJob) -> dict:
         traj = simulate_candidate(job.urdf_path, job.contact_model, job.run_spec, job.scene, job.reference,
                                   timeout_s=job.sim_timeout_s)
         values = score(job.reference, traj)
-        return _row(job.key, **values)
+        return runs_row(job.key, **values)
     except Exception as exc:
-        return _row(job.key, error=_one_line(exc))
+        return runs_row(job.key, error=one_line(exc))
 
 
 def _sha1_file(path: Path) -> str:
@@ -119,8 +122,11 @@ def _sha1_file(path: Path) -> str:
     return h.hexdigest()
 
 
-def _reference_cache_name(asset: Asset, mesh_path: Path, spec: RunSpec, scene: SceneConfig,
-                          properties_path: Path | None = None) -> str:
+def reference_cache_name(asset: Asset, mesh_path: Path, spec: RunSpec, scene: SceneConfig,
+                         properties_path: Path | None = None) -> str:
+    """The file name of a reference trajectory in RESULTS/reference_cache/: the object, task and run,
+    and a digest of everything the trajectory depends on (mesh and properties files, run spec, scene,
+    the asset's contact material), so a changed input never reads a stale trajectory."""
     h = hashlib.sha1()
     properties_path = properties_path or asset.physical_properties_path
     for part in (_sha1_file(mesh_path), _sha1_file(properties_path), repr(spec), repr(scene),

@@ -40,7 +40,7 @@ from real2sim.formats.physical import read_physical_properties
 from real2sim.formats.trajectory import Trajectory
 from real2sim.evaluate.scene.placement import StablePoseCache, initial_object_pose
 from real2sim.evaluate.scene.scene_config import SceneConfig
-from real2sim.evaluate.scene.tasks import RunSpec
+from real2sim.evaluate.scene.tasks import RunSpec, run_steps
 from real2sim.evaluate.scene.world import Scene, build_scene, reference_object_adder, urdf_object_adder
 
 
@@ -146,7 +146,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     _check_object_instance(scene)
     plant = scene.plant
     dt = cfg.time_step_s
-    n = cfg.num_steps(scene.task)
+    n = run_steps(scene.task, cfg)
     interval = cfg.reset_interval_steps() if reference is not None else None
     if reference is not None:
         if len(reference.times_s) != n + 1 or reference.task != scene.task:

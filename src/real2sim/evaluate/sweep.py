@@ -51,21 +51,16 @@ from __future__ import annotations
 import dataclasses
 import math
 import shutil
-import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
-
-import numpy as np
+from typing import Sequence
 
 from real2sim.evaluate.discovery import (Asset, Representation, discover_assets, discover_representations,
                                          place_reference_mesh, read_canonical_transform)
-from real2sim.evaluate.executors import EXECUTORS, _default_jobs, _make_executor, _Retry
+from real2sim.evaluate.executors import EXECUTORS, default_jobs, make_executor
 from real2sim.evaluate.inputs import check_inputs
 from real2sim.evaluate.record import check_resume_settings, config_record
-from real2sim.evaluate.scene.placement import StablePoseCache
-from real2sim.evaluate.jobs import CandidateJob, ReferenceJob, _reference_cache_name, _row, run_candidate_job, run_reference_job
+from real2sim.evaluate.schedule import run_simulations
 from real2sim.evaluate.scene.scene_config import SceneConfig
 from real2sim.evaluate.scene.tasks import TASKS, make_run_specs
 from real2sim.evaluate.workdir import (check_partial, check_results_dir, fresh_partial, partial_dir, protected_inputs,
@@ -74,37 +69,38 @@ from real2sim.formats.contact import CONTACT_MODELS
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import output_lock, publish_dir, write_json_atomic
 from real2sim.plumbing.progress import ProgressFn, null_progress
-from real2sim.formats.results import describe_torn, load_runs_csv, relative_paths_in_text, row_key, write_runs_csv
+from real2sim.formats.results import describe_torn, load_runs_csv, row_key, write_runs_csv
 
 
 @dataclass(frozen=True)
 class EvaluationConfig:
-    """What to simulate and how.
-
-    tasks: subset of ("push", "ramp"); contact_models: subset of ("point", "hydroelastic");
-    runs: runs per (object, task) -- the paper uses 10; seed: seeds the run
-    randomisation (:func:`real2sim.evaluate.scene.tasks.make_run_specs`); jobs: parallel
-    simulations (local pool size, or Ray tasks in flight); executor: "local" or "ray";
-    ray_address: Ray cluster address (None: ``$RAY_ADDRESS``, else a local Ray);
-    simulation_error: free roll-outs instead of equation error (resets every 0.1 s);
-    scene: task scene parameters (durations, sizes, time step).
-    sim_timeout_s: wall-clock limit of one simulation (reference or candidate), s; past it
-    the row is recorded as failed with the reason "timeout" and the sweep goes on. The
-    default is far above a paper-sized run (seconds), so it only stops runaways.
-    ray_timeout_s: how long to wait for the Ray cluster at ``ray_address`` to answer, s.
-    """
+    """What the sweep simulates and how: the tasks, contact models and runs, where the simulations run,
+    and the scenes' physical parameters."""
 
     tasks: tuple[str, ...] = TASKS
+    """The tasks to simulate: a non-empty subset of ("push", "ramp"), no repeats."""
     contact_models: tuple[str, ...] = CONTACT_MODELS
+    """The candidates' contact models: a non-empty subset of ("point", "hydroelastic"), no repeats."""
     runs: int = 10
+    """Seeded runs per (object, task); a whole number >= 1 (the paper uses 10)."""
     seed: int = 0
-    jobs: int = field(default_factory=_default_jobs)
+    """Seeds the runs' initial conditions (:func:`real2sim.evaluate.scene.tasks.make_run_specs`)."""
+    jobs: int = field(default_factory=default_jobs)
+    """Simulations at once (the local pool's size, or Ray tasks in flight); >= 1 (default: this process's CPUs)."""
     executor: str = "local"
+    """Where the simulations run: "local" (this process for ``jobs`` 1, else a process pool) or "ray"."""
     ray_address: str | None = None
+    """The Ray cluster's address; None: ``$RAY_ADDRESS``, else a local Ray."""
     simulation_error: bool = False
+    """True: free roll-outs (simulation error) instead of equation error (resets every
+    ``scene.reset_interval_s``)."""
     scene: SceneConfig = field(default_factory=SceneConfig)
+    """The scenes' physical parameters (durations, sizes, materials, time step)."""
     sim_timeout_s: float = 600.0
+    """Wall-clock limit of one simulation (reference or candidate), s; finite, > 0. Past it the row
+    records the reason "timeout" and the sweep goes on (why so long: docs/design-notes/evaluate.md#timeouts)."""
     ray_timeout_s: float = 30.0
+    """How long to wait for the Ray cluster at ``ray_address`` to answer, s; finite, > 0."""
 
     def __post_init__(self) -> None:
         if not self.tasks or any(t not in TASKS for t in self.tasks):
@@ -229,7 +225,7 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
     created = source is not partial
     executor = None
     try:
-        executor = _make_executor(config) if todo else None  # a Ray that cannot be reached fails here
+        executor = make_executor(config) if todo else None  # a Ray that cannot be reached fails here
         if created:
             fresh_partial(partial, copy_of=source)
         if reference_mesh is not None:
@@ -248,8 +244,8 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
     if executor is not None:
         asset_by_name = {a.name: a for a in assets}
         try:
-            simulated = _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows,
-                                   runs_path, say, target, reference_properties)
+            simulated = run_simulations(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial,
+                                        rows, runs_path, say, target, reference_properties)
         except BaseException:  # KeyboardInterrupt (Ctrl-C, SIGTERM) included: end the workers now
             executor.shutdown(abort=True)
             raise
@@ -310,100 +306,6 @@ def _write_animations(partial: Path, rows: list[dict], config: EvaluationConfig,
         return
     if written:
         say(f"animations: {', '.join(sorted(written))} ({ANIMATION_DIRNAME}/)", 0, 0)
-
-
-@contextmanager
-def _checkpoint_on_exit(runs_path: Path, rows: dict):
-    """Write runs.csv however the sweep ends (an interrupt keeps every finished row)."""
-    try:
-        yield
-    finally:
-        write_runs_csv(runs_path, sorted(rows.values(), key=row_key))
-
-
-def _private(row: dict, target: Path) -> dict:
-    """``row`` with the absolute paths in its error text made relative to the results folder."""
-    if row.get("error"):
-        row = dict(row, error=relative_paths_in_text(row["error"], target))
-    return row
-
-
-def _reference_failed(payload: str) -> str:
-    # A timeout keeps "timeout" as the reason the row records; its text names the reference.
-    return payload if payload.startswith("timeout:") else f"reference simulation failed: {payload}"
-
-
-def _stable_poses(mesh_path: Path, properties: Path) -> StablePoseCache:
-    """The reference object's resting poses, found here once rather than in every reference job.
-    A failure leaves the cache empty: each job then meets it again and records it in its rows."""
-    cache = StablePoseCache()
-    try:
-        from real2sim.geometry.mesh_io import load_mesh
-        from real2sim.formats.physical import read_physical_properties
-
-        vertices = np.asarray(load_mesh(Path(mesh_path)).vertices, dtype=float)
-        cache.rotations(vertices, read_physical_properties(properties).com_m)
-    except Exception:  # noqa: BLE001 -- the job reports it, with the reference's name
-        pass
-    return cache
-
-
-def _run_sweep(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows, runs_path,
-               progress: ProgressFn, target: Path, reference_properties: Path | None = None) -> int:
-    """Simulate every reference of ``todo``, then its candidates, as the executor finishes them.
-
-    ``progress`` counts both, references first: ("references and simulations", done, total)."""
-    total = len(todo) + sum(len(v) for v in todo.values())
-    pending: dict[Any, tuple[str, Any, Any]] = {}  # handle -> (kind "ref" or "cand", row key, job)
-    resting: dict[tuple[Path, Path], StablePoseCache] = {}  # one per reference object, for this sweep
-    for (obj, task, run), _ in sorted(todo.items()):
-        asset = asset_by_name[obj]
-        spec = spec_by[(task, run)]
-        properties = reference_properties or asset.physical_properties_path
-        cache = partial / "reference_cache" / _reference_cache_name(asset, reference_meshes[obj], spec, config.scene,
-                                                                    properties)
-        poses = None
-        if not cache.is_file():  # it will be simulated: its resting poses, found once per object
-            poses = resting.get((reference_meshes[obj], properties))
-            if poses is None:
-                poses = resting[(reference_meshes[obj], properties)] = _stable_poses(reference_meshes[obj], properties)
-        job = ReferenceJob(obj, task, run, reference_meshes[obj], properties, spec, config.scene,
-                           cache, asset.contact, config.sim_timeout_s, poses)
-        pending[executor.submit(run_reference_job, job)] = ("ref", (obj, task, run), job)
-
-    simulated = done = 0
-    last_write = 0.0
-    progress("references and simulations", 0, total)
-    with _checkpoint_on_exit(runs_path, rows):
-        while pending:
-            for handle in executor.wait(set(pending)):
-                kind, key, job = pending.pop(handle)
-                result = executor.result(handle)
-                if isinstance(result, _Retry):
-                    pending[executor.submit(result.fn, result.arg, result.attempt)] = (kind, key, job)
-                    continue
-                done += 1
-                if kind == "ref":
-                    status, payload = result
-                    for rep, cm in todo[key]:
-                        ckey = (rep.object, rep.name, cm, key[1], key[2])
-                        if status != "ok":
-                            rows[ckey] = _private(_row(ckey, error=_reference_failed(payload)), target)
-                            done += 1
-                            simulated += 1
-                            continue
-                        cjob = CandidateJob(rep.object, rep.name, cm, key[1], key[2], rep.urdf_for(cm), job.run_spec,
-                                            config.scene, config.simulation_error, payload, config.sim_timeout_s)
-                        pending[executor.submit(run_candidate_job, cjob)] = ("cand", ckey, cjob)
-                else:
-                    rows[key] = _private(result, target)
-                    simulated += 1
-                progress("references and simulations", done, total)
-                now = time.monotonic()
-                if now - last_write > 1.0 or not pending:
-                    write_runs_csv(runs_path, sorted(rows.values(), key=row_key))
-                    last_write = now
-    return simulated
 
 
 __all__ = ["EvaluationConfig", "EvaluationResult", "evaluate"]

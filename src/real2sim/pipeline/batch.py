@@ -3,7 +3,7 @@
 Each object is one task: :func:`run_object` calls :func:`real2sim.pipeline.run.run_pipeline` on its
 dataset into ``CATALOGUE/<name>/`` (an ordinary asset folder, with run's own ``.run/`` cache), so the
 stages of one object keep their order while different objects run side by side. Tasks run on a local
-process pool (:class:`real2sim.evaluate.executors._PoolExecutor`: a worker that dies breaks the pool,
+process pool (:class:`real2sim.evaluate.executors.PoolExecutor`: a worker that dies breaks the pool,
 its jobs are resubmitted, and a job that breaks a second pool is run alone) or on Ray
 (:class:`RayObjects`: one task per object and one CPU; Ray retries a task whose worker died once).
 Where the run uses ``cuda`` and the Ray cluster has GPUs, an object's stages are split into three
@@ -13,14 +13,12 @@ evaluation's simulations) on a CPU again, so a GPU is held only while its stages
 `run` on the same folder: it skips the stages an earlier task recorded and stops before the next
 task's first stage (``run_pipeline``'s ``pause``).
 
-Datasets and results move through paths, which every node must be able to read and write (a shared
-folder): datasets are tens to hundreds of megabytes of images, too big for the object store to be
-the better road, and run's cache lives beside the asset it resumes.
+Datasets and results move through paths on a folder every node reads and writes
+(why: docs/design-notes/pipeline.md#shared-folder).
 
-Resume: ``CATALOGUE/.batch/<name>.json`` records an object's outcome under its key (the dataset's
-files and the run settings). A rerun skips an object whose recorded outcome is "done" under the same
-key, and runs every other one again, which resumes it from run's cache. The catalogue
-(:mod:`.catalogue`) is written at the end, also after an interruption.
+Resume: a rerun skips an object whose outcome :mod:`.catalogue` recorded as "done" under the same key
+(the dataset's files and the run settings), and runs every other one again, which resumes it from run's
+cache. The catalogue is written at the end, also after an interruption.
 """
 
 from __future__ import annotations
@@ -34,17 +32,16 @@ from pathlib import Path
 from typing import Any, Callable
 
 from real2sim.plumbing.errors import UserInputError
-from real2sim.plumbing.outputs import MARKER_NAME, check_output_dir, make_output_dir, output_lock, write_json_atomic
+from real2sim.plumbing.outputs import make_output_dir, output_lock
 from real2sim.plumbing.progress import ProgressFn, null_progress
 from real2sim.pipeline import manifest as mf
+from real2sim.pipeline.catalogue import (BATCH_DIRNAME, MADE_BY, check_catalogue, finished_before, record_outcome,
+                                         state_path, write_catalogue)
 from real2sim.plumbing import digests
 
-BATCH_DIRNAME = ".batch"
-MADE_BY = "real2sim batch"
 EXECUTORS = ("local", "ray")
 #: what a worker that died (killed, or a crash in native code) leaves as its object's reason
 WORKER_DIED = "the worker process died (killed, or a crash in native code)"
-
 
 #: The stages a GPU speeds up: the radiance field, and the primitives' fitting in the asset stage.
 GPU_STAGES = frozenset({"reconstruct", "asset"})
@@ -88,14 +85,16 @@ class ObjectJob:
 
 @dataclass(frozen=True)
 class BatchConfig:
-    """executor: "local" (process pool) or "ray"; address: Ray cluster (None: a private local Ray on the
-    loopback address); workers: objects at once (None: the CPUs, at most the objects); timeout_s: how
-    long to wait for the Ray cluster at ``address``, s."""
+    """Where a batch's objects run, and how many at once."""
 
     executor: str = "local"
+    """Where the objects run: "local" (a process pool on this machine) or "ray"."""
     address: str | None = None
+    """The Ray cluster's address (``executor`` "ray" only); None: a private local Ray on the loopback address."""
     workers: int | None = None
+    """Objects at once, >= 1; None: this process's CPUs, at most the objects to run."""
     timeout_s: float = 30.0
+    """How long to wait for the Ray cluster at ``address`` to answer, s; > 0."""
 
     def __post_init__(self) -> None:
         if self.executor not in EXECUTORS:
@@ -120,27 +119,6 @@ def cpu_count() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
-
-
-def dataset_folder(dataset: Path | str) -> Path:
-    """The dataset's folder, resolved (``run`` also takes the path of its transforms.json)."""
-    dataset = Path(dataset).resolve()
-    return dataset.parent if dataset.name == "transforms.json" and dataset.is_file() else dataset
-
-
-def check_names(datasets: list[Path]) -> list[str]:
-    """The objects' names (their datasets' folder names); UserInputError when two are the same."""
-    seen: dict[str, Path] = {}
-    for ds in datasets:
-        name = dataset_folder(ds).name
-        if name.startswith("."):
-            raise UserInputError(f"{ds}: a dataset folder's name becomes its folder in CATALOGUE, and {name!r} "
-                                 "is hidden; rename it")
-        if name in seen:
-            raise UserInputError(f"two datasets are both named {name!r} ({seen[name]} and {ds}); each object's "
-                                 "folder in CATALOGUE is its dataset's name: rename one")
-        seen[name] = Path(ds)
-    return list(seen)
 
 
 def object_key(job: ObjectJob) -> str:
@@ -189,8 +167,7 @@ THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"
 def limit_threads(threads: int) -> None:
     """This worker process's numeric libraries to ``threads`` threads each. Called in a pool's worker before
     the stages import them: each library otherwise starts a thread per CPU, and two workers on two cores then
-    run four busy threads (the 6 small captures of bench_batch on 2 cores, 2 workers: 88-102 CPU s with torch
-    alone limited, 79-84 with these too; 52-54 -> 42-45 s wall). Ray does the same for its tasks itself."""
+    run four busy threads (why: docs/design-notes/pipeline.md#worker-threads). Ray does the same for its tasks."""
     from threadpoolctl import threadpool_limits
 
     for name in THREAD_VARIABLES:  # the libraries not loaded yet
@@ -226,14 +203,14 @@ class RayObjects:
 
         import ray
 
-        from real2sim.evaluate.executors import _init_ray_bounded, _probe_address, keeping_sigterm
+        from real2sim.evaluate.executors import init_ray_bounded, keeping_sigterm, probe_address
 
         self._ray = ray
         kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.ERROR}
         self._temp_dir = None
         self._owns = not ray.is_initialized()
         if address is not None:
-            _probe_address(address, timeout_s)
+            probe_address(address, timeout_s)
         elif self._owns:
             import tempfile
 
@@ -244,7 +221,7 @@ class RayObjects:
         if self._owns:
             try:
                 if address is not None:
-                    _init_ray_bounded(ray, address, kwargs, timeout_s)
+                    init_ray_bounded(ray, address, kwargs, timeout_s)
                 else:  # in this thread: Ray's processes die with the thread that started them (PR_SET_PDEATHSIG)
                     keeping_sigterm(lambda: ray.init(**kwargs))
             except BaseException as exc:  # SIGTERM and Ctrl-C too: what Ray started so far is stopped
@@ -308,37 +285,9 @@ def make_executor(config: BatchConfig, workers: int):
     """The executor for ``config``: UserInputError (one line, within ``timeout_s``) when Ray is not reachable."""
     if config.executor == "ray":
         return RayObjects(workers, config.address, config.timeout_s)
-    from real2sim.evaluate.executors import _PoolExecutor
+    from real2sim.evaluate.executors import PoolExecutor
 
-    return _PoolExecutor(workers)
-
-
-def check_catalogue(out: Path | str, datasets: list[Path]) -> Path:
-    """CATALOGUE resolved: new, empty, or an earlier batch's (resumed); UserInputError otherwise."""
-    out = check_output_dir(out, overwrite=True, inputs=datasets, what="CATALOGUE")
-    marker = out / MARKER_NAME
-    if marker.is_file():
-        try:
-            made_by = json.loads(marker.read_text()).get("made_by")
-        except (OSError, ValueError, AttributeError):
-            made_by = None
-        if made_by != MADE_BY:
-            raise UserInputError(f"CATALOGUE {out} is a real2sim output but not a batch's ({made_by or 'unknown'}); "
-                                 "choose a new folder")
-    return out
-
-
-def _state_path(out: Path, name: str) -> Path:
-    return out / BATCH_DIRNAME / f"{name}.json"
-
-
-def _finished(out: Path, job: ObjectJob, key: str) -> bool:
-    try:
-        state = json.loads(_state_path(out, job.name).read_text())
-    except (OSError, ValueError):
-        return False
-    return state.get("status") == "done" and state.get("key") == key and (
-        job.asset_dir / mf.RUN_DIRNAME / mf.MANIFEST_NAME).is_file()
+    return PoolExecutor(workers)
 
 
 def run_batch(jobs: list[ObjectJob], out: Path, config: BatchConfig, progress: ProgressFn | None = None,
@@ -346,21 +295,19 @@ def run_batch(jobs: list[ObjectJob], out: Path, config: BatchConfig, progress: P
     """Run every job (see the module docstring) and write the catalogue; ``progress`` gets the whole
     batch's count, ``echo`` one line per finished object. Bad input raises UserInputError before
     anything is written; an interruption writes the catalogue of what finished, then re-raises."""
-    from real2sim.pipeline.catalogue import write_catalogue
-
     progress, echo = progress or null_progress, echo or (lambda line: None)
     out = check_catalogue(out, [j.dataset for j in jobs])
     with output_lock(out):
         result = BatchResult(out)
         keys = {j.name: object_key(j) for j in jobs if j.config is not None}
-        todo = [j for j in jobs if j.config is not None and not _finished(out, j, keys[j.name])]
+        todo = [j for j in jobs if j.config is not None and not finished_before(out, j.name, j.asset_dir, keys[j.name])]
         result.skipped = [j.name for j in jobs if j.config is not None and j not in todo]
         workers = max(1, min(config.workers or cpu_count(), len(todo) or 1))
         executor = make_executor(config, workers) if todo else None  # Ray's refusal comes before any write
         make_output_dir(out, made_by=MADE_BY)
         (out / BATCH_DIRNAME).mkdir(exist_ok=True)
         for name in result.skipped:
-            result.outcomes[name] = json.loads(_state_path(out, name).read_text())
+            result.outcomes[name] = json.loads(state_path(out, name).read_text())
             echo(f"{name}: finished before, skipped")
         try:
             for job in jobs:
@@ -404,7 +351,7 @@ def release_stale_locks(jobs: list[ObjectJob], wait_s: float = 5.0) -> list[str]
 
 def _schedule(executor, todo: list[ObjectJob], keys: dict, out: Path, result: BatchResult, progress: ProgressFn,
               echo: Callable[[str], None], total: int, workers: int) -> None:
-    from real2sim.evaluate.executors import _Retry
+    from real2sim.evaluate.executors import Retry
 
     started, before = time.monotonic(), len(result.outcomes)
     if getattr(executor, "gpus", 0) >= 1:  # split where a GPU is asked for and the cluster has one
@@ -418,7 +365,7 @@ def _schedule(executor, todo: list[ObjectJob], keys: dict, out: Path, result: Ba
         for handle in executor.wait(set(handles)):
             job = handles.pop(handle)
             outcome = executor.result(handle)
-            if isinstance(outcome, _Retry):  # the pool broke under it: again, resuming from run's cache
+            if isinstance(outcome, Retry):  # the pool broke under it: again, resuming from run's cache
                 handles[executor.submit(outcome.fn, outcome.arg, outcome.attempt)] = job
                 continue
             if "name" not in outcome:  # the executor's own failure row: its worker died
@@ -434,9 +381,7 @@ def _schedule(executor, todo: list[ObjectJob], keys: dict, out: Path, result: Ba
 
 
 def _record(out: Path, result: BatchResult, outcome: dict, key: str, echo: Callable[[str], None]) -> None:
-    state = {"name": outcome["name"], "status": outcome["status"], "reason": outcome.get("reason", ""), "key": key}
-    write_json_atomic(_state_path(out, outcome["name"]), state)
-    result.outcomes[outcome["name"]] = state
+    state = result.outcomes[outcome["name"]] = record_outcome(out, outcome, key)
     if outcome["status"] == "done":
         ran = outcome.get("ran") or []
         echo(f"{outcome['name']}: done ({'ran ' + ', '.join(ran) if ran else 'all stages unchanged'})")

@@ -1,4 +1,6 @@
-"""A batch's catalogue: ``CATALOGUE/catalogue.csv``, ``timings.csv`` and a self-contained ``index.html``.
+"""A batch's catalogue folder: its layout (one asset folder per object, named after its dataset, and each
+object's outcome in ``CATALOGUE/.batch/<name>.json``), and what is written at the end: ``catalogue.csv``,
+``timings.csv`` and a self-contained ``index.html``.
 
 catalogue.csv has one row per object (COLUMNS), in the order the datasets were given, and holds only
 what the objects' results are, never how long they took or when: the same batch gives the same bytes,
@@ -22,8 +24,12 @@ import math
 from pathlib import Path
 from typing import Any, Sequence
 
-from real2sim.plumbing.outputs import write_text_atomic
+from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.outputs import MARKER_NAME, check_output_dir, write_json_atomic, write_text_atomic
 from real2sim.pipeline import manifest as mf
+
+BATCH_DIRNAME = ".batch"
+MADE_BY = "real2sim batch"
 
 COLUMNS = (
     "name", "status", "reason", "mass_kg", "size_x_m", "size_y_m", "size_z_m", "representations", "basis",
@@ -32,6 +38,66 @@ COLUMNS = (
     "truth_chamfer_mm", "truth_iou", "truth_com_error_mm", "truth_inertia_max_rel_error", "report",
 )
 PICTURE_PX = 160  # the picture's longer side on the page
+
+
+def dataset_folder(dataset: Path | str) -> Path:
+    """The dataset's folder, resolved (``run`` also takes the path of its transforms.json)."""
+    dataset = Path(dataset).resolve()
+    return dataset.parent if dataset.name == "transforms.json" and dataset.is_file() else dataset
+
+
+def check_names(datasets: list[Path]) -> list[str]:
+    """The objects' names (their datasets' folder names); UserInputError when two are the same."""
+    seen: dict[str, Path] = {}
+    for ds in datasets:
+        name = dataset_folder(ds).name
+        if name.startswith("."):
+            raise UserInputError(f"{ds}: a dataset folder's name becomes its folder in CATALOGUE, and {name!r} "
+                                 "is hidden; rename it")
+        if name in seen:
+            raise UserInputError(f"two datasets are both named {name!r} ({seen[name]} and {ds}); each object's "
+                                 "folder in CATALOGUE is its dataset's name: rename one")
+        seen[name] = Path(ds)
+    return list(seen)
+
+
+def check_catalogue(out: Path | str, datasets: list[Path]) -> Path:
+    """CATALOGUE resolved: new, empty, or an earlier batch's (resumed); UserInputError otherwise."""
+    out = check_output_dir(out, overwrite=True, inputs=datasets, what="CATALOGUE")
+    marker = out / MARKER_NAME
+    if marker.is_file():
+        try:
+            made_by = json.loads(marker.read_text()).get("made_by")
+        except (OSError, ValueError, AttributeError):
+            made_by = None
+        if made_by != MADE_BY:
+            raise UserInputError(f"CATALOGUE {out} is a real2sim output but not a batch's ({made_by or 'unknown'}); "
+                                 "choose a new folder")
+    return out
+
+
+def state_path(out: Path, name: str) -> Path:
+    """Where CATALOGUE ``out`` records the outcome of object ``name`` (its status, reason and key)."""
+    return out / BATCH_DIRNAME / f"{name}.json"
+
+
+def finished_before(out: Path, name: str, asset_dir: Path, key: str) -> bool:
+    """Whether an earlier batch into ``out`` finished object ``name`` under the same ``key`` (dataset and
+    settings), and its asset folder still holds run's record."""
+    try:
+        state = json.loads(state_path(out, name).read_text())
+    except (OSError, ValueError):
+        return False
+    return state.get("status") == "done" and state.get("key") == key and (
+        asset_dir / mf.RUN_DIRNAME / mf.MANIFEST_NAME).is_file()
+
+
+def record_outcome(out: Path, outcome: dict, key: str) -> dict:
+    """Record the outcome of object ``outcome["name"]`` (its status and reason) under ``key`` in CATALOGUE
+    ``out``; returns the record."""
+    state = {"name": outcome["name"], "status": outcome["status"], "reason": outcome.get("reason", ""), "key": key}
+    write_json_atomic(state_path(out, outcome["name"]), state)
+    return state
 
 
 def _num(value: Any) -> str:
@@ -177,7 +243,7 @@ def write_catalogue(out: Path, jobs: Sequence, outcomes: dict[str, dict]) -> lis
     for job in jobs:
         state = outcomes.get(job.name)
         if state is None:  # not in this batch's outcomes: an earlier batch's, if any
-            state = _json(out / ".batch" / f"{job.name}.json") or None
+            state = _json(state_path(out, job.name)) or None
         row = object_row(job.name, job.asset_dir, state)
         rows.append(row)
         times = stage_times(job.asset_dir) if row["status"] == "done" else {}

@@ -65,15 +65,16 @@ class PhoneInput:
 
 @dataclass(frozen=True)
 class PhoneConfig:
-    """``frames``: video frames kept; ``board``: the printed board (a
-    :class:`real2sim.capture.phone.board.BoardSpec`; None: ``real2sim board``'s default); ``board_square_mm``:
-    its square as measured when the print was scaled (None: the board's own size); ``sfm``:
-    structure-from-motion settings."""
+    """How a phone capture (photos or a video) becomes the dataset the rest of `run` reads."""
 
     frames: int = DEFAULT_FRAMES
+    """Frames kept from a video for structure from motion; >= 1 (photos: unused)."""
     board_square_mm: float | None = None
+    """The printed board's square as measured on the print, mm; > 0 (None: the board's own size)."""
     board: BoardSpec | None = None
+    """The printed board (a :class:`real2sim.capture.phone.board.BoardSpec`); None: ``real2sim board``'s default."""
     sfm: SfmConfig = field(default_factory=SfmConfig)
+    """Structure-from-motion settings."""
 
 
 def phone_input(path: Path | str) -> PhoneInput | None:

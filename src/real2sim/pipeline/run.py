@@ -33,9 +33,9 @@ from __future__ import annotations
 import importlib.util
 import json
 import shutil
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 from real2sim.formats.dataset import has_table_plane, read_dataset
 from real2sim.plumbing.errors import UserInputError
@@ -43,85 +43,21 @@ from real2sim.plumbing.outputs import check_output_dir, make_output_dir, output_
 from real2sim.plumbing.progress import ProgressFn
 from real2sim.pipeline import manifest as mf
 from real2sim.capture.masks.stage import PARALLAX
-from real2sim.capture.phone.normalise import MODEL_FROM_WORLD, NormaliseConfig
+from real2sim.capture.phone.normalise import MODEL_FROM_WORLD
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
-                                      EVALUATIONS, _asset, _evaluate, _evaluate_truth, _masks, _reconstruct, _refine,
-                                      _refine_unavailable, _robot_frame, _truth, check_evaluations, rewrite_reports)
+                                      EVALUATIONS, check_evaluations, refine_unavailable, rewrite_reports, run_asset,
+                                      run_evaluate, run_evaluate_truth, run_masks, run_reconstruct, run_refine,
+                                      run_robot_frame, run_truth)
 from real2sim.pipeline.run_folder import (check_dataset, dataset_files, discard, kept_note,  # noqa: F401
                                           poses_to_refine, prepare_asset_dir, remove_stale_temporaries)
+from real2sim.pipeline.run_config import RunConfig, RunResult, phone_mask_config  # noqa: F401 (public here)
 from real2sim.pipeline.runner import Paused, RunProgress, Runner, StageFailed
 from real2sim.pipeline.support import support_height_m
 from real2sim.pipeline.truth import has_ground_truth
 from real2sim.plumbing import digests
 
-if TYPE_CHECKING:
-    from real2sim.asset.build import AssetConfig
-    from real2sim.capture.masks.methods import MaskConfig
-    from real2sim.capture.poses.refinement import RefineConfig
-    from real2sim.evaluate.sweep import EvaluationConfig
-    from real2sim.pipeline.phone import PhoneConfig
-    from real2sim.capture.masks.parallax_config import ParallaxConfig
-    from real2sim.reconstruct.stage import ReconstructConfig
-
 # Evaluation settings that change how fast, not what: not part of the evaluate stage's key.
 _EVAL_SCHEDULING = ("jobs", "executor", "ray_address", "ray_timeout_s", "sim_timeout_s")
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    """Everything `run` needs besides the dataset and ASSETDIR.
-
-    asset: the asset stage's settings (mass, SPECs, ...); ``flat_bottom`` is forced on
-    at the reconstruction's table plane, and ``keep_up`` unless ``pca_up``: the table's
-    normal is the asset's +z, so the object stands in the asset as it stood when captured,
-    on the bottom closed at the table (the paper's PCA rule, ``pca_up``, stands a box on
-    its end and lays a mug on its side). reconstruct: None -> the
-    stage's defaults. mask_method: None -> the dataset's own masks (every frame must
-    have one); else masks are made with :func:`real2sim.capture.masks.stage.make_masks` (``mask``
-    the capture methods' settings, or for parallax masks a ParallaxConfig; otherwise their defaults, and
-    for a phone capture :func:`phone_mask_config`'s) on a copy; ``parallax`` masks of a robot
-    capture are made after refine_poses, on the refined poses. refine: None -> no pose refinement
-    (the API does what it is given; the command line refines by default where :func:`poses_to_refine`).
-    evaluation: None -> no evaluation. object_height_m (the object's height above the table,
-    metres) or scale (metres per model unit): exactly one for a COLMAP dataset (poses in an
-    arbitrary frame and scale), which the ``robot_frame`` stage then normalises; neither for a
-    transforms.json dataset (already metric, table at z = 0). phone: a phone capture's settings (video
-    frames, the board's square, structure from motion); None -> defaults.
-    """
-
-    asset: "AssetConfig"
-    reconstruct: "ReconstructConfig | None" = None
-    mask_method: str | None = None
-    mask: "MaskConfig | ParallaxConfig | None" = None
-    refine: "RefineConfig | None" = None
-    evaluation: "EvaluationConfig | None" = None
-    device: str = "cpu"
-    seed: int = 0
-    object_height_m: float | None = None
-    scale: float | None = None
-    pca_up: bool = False
-    phone: "PhoneConfig | None" = None
-
-    def robot_frame(self) -> NormaliseConfig | None:
-        """The robot_frame stage's settings; None when neither object_height_m nor scale is given."""
-        if self.object_height_m is None and self.scale is None:
-            return None
-        return NormaliseConfig(object_height_m=self.object_height_m, scale=self.scale)
-
-
-@dataclass
-class RunResult:
-    asset_dir: Path
-    statuses: dict[str, str]  # stage -> "ran" | "skipped"
-    manifest_path: Path
-    truth: dict | None = None
-    urdf_paths: list[Path] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)  # run's own notices (a stale evaluation), said once
-    #: what degraded: every warning the stages raised, ``{"stage", "message"}``, those of the stages
-    #: skipped as unchanged included (from run.json); the command repeats them in its summary
-    stage_warnings: list[dict] = field(default_factory=list)
-    #: the stage the run stopped before when its ``pause`` asked (None: it ran to the end)
-    paused_before: str | None = None
 
 
 def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, *, overwrite: bool = False,
@@ -153,9 +89,8 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
         robot_frame.validate()
     recon_cfg = config.reconstruct or ReconstructConfig()
     if recon_cfg.mask_edges == "auto" and config.mask_method == PARALLAX:
-        # parallax masks come from the images already (warps and colour agreement over a textured table,
-        # where colour models of object and table overlap): moving their edges by colour made a can 1.5 ->
-        # 1.7 mm Chamfer (tests/pipeline/test_parallax_run.py)
+        # parallax masks come from the images already (warps and colour agreement over a textured table, where
+        # colour models of object and table overlap): their edges stay (why: docs/design-notes/pipeline.md#mask-edges)
         recon_cfg = replace(recon_cfg, mask_edges="as-given")
     recon_cfg.validate()
     if (robot_frame is not None or phone is not None) and recon_cfg.table_z_m != 0.0:
@@ -206,24 +141,6 @@ def _run_locked(manifest: mf.Manifest, created: bool, dataset: Path, asset_dir: 
         elif isinstance(exc, UserInputError):  # the folder stays, deliberately: say so on the one line
             raise UserInputError(f"{exc}; {kept_note(asset_dir)}") from exc
         raise
-
-
-def phone_mask_config(config: RunConfig, kind: str) -> RunConfig:
-    """``config`` for a phone capture of ``kind`` ("photos" or "video") masked by parallax, unless ``config.mask``
-    is a ParallaxConfig already: the object's second opinion on the table plate
-    (``ParallaxConfig.plate_object_threshold``), and for photos step 6's stricter outlier share
-    (``plate_outlier_fraction``). A clip's frames come a few degrees apart along one path and repeat the
-    plate's chance matches on a printed object, which the hull then carves into a hollow; with the opinion
-    photos can let fewer views carve (a mug's handle hole), a clip cannot (the measurements are in the
-    settings' docstrings)."""
-    from real2sim.capture.masks.parallax_config import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
-                                                      ParallaxConfig)
-
-    if config.mask_method != PARALLAX or isinstance(config.mask, ParallaxConfig):
-        return config
-    outliers = PHONE_PHOTOS_PLATE_OUTLIER_FRACTION if kind == "photos" else None
-    return replace(config, mask=ParallaxConfig(plate_object_threshold=PHONE_PLATE_OBJECT_THRESHOLD,
-                                               plate_outlier_fraction=outliers))
 
 
 def _counted_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfig, recon_cfg, asset_cfg
@@ -289,8 +206,8 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
                     settings["parallax"] = changed
         return runner.stage("masks", {"dataset": digests.files_digest(source, dataset_files(source))}, settings,
                             upstream, [f"{mf.RUN_DIRNAME}/masked"],
-                            lambda: _masks(source, run_dir, config.mask_method, mask_cfg, progress, table_z_m,
-                                           config.seed))
+                            lambda: run_masks(source, run_dir, config.mask_method, mask_cfg, progress, table_z_m,
+                                              config.seed))
 
     if config.mask_method is not None and not masks_last:
         upstream = masks_stage(dataset, None)
@@ -303,7 +220,7 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
         upstream = runner.stage("robot_frame", {"dataset": digests.files_digest(source, dataset_files(source))},
                                 {"config": robot_frame, "seed": config.seed}, upstream,
                                 [f"{mf.RUN_DIRNAME}/robot_frame"],
-                                lambda: _robot_frame(source, run_dir, robot_frame, config.seed, progress))
+                                lambda: run_robot_frame(source, run_dir, robot_frame, config.seed, progress))
         used = truth_root = run_dir / "robot_frame"  # its ground_truth/ (if any) is re-expressed in the new frame
     elif manifest.entry("robot_frame"):
         manifest.forget("robot_frame")
@@ -313,11 +230,11 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
         inputs = {"dataset": digests.files_digest(source, dataset_files(source))}
         if importlib.util.find_spec("pycolmap") is not None:
             upstream = runner.stage("refine_poses", inputs, config.refine, upstream, [f"{mf.RUN_DIRNAME}/dataset"],
-                                    lambda: _refine(source, run_dir, config.refine, progress))
+                                    lambda: run_refine(source, run_dir, config.refine, progress))
             used = run_dir / "dataset"
         else:  # `make install` has it; without it the run goes on with the given poses, with a warning
             upstream = runner.stage("refine_poses", inputs, {"config": config.refine, "pycolmap": "missing"},
-                                    upstream, None, lambda: _refine_unavailable(run_dir))
+                                    upstream, None, lambda: refine_unavailable(run_dir))
     elif manifest.entry("refine_poses"):
         manifest.forget("refine_poses")
         shutil.rmtree(run_dir / "dataset", ignore_errors=True)
@@ -338,13 +255,13 @@ def _run_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfi
         "reconstruct", {"dataset": digests.files_digest(used, dataset_files(used))},
         {"config": recon_cfg, "device": config.device, "seed": config.seed}, upstream,
         [f"{mf.RUN_DIRNAME}/reconstruct/mesh.obj", f"{mf.RUN_DIRNAME}/reconstruct/report.json"],
-        lambda: _reconstruct(used, recon_dir, recon_cfg, config.device, config.seed, progress))
+        lambda: run_reconstruct(used, recon_dir, recon_cfg, config.device, config.seed, progress))
 
     mesh_files = [f for f in digests.tree_files(recon_dir) if f != "report.json"]
     support_m, support_from = support_height_m(used, recon_dir / "mesh.obj", recon_cfg.table_z_m)
     asset_cfg = replace(asset_cfg, support_height_m=support_m)
     asset_key = runner.stage("asset", {"mesh": digests.files_digest(recon_dir, mesh_files)}, asset_cfg, upstream, None,
-                             lambda: {**_asset(recon_dir / "mesh.obj", asset_dir, asset_cfg, manifest, progress),
+                             lambda: {**run_asset(recon_dir / "mesh.obj", asset_dir, asset_cfg, manifest, progress),
                                       "evaluation_mesh": evaluation_mesh, "support": support_from})
     asset_outputs = manifest.entry("asset")["outputs"]
 
@@ -367,12 +284,12 @@ def _run_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfi
         skip = () if any(s.name == "mesh" for s in config.asset.specs) else ("mesh",)
         eval_key = runner.stage("evaluate", inputs_now["evaluate"], {**settings, "skip": list(skip)}, asset_key,
                                 [RESULTS_DIRNAME],
-                                lambda: _evaluate(asset_dir, config.evaluation, manifest, progress, skip))
+                                lambda: run_evaluate(asset_dir, config.evaluation, manifest, progress, skip))
         if with_truth:
             eval_key = runner.stage(
                 "evaluate_truth", inputs_now["evaluate_truth"],
                 {**settings, "seed_properties": asset_cfg.seed}, eval_key, [TRUTH_RESULTS_DIRNAME],
-                lambda: _evaluate_truth(truth_root, asset_dir, config.evaluation, asset_cfg.seed, manifest, progress))
+                lambda: run_evaluate_truth(truth_root, asset_dir, config.evaluation, asset_cfg.seed, manifest, progress))
         # a report is written inside its stage, before the stage's own warnings are recorded: again with them
         rewrite_reports(asset_dir, manifest, [folder for stage, folder in EVALUATIONS if runner.statuses.get(stage)
                                               == "ran" and (manifest.entry(stage) or {}).get("warnings")])
@@ -391,9 +308,9 @@ def _run_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfi
         settings = {"seed": asset_cfg.seed, "refined": config.refine is not None, "dynamics": dynamics,
                     **({"warnings": raised} if raised else {})}  # none: the key of runs from before warnings
         runner.stage("truth", inputs, settings, eval_key or asset_key, ["truth.json"],
-                     lambda: _truth(truth_root, used, asset_dir, recon_dir, manifest, asset_cfg.seed, dynamics,
-                                    refined=config.refine is not None, robot_frame=config.robot_frame() is not None,
-                                    raised=raised))
+                     lambda: run_truth(truth_root, used, asset_dir, recon_dir, manifest, asset_cfg.seed, dynamics,
+                                       refined=config.refine is not None, robot_frame=config.robot_frame() is not None,
+                                       raised=raised))
         truth = json.loads((asset_dir / "truth.json").read_text())
     elif manifest.entry("truth"):  # the dataset lost its ground_truth/: a stale truth.json would mislead
         manifest.forget("truth")

@@ -40,8 +40,9 @@ def _edited_copy(dataset: Path, target: Path, edit: Callable[[Path], dict]) -> d
     return extra
 
 
-def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: ProgressFn, table_z_m: float = 0.0,
-           seed: int = 0) -> dict:
+def run_masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: ProgressFn, table_z_m: float = 0.0,
+              seed: int = 0) -> dict:
+    """The masks stage: ``method``'s masks made on a copy of ``dataset`` in ``run_dir/masked``."""
     from real2sim.capture.masks.stage import make_masks
 
     def edit(copy: Path) -> dict:
@@ -58,7 +59,7 @@ def _masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: Progre
     return _edited_copy(dataset, run_dir / "masked", edit)
 
 
-def _refine(dataset: Path, run_dir: Path, refine_cfg, progress: ProgressFn) -> dict:
+def run_refine(dataset: Path, run_dir: Path, refine_cfg, progress: ProgressFn) -> dict:
     """refine_poses on a copy. When COLMAP keeps all the given poses, refine_poses warns itself; when it
     keeps some, this stage says so: those frames keep the robot's noise."""
     from real2sim.capture.poses.refinement import refine_poses
@@ -79,7 +80,7 @@ def _refine(dataset: Path, run_dir: Path, refine_cfg, progress: ProgressFn) -> d
 PYCOLMAP_MISSING = "pycolmap is not installed (`make install` installs it; or pip install pycolmap)"
 
 
-def _refine_unavailable(run_dir: Path) -> dict:
+def refine_unavailable(run_dir: Path) -> dict:
     """The refine_poses stage without pycolmap: no copy, the given poses go on, with a warning."""
     shutil.rmtree(run_dir / "dataset", ignore_errors=True)  # an earlier run's refined copy: not this run's poses
     warnings.warn(f"pose refinement skipped: {PYCOLMAP_MISSING}; the given poses are used as they are",
@@ -87,7 +88,8 @@ def _refine_unavailable(run_dir: Path) -> dict:
     return {"outputs": [], "result": {"refined": False, "reason": f"skipped: {PYCOLMAP_MISSING}"}}
 
 
-def _robot_frame(dataset: Path, run_dir: Path, cfg: NormaliseConfig, seed: int, progress: ProgressFn) -> dict:
+def run_robot_frame(dataset: Path, run_dir: Path, cfg: NormaliseConfig, seed: int, progress: ProgressFn) -> dict:
+    """The robot_frame stage: ``dataset`` (a COLMAP model) normalised into ``run_dir/robot_frame``."""
     from real2sim.capture.phone.normalise import normalise
 
     record = normalise(dataset, run_dir / "robot_frame", cfg, seed=seed, progress=progress)
@@ -95,7 +97,8 @@ def _robot_frame(dataset: Path, run_dir: Path, cfg: NormaliseConfig, seed: int, 
     return {"result": {"scale": record["robot_from_model"]["scale"], **{k: record[k] for k in keep if k in record}}}
 
 
-def _reconstruct(dataset: Path, out: Path, cfg, device: str, seed: int, progress: ProgressFn) -> dict:
+def run_reconstruct(dataset: Path, out: Path, cfg, device: str, seed: int, progress: ProgressFn) -> dict:
+    """The reconstruct stage: the mesh and report of ``dataset`` written into ``out``."""
     from real2sim.reconstruct.stage import reconstruct, write_reconstruction
 
     result = reconstruct(dataset, cfg, device=device, seed=seed, progress=progress)
@@ -111,7 +114,7 @@ def check_reaches_table(mesh: Path, table_z_m: float) -> None:
     reconstructed (masks that miss it near the table, a table height that is wrong), and there is
     no bottom to close at the table. ``asset``'s own message speaks of ``--support-height``, which
     ``run`` sets itself."""
-    from real2sim.asset.build import SUPPORT_BELOW_TOLERANCE, support_below_mesh
+    from real2sim.asset.checks import SUPPORT_BELOW_TOLERANCE, support_below_mesh
     from real2sim.plumbing.errors import UserInputError
     from real2sim.geometry.mesh_io import load_mesh
 
@@ -162,7 +165,7 @@ def _infer_legacy_asset(asset_dir: Path, manifest: mf.Manifest) -> None:
     manifest.claim("asset", {name: None for name in names if (asset_dir / name).exists()})
 
 
-def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: ProgressFn) -> dict:
+def run_asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: ProgressFn) -> dict:
     """build_asset into ``.run/asset`` (whole or not at all), then swap its entries into ASSETDIR.
 
     Only what the previous asset stage wrote (the manifest's ``owned`` record) is replaced or
@@ -201,8 +204,8 @@ def _asset(mesh: Path, asset_dir: Path, cfg, manifest: mf.Manifest, progress: Pr
     return {"outputs": outputs}
 
 
-def _evaluate_truth(dataset: Path, asset_dir: Path, cfg, seed: int, manifest: mf.Manifest,
-                    progress: ProgressFn) -> dict:
+def run_evaluate_truth(dataset: Path, asset_dir: Path, cfg, seed: int, manifest: mf.Manifest,
+                       progress: ProgressFn) -> dict:
     """The sweep again, against the true mesh with the true mass properties (see truth_dynamics)."""
     from real2sim.evaluate.sweep import evaluate
     from real2sim.pipeline.truth_dynamics import write_true_reference
@@ -215,7 +218,8 @@ def _evaluate_truth(dataset: Path, asset_dir: Path, cfg, seed: int, manifest: mf
     return {"summary": {"simulated": result.simulated, "failed": result.failed}}
 
 
-def _evaluate(asset_dir: Path, cfg, manifest: mf.Manifest, progress: ProgressFn, skip: tuple[str, ...] = ()) -> dict:
+def run_evaluate(asset_dir: Path, cfg, manifest: mf.Manifest, progress: ProgressFn, skip: tuple[str, ...] = ()) -> dict:
+    """The evaluate stage: the sweep of the asset in ``asset_dir`` into its results folder."""
     from real2sim.evaluate.sweep import evaluate
 
     refuse_foreign(asset_dir, manifest, [RESULTS_DIRNAME])
@@ -274,8 +278,8 @@ def rewrite_reports(asset_dir: Path, manifest: mf.Manifest, folders) -> None:
             manifest.add_owned_files(name, set(digests.all_files(folder)) - before)
 
 
-def _truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, manifest: mf.Manifest, seed: int,
-           dynamics: bool, *, refined: bool, robot_frame: bool, raised: list[dict] = ()) -> None:
+def run_truth(dataset: Path, used: Path, asset_dir: Path, recon_dir: Path, manifest: mf.Manifest, seed: int,
+              dynamics: bool, *, refined: bool, robot_frame: bool, raised: list[dict] = ()) -> None:
     """truth.json; ``dynamics``: with the evaluations' comparison (run now, or kept and still valid);
     ``refined`` / ``robot_frame``: whether those stages are part of this run; ``raised``: the warnings the
     stages before raised (``{"stage", "message"}``), repeated in truth.json."""

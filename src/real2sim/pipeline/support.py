@@ -10,17 +10,15 @@
 
 Why not simply the mesh's lowest vertex (or a low percentile of its vertices): with the cameras
 above the object's bottom, nothing under the bottom is seen by any view, and the visual hull
-there is a downward cone under the bottom (13 mm deep and 13 % of the surface under the can of a
-40-view capture whose lowest cameras look from 11 deg up). A support at the cone's apex
-would stand the asset on a point, with mass where the object has none. The cone's faces are
+there is a downward cone under the bottom (how deep: docs/design-notes/pipeline.md#support). A
+support at the cone's apex would stand the asset on a point, with mass where the object has none. The cone's faces are
 the ones no camera looks at: they face down, away from every view. So the support is the lowest
 part of the surface the cameras *see*: faces whose normal is within :data:`SEEN_WITHIN_DEG` of
 the direction to at least :data:`SEEN_BY_VIEWS` camera centres, and among those the height
 below which :data:`LOW_AREA_FRACTION` of their area lies (a percentile by area, so that a
-stray sliver of a face does not set it, and the mesh's tessellation does not weigh in). On the
-can above this lands within a millimetre of the true bottom (the 1st percentile of all vertices
-was 11 mm below it). Occlusion is not tested: a bottom is seen from the side, where the object
-does not hide its own lowest rim.
+stray sliver of a face does not set it, and the mesh's tessellation does not weigh in).
+Occlusion is not tested: a bottom is seen from the side, where the object does not hide its own
+lowest rim.
 """
 
 from __future__ import annotations

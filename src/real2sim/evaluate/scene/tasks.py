@@ -21,14 +21,10 @@ around either; adding a task means adding one object here.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from real2sim.evaluate.scene.plant_parts import contact_material, pd_actuator
-
-if TYPE_CHECKING:
-    from real2sim.evaluate.scene.scene_config import SceneConfig
+from real2sim.evaluate.scene.scene_config import SceneConfig
 
 
 @dataclass(frozen=True)
@@ -254,3 +250,13 @@ def task_named(task: str) -> PushTask | RampTask:
 
 def check_task(task: str) -> None:
     task_named(task)
+
+
+def run_duration_s(task: str, cfg: SceneConfig) -> float:
+    """Simulated seconds of one run of ``task`` in the scenes ``cfg``."""
+    return task_named(task).duration_s(cfg)
+
+
+def run_steps(task: str, cfg: SceneConfig) -> int:
+    """Number of plant steps of one run of ``task`` (integer; times are step * ``cfg.time_step_s``)."""
+    return int(round(run_duration_s(task, cfg) / cfg.time_step_s))
