@@ -129,3 +129,33 @@ def test_packages_are_small_enough_to_read():
 @pytest.mark.parametrize("name", sorted(MODULES))
 def test_modules_stay_within_their_size(name):
     assert len(MODULES[name].read_text().splitlines()) <= MAX_LINES
+
+
+def first_line(path: Path) -> str:
+    """The first sentence of a module's docstring, on one line (what docs/architecture.md says of it)."""
+    doc = ast.get_docstring(ast.parse(path.read_text())) or ""
+    text = " ".join(doc.split("\n\n")[0].split())
+    cut = text.find(". ")
+    return (text[: cut + 1] if 0 < cut < 150 else text[:150]).rstrip()
+
+
+def tree_listing() -> list[str]:
+    """docs/architecture.md's tree: every package and module, indented, each with its first line."""
+    lines = []
+    for path in sorted(PACKAGE.rglob("*.py"), key=lambda p: p.relative_to(PACKAGE).parts):
+        rel = path.relative_to(PACKAGE)
+        depth = len(rel.parts) - 1
+        if path.name == "__init__.py":
+            if depth == 0:
+                continue
+            lines.append(f"{'  ' * (depth - 1)}{rel.parts[-2]}/  {first_line(path)}")
+        else:
+            lines.append(f"{'  ' * depth}{path.name}  {first_line(path)}")
+    return lines
+
+
+def test_the_architecture_page_draws_the_tree():
+    text = (PACKAGE.parents[1] / "docs" / "architecture.md").read_text()
+    start = text.index("<!-- tree: generated")
+    body = text[start:text.index("<!-- end of tree -->")].split("```")[1].strip("\n").splitlines()
+    assert body == tree_listing(), "regenerate: python -c 'from tests.test_tree import tree_listing; ...'"

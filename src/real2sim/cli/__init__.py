@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + signal.SIGTERM if terminated and code == 130 else code
     except UserInputError as exc:
         print(f"real2sim {args.verb}: error: {public_paths(str(exc))}", file=sys.stderr)
-        if getattr(exc, "exit_now", False):  # a library call was abandoned mid-way (executors._init_ray_bounded)
+        if getattr(exc, "exit_now", False):  # a library call was abandoned mid-way (executors.init_ray_bounded)
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(2)

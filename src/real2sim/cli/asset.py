@@ -25,7 +25,7 @@ def add_contact_arguments(p: argparse.ArgumentParser) -> None:
                    help="make --point-stiffness the body's: each piece gets it divided by the mean number of "
                         "pieces that touch a plane laid on the hull, so a union of primitives rests as stiffly "
                         "as one piece (default on; --no-split-point-stiffness gives every piece all of it: "
-                        "docs/benchmarks/point_contact_split20_idle.md)")
+                        "docs/design-notes/asset.md#point-stiffness-per-piece)")
     g.add_argument("--dissipation", type=positive(100.0), default=1.0, metavar="S_PER_M",
                    help="Hunt-Crossley dissipation, s/m (default 1.0)")
     g.add_argument("--point-dissipation", type=number(0.0, 100.0), default=20.0, metavar="S_PER_M",
@@ -94,7 +94,7 @@ def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX)
     g.add_argument("--contact-weight", type=number(0.0, 1000.0), default=None, metavar="GAIN",
                    help="weight 1 + GAIN for the signed-distance samples near the convex hull (the surfaces the "
                    "object stands, rolls and tips on); 0 is the paper's plain fit (default: 5 for cylinders and "
-                   "ellipsoids alone, 0 for the other families, as measured in docs/benchmarks/table1.md)")
+                   "ellipsoids alone, 0 for the other families: docs/design-notes/collision.md#contact-aware-fitting)")
     g.add_argument("--fill-cavities", type=number(1e-4, 10.0), default=None, metavar="M",
                    help="fit every collision SPEC (CoACD's included) to the solid with its cavities and holes "
                    "narrower than a ball of radius M metres filled: a cup's inside, a handle's hole. For "

@@ -52,10 +52,8 @@ class DemoPlan:
     duration_scale: float = 1.0
 
 
-# Measured by benchmarks/bench_demo.py (docs/benchmarks/demo.md): full at most 15 min on 2 cores,
-# quick at most 3 (CI runs it). The visual hull needs ~60 views to close. The full demo runs each
-# task once per contact model: its two sweeps (against the reconstruction and against the truth)
-# took 13.5 min of its 23 with three runs; benchmarks/bench_table1.py runs the paper's ten.
+# The full demo fits the paper's families and runs each task once per contact model, to stay within
+# minutes on a laptop CPU (docs/design-notes/pipeline.md#demo).
 FULL = DemoPlan(
     specs=("cylinders:10", "boxes:50", "spheres:64", "ellipsoids:32", "rotated_boxes:20", "superquadrics:5", "coacd"),
     tasks=("push", "ramp"), contact_models=("point", "hydroelastic"), runs=1,
