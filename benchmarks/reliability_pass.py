@@ -4,7 +4,7 @@ For each option of each verb, values of the classes that broke the contract befo
 range or not finite, unknown choices, and, for paths, what a user's file system holds in place of
 the right file (nothing, a folder for a file, a file for a folder, an empty or garbage file, a link
 to nothing, a link loop, a path under a file; for outputs also a folder real2sim did not make, an
-overlong name, an earlier output without --overwrite, an output inside an input). Every other
+overlong name; an output over an input is tests/cli/test_path_roles.py's, for every pair). Every other
 argument is a valid small input made first. Each case runs as its own `real2sim` process with a time
 limit and is judged by the contract: exit 2 with exactly one line and no traceback ("refused"),
 otherwise "internal error" (exit 1 or a traceback), "several lines", "accepted" (exit 0: to be read
@@ -90,8 +90,7 @@ def path_values(work: Path, role: str) -> dict[str, str]:
                        "a folder": str(bad / "folder"), "a file": str(bad / "file.txt")})
     else:
         values.update({"a folder real2sim did not make": str(bad / "theirs"),
-                       "an overlong name": str(bad / ("n" * 300)), "nowhere to write": "/proc/real2sim_out",
-                       "an input inside it": str(work / "inputs_parent")})
+                       "an overlong name": str(bad / ("n" * 300)), "nowhere to write": "/proc/real2sim_out"})
     return values
 
 

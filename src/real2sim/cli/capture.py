@@ -287,6 +287,10 @@ def run_mask(args: argparse.Namespace) -> int:
     from real2sim.plumbing.outputs import output_lock
     from real2sim.capture.masks.stage import make_masks
 
+    if args.weights is not None and args.method != "maskrcnn":
+        from real2sim.plumbing.errors import UserInputError
+
+        raise UserInputError(f"--weights is for --method maskrcnn, not --method {args.method}")
     cfg = MaskConfig(threshold=args.threshold, weights=args.weights, device=args.device,
                      maskrcnn_min_size_px=args.maskrcnn_min_size, maskrcnn_max_size_px=args.maskrcnn_max_size,
                      maskrcnn_max_instances=args.maskrcnn_max_instances)

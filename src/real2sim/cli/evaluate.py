@@ -100,6 +100,8 @@ def config_from_args(args: argparse.Namespace):
 
     if args.runs < 1:
         raise UserInputError(f"--runs must be >= 1, got {args.runs}")
+    if args.ray_address is not None and args.executor != "ray":
+        raise UserInputError("--ray-address is for --executor ray")
     if args.jobs is not None and args.jobs < 1:
         raise UserInputError(f"--jobs must be >= 1, got {args.jobs}")
     k = float(args.duration_scale)
@@ -186,6 +188,9 @@ def run(args: argparse.Namespace) -> int:
     from real2sim.evaluate.workdir import partial_dir
     from real2sim.plumbing.errors import UserInputError
 
+    from real2sim.plumbing.outputs import check_output_path
+
+    check_output_path(args.out, what="--out")  # a link to nothing, an overlong name: one line, before any work
     config = config_from_args(args)
     if args.reference is not None and not args.reference.is_file():
         from real2sim.plumbing.paths import missing

@@ -22,6 +22,12 @@ DURATION_SCALE = positive(100.0)
 _FORCED_ASSET_FLAGS = ("flat_bottom", "support_height", "keep_up")
 
 
+#: run's evaluation options (dest by flag): refused without --evaluate rather than silently unused.
+EVALUATION_FLAGS = {"--tasks": "tasks", "--contact": "contact", "--runs": "runs", "--jobs": "jobs",
+                    "--duration-scale": "duration_scale"}
+EVALUATION_DEFAULTS = {"tasks": "push,ramp", "contact": "point,hydroelastic", "runs": 10, "jobs": None, "duration_scale": 1.0}
+
+
 def register(sub) -> None:
     p = sub.add_parser(
         "run",
@@ -101,12 +107,12 @@ def register(sub) -> None:
             action.help = argparse.SUPPRESS
     e = p.add_argument_group("evaluation (with --evaluate; results in ASSETDIR/results)")
     e.add_argument("--evaluate", action="store_true", help="run the Drake evaluation of every representation")
-    e.add_argument("--tasks", default="push,ramp", metavar="LIST", help="comma-separated tasks (default push,ramp)")
-    e.add_argument("--contact", default="point,hydroelastic", metavar="LIST",
+    e.add_argument("--tasks", default=EVALUATION_DEFAULTS["tasks"], metavar="LIST", help="comma-separated tasks (default push,ramp)")
+    e.add_argument("--contact", default=EVALUATION_DEFAULTS["contact"], metavar="LIST",
                    help="comma-separated contact models (default point,hydroelastic)")
-    e.add_argument("--runs", type=RUNS, default=10, metavar="N", help="runs per task (default 10)")
+    e.add_argument("--runs", type=RUNS, default=EVALUATION_DEFAULTS["runs"], metavar="N", help="runs per task (default 10)")
     e.add_argument("--jobs", type=jobs, default=None, metavar="N", help="simulations in parallel (default CPU count)")
-    e.add_argument("--duration-scale", type=DURATION_SCALE, default=1.0, metavar="K",
+    e.add_argument("--duration-scale", type=DURATION_SCALE, default=EVALUATION_DEFAULTS["duration_scale"], metavar="K",
                    help="multiply the tasks' durations by K (default 1)")
     options.finish(p)
     options.declare_paths(p, reads=("dataset", "board", "mask_weights", "properties"), writes=("out",),
@@ -149,6 +155,13 @@ def config_from_args(args: argparse.Namespace):
     if args.max_faces is not None:
         recon = replace(recon, max_faces=args.max_faces)
     recon.validate()
+    if args.mask_weights is not None and args.mask != "maskrcnn":
+        raise UserInputError("--mask-weights is for --mask maskrcnn")
+    if not args.evaluate:
+        for flag, dest in EVALUATION_FLAGS.items():
+            if getattr(args, dest) != EVALUATION_DEFAULTS[dest]:
+                raise UserInputError(f"{flag} is for --evaluate (the evaluation of the asset); add --evaluate "
+                                     f"or drop {flag}")
     mask = None
     if args.mask is not None:
         from real2sim.capture.masks.methods import MaskConfig
