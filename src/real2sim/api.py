@@ -19,7 +19,7 @@ from typing import Iterable, Sequence
 
 from real2sim.asset.build import AssetConfig
 from real2sim.asset.build import build_asset as _build
-from real2sim.collision.fit.config import FitConfig
+from real2sim.collision.fit.config import FitConfig, iteration_limits
 from real2sim.evaluate.sweep import EvaluationConfig
 from real2sim.evaluate.sweep import evaluate as _evaluate
 from real2sim.formats.contact import ContactProperties
@@ -178,8 +178,7 @@ def build_asset(mesh: str | Path, out: str | Path, *, mass_kg: float | None = No
     if max_iterations is not None:
         if int(max_iterations) < 1:
             raise UserInputError(f"max_iterations must be at least 1, got {max_iterations}")
-        config = replace(config, fit_config=FitConfig(max_iterations=int(max_iterations),
-                                                      min_iterations=min(int(max_iterations), 300)))
+        config = replace(config, fit_config=FitConfig(**iteration_limits(max_iterations)))
     _build(Path(mesh), Path(out), config, overwrite=overwrite, progress=progress)
     return load_asset(out)
 

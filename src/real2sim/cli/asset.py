@@ -168,8 +168,9 @@ def config_from_args(args: argparse.Namespace):
             from real2sim.plumbing.errors import UserInputError
 
             raise UserInputError(f"--iterations must be at least 1, got {args.iterations}")
-        fit_overrides["max_iterations"] = args.iterations
-        fit_overrides["min_iterations"] = min(args.iterations, 300)
+        from real2sim.collision.fit.config import iteration_limits
+
+        fit_overrides.update(iteration_limits(args.iterations))
     if args.fit_parameterization:
         fit_overrides["parameterization"] = args.fit_parameterization
     if args.fit_paper_loss:

@@ -173,3 +173,10 @@ class FitResult:
         """(P_kind, D) array of the rows of one kind, in order."""
         rows = [p for k, p in zip(self.kinds, self.parameters) if k == kind]
         return np.asarray(rows, dtype=np.float64).reshape(len(rows), PARAM_DIM[kind])
+
+
+def iteration_limits(max_iterations: int) -> dict:
+    """FitConfig fields for a cap of ``max_iterations`` steps (>= 1): the cap, and the early stop's
+    floor lowered to it when the cap is below the default floor."""
+    return {"max_iterations": int(max_iterations),
+            "min_iterations": min(int(max_iterations), FitConfig.min_iterations)}
