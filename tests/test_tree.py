@@ -154,8 +154,25 @@ def tree_listing() -> list[str]:
     return lines
 
 
-def test_the_architecture_page_draws_the_tree():
-    text = (PACKAGE.parents[1] / "docs" / "architecture.md").read_text()
+ARCHITECTURE_PAGE = PACKAGE.parents[1] / "docs" / "architecture.md"
+
+
+def drawn_tree(text: str) -> list[str]:
+    """The tree block of docs/architecture.md, one line per entry."""
     start = text.index("<!-- tree: generated")
-    body = text[start:text.index("<!-- end of tree -->")].split("```")[1].strip("\n").splitlines()
-    assert body == tree_listing(), "regenerate: python -c 'from tests.test_tree import tree_listing; ...'"
+    return text[start:text.index("<!-- end of tree -->")].split("```")[1].strip("\n").splitlines()
+
+
+def write_tree() -> None:
+    """Redraw docs/architecture.md's tree from the modules: ``python -m tests.test_tree``."""
+    text = ARCHITECTURE_PAGE.read_text()
+    old = "\n".join(drawn_tree(text))
+    ARCHITECTURE_PAGE.write_text(text.replace(old, "\n".join(tree_listing()), 1))
+
+
+def test_the_architecture_page_draws_the_tree():
+    assert drawn_tree(ARCHITECTURE_PAGE.read_text()) == tree_listing(), "regenerate: python -m tests.test_tree"
+
+
+if __name__ == "__main__":
+    write_tree()
