@@ -73,7 +73,7 @@ def make_captures(root: Path, views: int, width: int, height: int) -> list[Path]
     for name in OBJECTS:
         for seed in SEEDS:
             ds = root / f"{name}_{seed}"
-            _cli("capture", name, "--out", ds, "--views", views, "--width", width, "--height", height, "--seed", seed)
+            _cli("capture", name, "--out", ds, "--views", views, "--width-px", width, "--height-px", height, "--seed", seed)
             datasets.append(ds)
     return datasets
 
@@ -204,13 +204,13 @@ def main() -> None:
         datasets = make_captures(root, args.views, args.width, args.height)
         masses = _masses(root, datasets)
         first = datasets[0]
-        _cli("run", first, "--mass", MASSES_KG[first.name.split("_")[0]], "--out", root / "warm_up", *RUN_FLAGS)
+        _cli("run", first, "--mass-kg", MASSES_KG[first.name.split("_")[0]], "--out", root / "warm_up", *RUN_FLAGS)
         timings: dict[tuple[str, int], list[tuple[float, float]]] = {}
         means: dict[str, float] = {}
         for repeat in range(args.repeats):
             for executor, workers in passes(args.executors, args.workers, not args.no_serial):
                 if executor == "one by one":
-                    serial = [_cli_timed("run", ds, "--mass", MASSES_KG[ds.name.split("_")[0]], "--out",
+                    serial = [_cli_timed("run", ds, "--mass-kg", MASSES_KG[ds.name.split("_")[0]], "--out",
                                          root / f"serial_{repeat}" / ds.name, *RUN_FLAGS) for ds in datasets]
                     wall_cpu = (sum(w for w, _ in serial), sum(c for _, c in serial))
                 else:

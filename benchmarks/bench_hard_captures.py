@@ -1,8 +1,8 @@
 """`real2sim run` on hard captures (issue #28, "Targets"): each hard-rig condition of `capture` alone,
 and all of them together, on the bundled bottle and can, judged against the truth.
 
-For each object and condition: `real2sim capture OBJECT --views N --width 320 --height 240 FLAGS`
-(robot poses with the default 5 mm / 1 deg noise), then `real2sim run DATASET --mass KG --out ASSET`
+For each object and condition: `real2sim capture OBJECT --views N --width-px 320 --height-px 240 FLAGS`
+(robot poses with the default 5 mm / 1 deg noise), then `real2sim run DATASET --mass-kg KG --out ASSET`
 with the default settings (radiance field backend), both as a user would type them. Reported from
 ASSET/truth.json: the reconstruction's Chamfer distance (mm) and volume IoU against the true object,
 whether the issue's target holds (Chamfer <= 1.5 mm and IoU >= 0.90), the WARNING lines `run` printed,
@@ -53,11 +53,11 @@ CONDITIONS: dict[str, list[str]] = {
     "long_lens": ["--focal-px", "LONG_LENS"],
     "cut_off": ["--cut-off-fraction", "0.25"],
     "no_table": ["--no-table"],
-    "jitter": ["--exposure-jitter", "0.5", "--white-balance-jitter", "0.1"],
+    "jitter": ["--exposure-jitter-stops", "0.5", "--white-balance-jitter", "0.1"],
     "jpeg": ["--jpeg", "--jpeg-quality", "85"],
-    "low_res_256x192": ["--width", "256", "--height", "192"],
+    "low_res_256x192": ["--width-px", "256", "--height-px", "192"],
     "all": ["--ring-elevation-deg", "0", "--focal-px", "LONG_LENS", "--cut-off-fraction", "0.25", "--no-table",
-            "--exposure-jitter", "0.5", "--white-balance-jitter", "0.1", "--jpeg", "--jpeg-quality", "85"],
+            "--exposure-jitter-stops", "0.5", "--white-balance-jitter", "0.1", "--jpeg", "--jpeg-quality", "85"],
 }
 LONG_LENS_PX_AT_640 = 3300.0
 
@@ -65,8 +65,8 @@ LONG_LENS_PX_AT_640 = 3300.0
 def _flags(condition: str, width: int, height: int) -> list[str]:
     """The capture's flags for ``condition`` at ``width`` x ``height`` px (a condition may set its own size)."""
     flags = [f if f != "LONG_LENS" else f"{LONG_LENS_PX_AT_640 * width / 640:g}" for f in CONDITIONS[condition]]
-    if "--width" not in flags:
-        flags = ["--width", str(width), "--height", str(height)] + flags
+    if "--width-px" not in flags:
+        flags = ["--width-px", str(width), "--height-px", str(height)] + flags
     return flags
 
 
@@ -204,7 +204,7 @@ def run_condition(name: str, condition: str, work: Path, views: int, width: int,
         mark_all_unrefined(dataset)
         run_args = [*run_args, "--no-refine-poses"]
     start = time.perf_counter()
-    run = subprocess.run(_cli("run", str(dataset), "--mass", f"{OBJECTS[name].mass_kg:g}", "--out", str(asset),
+    run = subprocess.run(_cli("run", str(dataset), "--mass-kg", f"{OBJECTS[name].mass_kg:g}", "--out", str(asset),
                               *run_args), capture_output=True, text=True)
     wall_s = time.perf_counter() - start
     # run prints each WARNING while running and again in its summary, worded alike up to their ends

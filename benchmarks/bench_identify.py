@@ -4,7 +4,7 @@ For each bundled object (bottle, can, mug) at a mass in 0.3-0.6 kg, uniform and 
 of a third of its body's mass placed off-centre inside it: `excite` (simulated arm, default torque
 noise) then `identify`, both through their Python functions as the verbs call them. Reported:
 mass error (%), centre-of-mass error (mm), inertia-about-the-CoM error (largest relative principal-
-moment error, %), the same two for uniform density (what `asset --mass` assumes), and the wall
+moment error, %), the same two for uniform density (what `asset --mass-kg` assumes), and the wall
 seconds of excite and identify. A noise sweep (0.01, 0.05, 0.2 N m) on the non-uniform can, and
 with ``--evaluate`` the Drake evaluation of the non-uniform can's asset with identified and with
 uniform-density properties against a reference that has the true ones.
@@ -75,7 +75,7 @@ def one_case(obj: str, extra: bool, noise: float, work: Path, seed: int = 0, dur
         return json.loads(saved.read_text())
     start = time.perf_counter()
     periods = periods_for(duration_s or DEFAULT_DURATION_S)
-    truth = run_excite(mesh, ExciteConfig(mass_kg=body, extra_mass_kg=extra_kg, extra_at_m=at, torque_noise_n_m=noise,
+    truth = run_excite(mesh, ExciteConfig(mass_kg=body, extra_mass_kg=extra_kg, extra_mass_at_m=at, torque_noise_n_m=noise,
                                           seed=seed, periods=periods), log_dir, overwrite=True, say=lambda *_: None)
     excite_s = time.perf_counter() - start
     start = time.perf_counter()
@@ -191,7 +191,7 @@ def main() -> int:
              f"{100 * c['uniform_inertia_rel']:.1f}", f"{c['excite_s']:.0f} + {c['identify_s']:.0f}",
              "yes" if target(c) else "no"] for c in cases]
     body = ("Identified against the truth (default torque noise 0.05 N m RMS, 1 kHz, friction, 2^20-count encoders; "
-            f"a {duration_s:.0f} s exciting trajectory, designed for the smallest predicted inertia error; torques from a 2 kHz controller averaged over each 1 ms sample). Uniform density: what `asset --mass` assumes, at the payload's true mass. "
+            f"a {duration_s:.0f} s exciting trajectory, designed for the smallest predicted inertia error; torques from a 2 kHz controller averaged over each 1 ms sample). Uniform density: what `asset --mass-kg` assumes, at the payload's true mass. "
             "Target: mass within 2 %, CoM within 2 mm, inertia within 15 %." + (f" {args.note}" if args.note else "")
             + "\n\n" + markdown_table(["object", "case", "mass kg", "mass err %", "CoM err mm", "inertia err %",
                                        "uniform CoM err mm", "uniform inertia err %", "excite + identify s",

@@ -1,6 +1,6 @@
 """Benchmark: phone captures with the printed board (issue #29), the board and world-frame part.
 
-For each bundled object, a simulated handheld capture (``capture --handheld --board``: 60 JPEG photos
+For each bundled object, a simulated handheld capture (``capture --handheld --with-board``: 60 JPEG photos
 at 640x480, 65 degree lens, motion blur) is rendered; the board is looked for in every photo; then the
 TRUE camera poses, moved into an arbitrary "SfM" frame (scaled, turned and shifted), go with the
 detections through ``world_from_board_views``, and the recovered frame is compared with the truth:
@@ -57,7 +57,7 @@ SFM_SCALE, SFM_EULER_DEG, SFM_SHIFT = 3.7, (40.0, -70.0, 15.0), (1.0, 2.0, -0.5)
 
 def render_capture(name: str, out: Path, views: int, width: int, height: int, seed: int = 0,
                    video: bool = False) -> float:
-    """``capture NAME --handheld --board`` into ``out``; wall seconds."""
+    """``capture NAME --handheld --with-board`` into ``out``; wall seconds."""
     from real2sim.capture.phone.board import DEFAULT_BOARD
     from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld
     from real2sim.geometry.objects import make_textured_object
@@ -182,7 +182,7 @@ def _run_row(name: str, variant: str, inp: Path, asset: Path, args, capture_s: f
     from real2sim.cli import main as cli
 
     extra = {"video": ["--frames", str(args.frames)], "height": ["--object-height-m", str(OBJECT_HEIGHT_M[name])]}
-    command = ["run", str(inp), "--mass", "0.35", "--out", str(asset), "--backend", args.backend,
+    command = ["run", str(inp), "--mass-kg", "0.35", "--out", str(asset), "--backend", args.backend,
                "--collision", args.collision, *extra.get(variant, [])]
     start = time.perf_counter()
     code = cli(command)
@@ -244,7 +244,7 @@ def run_main(args, argv) -> int:
                     inp = root / "clip.mp4" if video else root
                     rows.append(_run_row(name, variant, inp, work / "asset", args, capture_s, seed))
                 print(markdown_table(RUN_HEADER, rows[-1:]), flush=True)
-    body = (f"The whole `real2sim run` on simulated handheld captures (`capture NAME --handheld [--board] [--video]`, "
+    body = (f"The whole `real2sim run` on simulated handheld captures (`capture NAME --handheld [--with-board] [--video]`, "
             f"{args.width}x{args.height}): `board` = {args.views} photos with the board; `video` = a clip of "
             f"{args.video_frames} frames at 30 fps with the board, `--frames {args.frames}`; `height` = {args.views} photos "
             "without the board and `--object-height-m` (the true height). `--backend "
@@ -414,8 +414,8 @@ def main(argv: list[str] | None = None) -> int:
             renders.append([name, args.views, f"{args.width}x{args.height}", round(seconds, 1)])
             rows += board_rows(name, root, (args.noise_mm, args.noise_deg))
         print(markdown_table(HEADER, rows[-3:]), flush=True)
-    body = (f"Simulated handheld photos with the board (`capture NAME --handheld --board --views {args.views} "
-            f"--width {args.width} --height {args.height}`), the board looked for in each; the world frame from the "
+    body = (f"Simulated handheld photos with the board (`capture NAME --handheld --with-board --views {args.views} "
+            f"--width-px {args.width} --height-px {args.height}`), the board looked for in each; the world frame from the "
             f"detections and the true cameras moved into an arbitrary SfM frame (scale {SFM_SCALE}, turned "
             f"{SFM_EULER_DEG} deg z-y-x, shifted), with and without pose noise. Errors against the true frame; "
             "issue #29's targets: scale 0.5 %, plane 0.5 deg and 1 mm, origin 2 mm. 'not found': views without the "

@@ -15,7 +15,7 @@ true object). Reported, from ASSETDIR/.run/run.json and ASSETDIR/truth.json:
     python benchmarks/bench_run.py --objects can
     python benchmarks/bench_run.py --objects can --runs 4 --tag can_runs4   # less noise, own section
     python benchmarks/bench_run.py --round-can --tag round_can   # the can round, not 72 flats
-    python benchmarks/bench_run.py --objects can --cylinder-flat-depth 1e-5 --tag can_flat10um
+    python benchmarks/bench_run.py --objects can --cylinder-flat-depth-m 1e-5 --tag can_flat10um
 
 Writes docs/benchmarks/run.md (machine and date included), after each object.
 """
@@ -94,7 +94,7 @@ def main() -> int:
                         help="seeded runs per task and contact model (default: the demo's); more runs, less noise")
     parser.add_argument("--tag", default="", help="write docs/benchmarks/run_TAG.md instead of run.md")
     parser.add_argument("--cylinder-flat-depth", type=float, default=None, metavar="M",
-                        help="`run --cylinder-flat-depth M`: compliant cylinders meshed with flats at most M deep")
+                        help="`run --cylinder-flat-depth-m M`: compliant cylinders meshed with flats at most M deep")
     parser.add_argument("--round-can", action="store_true",
                         help="capture a round can (flats at most ROUND_SAGITTA_M deep) instead of the bundled "
                              "72-section one (docs/truth.md)")
@@ -128,7 +128,7 @@ def main() -> int:
             body = ((args.note + "\n\n" if args.note else "")
                     + (f"The can is round: {sagitta_sections_note()}.\n\n" if args.round_can else "")
                     + (f"Compliant cylinders meshed with flats at most {args.cylinder_flat_depth:g} m deep "
-                       "(`--cylinder-flat-depth`).\n\n" if args.cylinder_flat_depth is not None else "")
+                       "(`--cylinder-flat-depth-m`).\n\n" if args.cylinder_flat_depth is not None else "")
                     + (f"Quick settings (60 noise-free views at 160x120, visual hull, {runs} run(s) per task).\n\n"
                        if args.quick else
                        "The demo's settings: 100 views at 320x240 px with 5 mm / 1 deg robot-pose noise, COLMAP "

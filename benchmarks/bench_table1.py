@@ -107,7 +107,7 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
             build = work / "build" / name / spec.name
             if not (build / spec.name / "model.urdf").exists():
                 start = time.perf_counter()
-                build_asset(mesh, build, AssetConfig(mass_kg=mass_kg, specs=(spec,), seed=seed, keep_up=generated,
+                build_asset(mesh, build, AssetConfig(mass_kg=mass_kg, specs=(spec,), seed=seed, pca_up=not generated,
                                                      fit_config=fit_config, fill_cavities_m=fill_cavities_m),
                             overwrite=True)
                 print(f"built {name} {spec_text} in {time.perf_counter() - start:.1f} s", flush=True)
@@ -334,7 +334,7 @@ def main() -> int:
                         help="FitConfig.protrusion_weight of the primitive fits (outside samples the union reaches "
                         "past weigh 1 + W; default: FitConfig's). Use a --work folder of its own")
     parser.add_argument("--fill-cavities", type=float, default=None, metavar="M",
-                        help="AssetConfig.fill_cavities_m of every build (asset --fill-cavities: fit the solid with "
+                        help="AssetConfig.fill_cavities_m of every build (asset --fill-cavities-m: fit the solid with "
                         "its cavities narrower than a ball of M metres filled). Use a --work folder of its own")
     parser.add_argument("--polytopes", action="store_true",
                         help="each representation with ellipsoids or cylinders also as <name>_polytopes, those pieces "
@@ -457,9 +457,9 @@ def main() -> int:
         + (f"Every representation written as a {args.hydroelastic} hydroelastic body (`--hydroelastic`, CoACD's "
            "hulls included; the reference mesh is rigid either way). " if args.hydroelastic else "")
         + (f"Candidates' compliant cylinders meshed with flats at most {args.cylinder_flat_depth:g} m deep "
-           "(`--cylinder-flat-depth`). " if args.cylinder_flat_depth is not None else "")
+           "(`--cylinder-flat-depth-m`). " if args.cylinder_flat_depth is not None else "")
         + (f"Candidates' compliant spheres, cylinders and ellipsoids meshed at a resolution hint of "
-           f"{args.resolution_hint:g} m (`--resolution-hint`; default {ContactProperties().resolution_hint_m:g}). "
+           f"{args.resolution_hint:g} m (`--resolution-hint-m`; default {ContactProperties().resolution_hint_m:g}). "
            if args.resolution_hint is not None else "")
         + ("Rows named `_hint<M>`: the same fits meshed at resolution hint M m (`--extra-hint`). "
            if args.extra_hint else "")
@@ -472,7 +472,7 @@ def main() -> int:
         + ("Rows named `_polytopes`: the same fits with each ellipsoid and cylinder written as a compliant convex "
            "polytope instead of Drake's own shape (`--polytopes`). " if args.polytopes else "")
         + (f"Every representation fitted to the solid with its cavities narrower than a {args.fill_cavities:g} m "
-           "ball filled (`--fill-cavities`; judged, as always, against the true object). "
+           "ball filled (`--fill-cavities-m`; judged, as always, against the true object). "
            if args.fill_cavities is not None else "")
         + (f"Primitives fitted with protrusion weight {args.protrusion_weight:g} (`FitConfig.protrusion_weight`: "
            "outside samples the union reaches past weigh 1 + W in eq. 9). " if args.protrusion_weight is not None else "")

@@ -54,7 +54,7 @@ def _score(name: str, label: str, mesh, reference: Path, work: Path, runs: int) 
     source = work / f"{name}_{slug}.obj"
     mesh.export(source)
     asset, results = work / f"{name}_{slug}_asset", work / f"{name}_{slug}_results"
-    if cli(["asset", str(source), "--mass", str(OBJECTS[name].mass_kg), "--collision", "mesh", "--out", str(asset)]):
+    if cli(["asset", str(source), "--mass-kg", str(OBJECTS[name].mass_kg), "--collision", "mesh", "--out", str(asset)]):
         raise RuntimeError(f"asset failed for {label}")
     if cli(["evaluate", str(asset), "--out", str(results), "--reference", str(reference), "--reference-inertia",
             "mesh", "--runs", str(runs), "--contact", "hydroelastic", "--no-animations"]):

@@ -22,7 +22,7 @@ def make(out: Path) -> None:
     with tempfile.TemporaryDirectory() as work:
         mesh = Path(work) / "mug.obj"
         assert cli(["objects", "export", "mug", str(mesh)]) == 0
-        asset = real2sim.build_asset(mesh, Path(work) / "mug_asset", mass_kg=0.35, collision=SPECS, keep_up=True)
+        asset = real2sim.build_asset(mesh, Path(work) / "mug_asset", mass_kg=0.35, collision=SPECS, )
         names = [rep.name for rep in asset.representations]
         if not write_asset_preview(asset.folder, out, names, panel_px=240):
             raise SystemExit("the asset has no visual mesh to show")

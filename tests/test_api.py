@@ -50,7 +50,7 @@ def test_a_bad_argument_is_the_clis_one_line(can_obj, tmp_path, kwargs, words):
 def test_the_same_spec_mistake_reads_the_same_on_the_command_line(can_obj, tmp_path, capsys):
     with pytest.raises(real2sim.UserInputError) as caught:
         real2sim.build_asset(can_obj, tmp_path / "x", mass_kg=0.4, collision="cylinders:abc")
-    code, _, err = run_cli(capsys, "asset", can_obj, "--mass", "0.4", "--collision", "cylinders:abc",
+    code, _, err = run_cli(capsys, "asset", can_obj, "--mass-kg", "0.4", "--collision", "cylinders:abc",
                            "--out", tmp_path / "y")
     assert code == 2 and str(caught.value) in err
 

@@ -62,7 +62,7 @@ def manifest(asset_dir: Path) -> dict:
 @pytest.fixture(scope="module")
 def first_run(can_ds, tmp_path_factory) -> tuple[Path, str]:
     out = tmp_path_factory.mktemp("pipeline_run") / "can_asset"
-    code = main(["run", str(can_ds), "--mass", "0.35", "--out", str(out), "--collision", "mesh", *FAST])
+    code = main(["run", str(can_ds), "--mass-kg", "0.35", "--out", str(out), "--collision", "mesh", *FAST])
     assert code == 0
     return out, json.dumps(manifest(out), sort_keys=True)
 
@@ -110,7 +110,7 @@ def test_run_writes_a_drake_loadable_asset_manifest_and_truth(first_run, can_ds)
 
 def test_second_identical_run_skips_every_stage(first_run, can_ds, capsys):
     out, before = first_run
-    code, stdout, _ = run_cli(capsys, can_ds, "--mass", "0.35", "--out", out, "--collision", "mesh", *FAST)
+    code, stdout, _ = run_cli(capsys, can_ds, "--mass-kg", "0.35", "--out", out, "--collision", "mesh", *FAST)
     assert code == 0 and "none, all unchanged" in stdout
     assert json.dumps(manifest(out), sort_keys=True) == before  # nothing recorded again
 
@@ -124,7 +124,7 @@ def test_changing_collision_refits_without_reconstructing(first_run, can_ds, tmp
     shutil.copytree(first_run[0], out)
     mesh_before = (out / ".run" / "reconstruct" / "mesh.obj").read_bytes()
     recon_before = manifest(out)["stages"]["reconstruct"]
-    args = build_parser().parse_args(["run", str(can_ds), "--mass", "0.35", "--out", str(out), *FAST,
+    args = build_parser().parse_args(["run", str(can_ds), "--mass-kg", "0.35", "--out", str(out), *FAST,
                                       "--collision", "boxes:4", "--iterations", "20"])
     from tests.progress_check import Recorder
 
@@ -189,12 +189,12 @@ def test_failed_stage_is_named_and_finished_stages_kept(can_ds_no_truth, tmp_pat
 
     monkeypatch.setattr(asset_build, "build_asset", broken)
     out = tmp_path / "can_asset"
-    code, _, err = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, "--collision", "mesh", *FAST)
+    code, _, err = run_cli(capsys, can_ds_no_truth, "--mass-kg", "0.35", "--out", out, "--collision", "mesh", *FAST)
     assert code == 1
     assert "stage asset failed" in err and "fitting exploded" in err
     assert list(manifest(out)["stages"]) == ["reconstruct"]
     monkeypatch.undo()
-    code, stdout, _ = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, "--collision", "mesh", *FAST)
+    code, stdout, _ = run_cli(capsys, can_ds_no_truth, "--mass-kg", "0.35", "--out", out, "--collision", "mesh", *FAST)
     assert code == 0 and "stages run: asset" in stdout
 
 
@@ -210,15 +210,15 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(can_ds_no_truth, tmp
     (other / "keep.txt").write_text("mine")
     ds = can_ds_no_truth
     cases = {
-        "missing dataset": [tmp_path / "nope", "--mass", "0.3"],
-        "not a dataset": [other, "--mass", "0.3"],
-        "zero mass": [ds, "--mass", "0"],
-        "negative mass": [ds, "--mass", "-1"],
-        "nan mass": [ds, "--mass", "nan"],
-        "inf mass": [ds, "--mass", "inf"],
-        "unknown spec": [ds, "--mass", "0.3", "--collision", "pyramids:3"],
-        "no masks": [no_masks, "--mass", "0.3"],
-        "cuda without a GPU": [ds, "--mass", "0.3", "--device", "cuda"],
+        "missing dataset": [tmp_path / "nope", "--mass-kg", "0.3"],
+        "not a dataset": [other, "--mass-kg", "0.3"],
+        "zero mass": [ds, "--mass-kg", "0"],
+        "negative mass": [ds, "--mass-kg", "-1"],
+        "nan mass": [ds, "--mass-kg", "nan"],
+        "inf mass": [ds, "--mass-kg", "inf"],
+        "unknown spec": [ds, "--mass-kg", "0.3", "--collision", "pyramids:3"],
+        "no masks": [no_masks, "--mass-kg", "0.3"],
+        "cuda without a GPU": [ds, "--mass-kg", "0.3", "--device", "cuda"],
     }
     import torch
 
@@ -230,11 +230,11 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(can_ds_no_truth, tmp
         assert code == 2, label
         assert len(err.strip().splitlines()) == 1, (label, err)
         assert not out.exists(), label
-    code, _, err = run_cli(capsys, no_masks, "--mass", "0.3", "--out", tmp_path / "x", *FAST)
+    code, _, err = run_cli(capsys, no_masks, "--mass-kg", "0.3", "--out", tmp_path / "x", *FAST)
     assert "real2sim mask" in err
-    code, _, err = run_cli(capsys, ds, "--mass", "0.3", "--out", ds / "asset_inside", *FAST)
+    code, _, err = run_cli(capsys, ds, "--mass-kg", "0.3", "--out", ds / "asset_inside", *FAST)
     assert code == 2 and not (ds / "asset_inside").exists()
-    code, _, err = run_cli(capsys, ds, "--mass", "0.3", "--out", other, *FAST)
+    code, _, err = run_cli(capsys, ds, "--mass-kg", "0.3", "--out", other, *FAST)
     assert code == 2 and "--overwrite" in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in other.iterdir()) == ["keep.txt"]
 
@@ -244,7 +244,7 @@ def test_refine_poses_works_on_a_copy_and_leaves_the_dataset_alone(can_ds_no_tru
     out = tmp_path / "can_asset"
     # --no-silhouette-poses: when COLMAP refines too few of these small frames, aligning all 60 by their
     # silhouettes takes minutes; the copy is what this test is about
-    code, stdout, _ = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, "--collision", "mesh",
+    code, stdout, _ = run_cli(capsys, can_ds_no_truth, "--mass-kg", "0.35", "--out", out, "--collision", "mesh",
                               "--refine-poses", "--no-silhouette-poses", *HULL)
     assert code == 0 and "stages run: refine_poses, reconstruct, asset" in stdout
     after = {p.relative_to(can_ds_no_truth): p.read_bytes() for p in can_ds_no_truth.rglob("*") if p.is_file()}
@@ -270,7 +270,7 @@ def test_evaluate_after_the_asset_runs_only_the_evaluation(first_run, can_ds, tm
 
     out = tmp_path / "can_asset"
     shutil.copytree(first_run[0], out)
-    code, stdout, _ = run_cli(capsys, can_ds, "--mass", "0.35", "--out", out, "--collision", "mesh", *FAST,
+    code, stdout, _ = run_cli(capsys, can_ds, "--mass-kg", "0.35", "--out", out, "--collision", "mesh", *FAST,
                               "--evaluate", "--tasks", "push", "--contact", "point", "--runs", "1", "--jobs", "1",
                               "--duration-scale", "0.2")
     assert code == 0 and "stages run: evaluate, evaluate_truth, truth" in stdout
@@ -311,7 +311,7 @@ def test_assetdir_of_another_dataset_is_refused(can_ds_no_truth, tmp_path, capsy
     foreign = {"version": 1, "dataset": str(tmp_path / "another_dataset"), "stages": {}}
     (out / ".run" / "run.json").write_text(json.dumps(foreign))
     (out / ".real2sim").write_text("{}")  # made by real2sim
-    code, _, err = run_cli(capsys, can_ds_no_truth, "--mass", "0.35", "--out", out, *FAST)
+    code, _, err = run_cli(capsys, can_ds_no_truth, "--mass-kg", "0.35", "--out", out, *FAST)
     assert code == 2 and "another dataset" in err and len(err.strip().splitlines()) == 1
     assert json.loads((out / ".run" / "run.json").read_text()) == foreign
     assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == [".real2sim", ".run", ".run/run.json"]
@@ -344,7 +344,7 @@ def test_missing_masks_are_made_with_mask_method_on_a_copy(can_ds_no_truth, tmp_
     (no_masks / "transforms.json").write_text(json.dumps(data))
     before = (no_masks / "transforms.json").read_bytes()
     out = tmp_path / "can_asset"
-    code, stdout, _ = run_cli(capsys, no_masks, "--mass", "0.35", "--out", out, "--collision", "mesh", "--mask",
+    code, stdout, _ = run_cli(capsys, no_masks, "--mass-kg", "0.35", "--out", out, "--collision", "mesh", "--mask",
                               "provided", *FAST)
     assert code == 0 and "stages run: masks, reconstruct, asset" in stdout
     assert (no_masks / "transforms.json").read_bytes() == before
@@ -359,7 +359,7 @@ def test_surface_level_reaches_the_reconstruct_stage(can_ds_no_truth, tmp_path):
     from real2sim.cli import build_parser
     from real2sim.cli.run import config_from_args
 
-    base = ["run", str(can_ds_no_truth), "--mass", "0.35", "--out", str(tmp_path / "out")]
+    base = ["run", str(can_ds_no_truth), "--mass-kg", "0.35", "--out", str(tmp_path / "out")]
     default = config_from_args(build_parser().parse_args(base))
     chosen = config_from_args(build_parser().parse_args([*base, "--surface-level", "half-light"]))
     assert default.reconstruct.surface_level == "silhouettes"
@@ -371,7 +371,7 @@ def test_hollow_prior_reaches_the_reconstruct_stage(can_ds_no_truth, tmp_path):
     from real2sim.cli import build_parser
     from real2sim.cli.run import config_from_args
 
-    base = ["run", str(can_ds_no_truth), "--mass", "0.35", "--out", str(tmp_path / "out")]
+    base = ["run", str(can_ds_no_truth), "--mass-kg", "0.35", "--out", str(tmp_path / "out")]
     default = config_from_args(build_parser().parse_args(base))
     chosen = config_from_args(build_parser().parse_args([*base, "--no-hollow-prior"]))
     assert default.reconstruct.field.carving.hollow_prior and default.reconstruct.field.photo_carving
@@ -381,7 +381,7 @@ def test_hollow_prior_reaches_the_reconstruct_stage(can_ds_no_truth, tmp_path):
 
 def test_a_reconstruction_short_of_the_table_is_named_before_the_asset_is_built(tmp_path):
     """A reconstruction whose lowest point is above the table by more than the asset's flat-bottom
-    tolerance (5 % of its height) gets run's own message, not asset's ``--support-height`` one."""
+    tolerance (5 % of its height) gets run's own message, not asset's ``--support-height-m`` one."""
     import trimesh
 
     from real2sim.plumbing.errors import UserInputError
@@ -391,7 +391,7 @@ def test_a_reconstruction_short_of_the_table_is_named_before_the_asset_is_built(
     box.apply_translation([0.0, 0.0, 0.02 + 0.005])  # 40 mm tall, 5 mm above z = 0
     path = tmp_path / "mesh.obj"
     box.export(path)
-    with pytest.raises(UserInputError, match=r"5\.0 mm above the table \(z = 0 m\).*--table-z"):
+    with pytest.raises(UserInputError, match=r"5\.0 mm above the table \(z = 0 m\).*--table-z-m"):
         check_reaches_table(path, 0.0)
     check_reaches_table(path, 0.0035)  # 1.5 mm short: within 2 mm, the flat bottom closes it
     check_reaches_table(path, 0.01)  # the table cuts the mesh

@@ -136,7 +136,7 @@ def load_asset(folder: str | Path) -> Asset:
 def build_asset(mesh: str | Path, out: str | Path, *, mass_kg: float | None = None,
                 collision: str | Sequence[str | CollisionSpec] = ("cylinders:10",),
                 formats: str | Sequence[str] = ("urdf",), properties: str | Path | None = None,
-                flat_bottom: bool = False, support_height_m: float = 0.0, keep_up: bool = False,
+                flat_bottom: bool = False, support_height_m: float = 0.0, pca_up: bool = False,
                 mesh_units: str = "m", contact: ContactProperties | None = None, max_iterations: int | None = None,
                 seed: int = 0, device: str = "cpu", overwrite: bool = False, progress=None) -> Asset:
     """Build an asset folder from a mesh, as ``real2sim asset`` does.
@@ -151,7 +151,7 @@ def build_asset(mesh: str | Path, out: str | Path, *, mass_kg: float | None = No
             centre of mass and inertia instead of uniform density).
         flat_bottom: crop below the support plane and close the bottom flat (paper IV-C1).
         support_height_m: the support (table) height in the mesh frame, m, +z up.
-        keep_up: keep the mesh's +z as the asset's up axis instead of the longest principal axis.
+        pca_up: make the longest principal axis the asset's +z, as the paper does (default: the mesh's +z stays up).
         mesh_units: ``"m"``, ``"cm"``, ``"mm"`` or ``"in"``.
         contact: Drake contact properties (default: :class:`ContactProperties`'s).
         max_iterations: at most this many fitting steps per primitive SPEC (default: the fit's own rule).
@@ -172,7 +172,7 @@ def build_asset(mesh: str | Path, out: str | Path, *, mass_kg: float | None = No
     config = AssetConfig(mass_kg=float(mass_kg if mass_kg is not None else given.mass_kg), specs=_specs(collision),
                          formats=_formats(formats), given_properties=given, given_properties_frame=frame,
                          given_properties_source=source, flat_bottom=flat_bottom, support_height_m=support_height_m,
-                         keep_up=keep_up, mesh_units=mesh_units, seed=seed, device=device)
+                         pca_up=pca_up, mesh_units=mesh_units, seed=seed, device=device)
     if contact is not None:
         config = replace(config, contact=contact)
     if max_iterations is not None:

@@ -49,7 +49,7 @@ def test_asset_of_a_scan_with_a_speck_spends_no_collision_piece_on_it(tmp_path, 
     path = tmp_path / "scan.obj"
     mesh.export(path)
     out = tmp_path / "asset"
-    code, _, err = run_cli(capsys, "asset", path, "--mass", 0.3, "--out", out, "--collision", "cylinders:2",
+    code, _, err = run_cli(capsys, "asset", path, "--mass-kg", 0.3, "--out", out, "--collision", "cylinders:2",
                            "--iterations", "200")
     assert code == 0, err
     assert "dropped 320 faces of debris" in err

@@ -28,13 +28,13 @@ PRIMITIVE_AND_CONVEX_SPECS = ("cylinders:1", "rotated_boxes:2", "spheres:16", "e
 STANDING = ("cylinders_1", "rotated_boxes_2", "spheres_16", "coacd", "mesh")
 
 
-def _build(tmp_path_factory, name: str, specs, keep_up: bool = False) -> Path:
+def _build(tmp_path_factory, name: str, specs, pca_up: bool = True) -> Path:
     from real2sim.collision.fit import FitConfig
     from real2sim.geometry.objects import OBJECTS, export_object
 
     mesh = export_object(name, tmp_path_factory.mktemp(name) / f"{name}.obj")
     config = AssetConfig(mass_kg=OBJECTS[name].mass_kg, specs=tuple(parse_spec(s) for s in specs),
-                         flat_bottom=True, keep_up=keep_up, formats=("urdf", "mjcf"),
+                         flat_bottom=True, pca_up=pca_up, formats=("urdf", "mjcf"),
                          fit_config=FitConfig(max_iterations=150, min_iterations=50))
     return build_asset(mesh, tmp_path_factory.mktemp(f"{name}_asset") / "asset", config).asset_dir
 
@@ -192,7 +192,7 @@ def test_handwritten_text_matches_the_writer(tmp_path):
 @pytest.mark.parametrize("name", ["bottle", "can", "mug"])
 def test_every_representation_of_every_bundled_object_loads(tmp_path_factory, name):
     specs = PRIMITIVE_AND_CONVEX_SPECS + ("vhacd", "boxes:8", "boxes:4+cylinders:2")
-    asset = _build(tmp_path_factory, name, specs, keep_up=name == "mug")
+    asset = _build(tmp_path_factory, name, specs, pca_up=name != "mug")
     for rep in sorted(p.parent for p in asset.glob("*/collision.json")):
         model, data = _load(rep / "model.xml", floor=True)
         assert len(_collision_geoms(model)) == len(read_collision_json(rep / "collision.json").shapes)

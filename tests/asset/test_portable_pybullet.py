@@ -306,7 +306,7 @@ def test_every_fitted_representation_of_every_bundled_object(tmp_path_factory, n
 
     mesh = export_object(name, tmp_path_factory.mktemp(name) / f"{name}.obj")
     config = AssetConfig(mass_kg=OBJECTS[name].mass_kg, specs=tuple(parse_spec(s) for s in BUNDLED_SPECS),
-                         flat_bottom=True, keep_up=name == "mug", coacd_config=FAST_COACD,
+                         flat_bottom=True, pca_up=name != "mug", coacd_config=FAST_COACD,
                          fit_config=FitConfig(max_iterations=150, min_iterations=50))
     asset = build_asset(mesh, tmp_path_factory.mktemp(f"{name}_asset") / "asset", config).asset_dir
     check_mass_properties_in_pybullet(asset)

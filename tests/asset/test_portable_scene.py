@@ -33,7 +33,7 @@ def test_asset_command_writes_the_files_for_every_simulator(tmp_path, capsys):
     mesh = tmp_path / "can.obj"
     trimesh.creation.cylinder(radius=0.034, height=0.1, sections=24).export(mesh)
     out = tmp_path / "can_asset"
-    code = main(["asset", str(mesh), "--mass", "0.35", "--out", str(out),
+    code = main(["asset", str(mesh), "--mass-kg", "0.35", "--out", str(out),
                  "--collision", "mesh", "--format", "usd", "--format", "mjcf"])
     assert code == 0, capsys.readouterr().err
     rep = out / "mesh"
@@ -50,7 +50,7 @@ def test_an_unknown_format_is_refused_in_one_line(tmp_path, capsys):
     from real2sim.cli import main
 
     with pytest.raises(SystemExit) as exit_info:
-        main(["asset", str(tmp_path / "x.obj"), "--mass", "1", "--out", str(tmp_path / "o"), "--format", "fbx"])
+        main(["asset", str(tmp_path / "x.obj"), "--mass-kg", "1", "--out", str(tmp_path / "o"), "--format", "fbx"])
     assert exit_info.value.code == 2
     assert "invalid choice: 'fbx'" in capsys.readouterr().err
 

@@ -215,7 +215,7 @@ def test_board_verb_writes_pdf_and_png(tmp_path, capsys):
     (["--out", "{d}/b.png"], "PDF"),
     (["--out", "{d}/b.pdf", "--squares", "7"], "--squares"),
     (["--out", "{d}/b.pdf", "--squares", "7x1"], "--squares"),
-    (["--out", "{d}/b.pdf", "--square-mm", "60"], "does not fit"),
+    (["--out", "{d}/b.pdf", "--board-square-mm", "60"], "does not fit"),
     (["--out", "{d}/b.pdf", "--paper", "a3"], "--paper"),
     (["--out", "{d}/existing.pdf"], "exists"),
     (["--out", "{d}/afile/b.pdf"], "is a file"),

@@ -152,8 +152,8 @@ def test_video_capture_writes_a_decodable_mp4(tmp_path, capsys):
     import av
 
     out = tmp_path / "clip_ds"
-    code, _, err = run_cli(capsys, "capture", "can", "--handheld", "--board", "--video", "--views", "16",
-                           "--width", "96", "--height", "72", "--fps", "24", "--out", out)
+    code, _, err = run_cli(capsys, "capture", "can", "--handheld", "--with-board", "--video", "--views", "16",
+                           "--width-px", "96", "--height-px", "72", "--fps", "24", "--out", out)
     assert code == 0, err
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["clip.mp4", "ground_truth"]
     with av.open(str(out / "clip.mp4")) as container:
@@ -192,9 +192,9 @@ def test_video_rotation_metadata_turns_the_stored_frames_upright(tmp_path):
 
 
 @pytest.mark.parametrize("argv, says", [
-    (["--board"], "--board needs --handheld"),
+    (["--with-board"], "--with-board needs --handheld"),
     (["--video"], "--video needs --handheld"),
-    (["--handheld", "--video", "--width", "97"], "even"),
+    (["--handheld", "--video", "--width-px", "97"], "even"),
     (["--handheld", "--fps", "10"], "--fps needs --video"),
     (["--handheld", "--no-table"], "--no-table"),
     (["--handheld", "--pose-noise-mm", "2"], "--pose-noise-mm"),
@@ -209,7 +209,7 @@ def test_video_rotation_metadata_turns_the_stored_frames_upright(tmp_path):
 ])
 def test_handheld_bad_flags_exit_2(tmp_path, capsys, argv, says):
     out = tmp_path / "ds"
-    code, _, err = run_cli(capsys, "capture", "can", "--out", out, "--views", "4", "--width", "64", "--height", "48",
+    code, _, err = run_cli(capsys, "capture", "can", "--out", out, "--views", "4", "--width-px", "64", "--height-px", "48",
                            *argv)
     assert code == 2 and len(err.strip().splitlines()) == 1 and says in err and "Traceback" not in err, err
     assert not out.exists()

@@ -257,12 +257,12 @@ def test_cli_help_units_and_bad_values(tmp_path, capsys, monkeypatch):
         else:
             flag = None
     for flag, unit in [("--ring-elevation-deg", "degrees"), ("--focal-px", "pixels"), ("--fov-deg", "degrees"),
-                       ("--cut-off-fraction", "fraction"), ("--exposure-jitter", "stops"),
+                       ("--cut-off-fraction", "fraction"), ("--exposure-jitter-stops", "stops"),
                        ("--white-balance-jitter", "fraction"), ("--jpeg-quality", "1-100"), ("--no-table", "z = 0")]:
         assert unit in lines[flag], flag
-    base = ["capture", "can", "--out", str(tmp_path / "o"), "--views", "8", "--width", "64", "--height", "48"]
+    base = ["capture", "can", "--out", str(tmp_path / "o"), "--views", "8", "--width-px", "64", "--height-px", "48"]
     for bad in (["--ring-elevation-deg", "95"], ["--focal-px", "0"], ["--fov-deg", "180"],
-                ["--cut-off-fraction", "1.5"], ["--exposure-jitter", "-1"], ["--white-balance-jitter", "nan"],
+                ["--cut-off-fraction", "1.5"], ["--exposure-jitter-stops", "-1"], ["--white-balance-jitter", "nan"],
                 ["--jpeg", "--jpeg-quality", "0"], ["--focal-px", "500", "--fov-deg", "40"]):
         with pytest.raises(SystemExit) as exc:
             main(base + bad)

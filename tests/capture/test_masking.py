@@ -117,7 +117,7 @@ def test_background_missing_leaves_dataset_untouched(tmp_path, captures):
 
 def test_maskrcnn_error_paths(tmp_path, captures):
     root = captures["bottle"]
-    with pytest.raises(UserInputError, match="--weights"):
+    with pytest.raises(UserInputError, match="--mask-weights"):
         compute_masks(root, "maskrcnn", MaskConfig(weights=None))
     with pytest.raises(UserInputError, match="not found"):
         compute_masks(root, "maskrcnn", MaskConfig(weights=tmp_path / "missing.pth"))
@@ -148,5 +148,5 @@ def test_cli_mask(captures, capsys, tmp_path):
 
     assert main(["mask", str(captures["mug"]), "--method", "provided"]) == 0
     assert "IoU vs ground truth" in capsys.readouterr().out
-    assert main(["mask", str(captures["mug"]), "--method", "maskrcnn", "--weights", str(tmp_path / "x.pth")]) == 2
+    assert main(["mask", str(captures["mug"]), "--method", "maskrcnn", "--mask-weights", str(tmp_path / "x.pth")]) == 2
     assert "not found" in capsys.readouterr().err

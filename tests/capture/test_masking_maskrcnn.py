@@ -303,8 +303,8 @@ def test_cli_mask_maskrcnn(weights_file, small_dataset, tmp_path, capsys):
     data = json.loads((root / "transforms.json").read_text())
     data["frames"] = data["frames"][:1]
     (root / "transforms.json").write_text(json.dumps(data))
-    assert main(["mask", str(root), "--method", "maskrcnn", "--weights", str(weights_file),
-                 "--maskrcnn-min-size", "96", "--maskrcnn-max-size", "128"]) == 0
+    assert main(["mask", str(root), "--method", "maskrcnn", "--mask-weights", str(weights_file),
+                 "--maskrcnn-min-size-px", "96", "--maskrcnn-max-size-px", "128"]) == 0
     assert "masks: 1 frames in masks_maskrcnn/" in capsys.readouterr().out
     _check_written(root, 1, 80, 60)
 
@@ -313,6 +313,6 @@ def test_cli_mask_maskrcnn_rejects_a_bad_size(small_dataset, weights_file):
     from real2sim.cli import main
 
     with pytest.raises(SystemExit) as exc:
-        main(["mask", str(small_dataset), "--method", "maskrcnn", "--weights", str(weights_file),
-              "--maskrcnn-min-size", "0"])
+        main(["mask", str(small_dataset), "--method", "maskrcnn", "--mask-weights", str(weights_file),
+              "--maskrcnn-min-size-px", "0"])
     assert exc.value.code == 2

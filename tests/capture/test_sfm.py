@@ -22,7 +22,7 @@ def handheld(tmp_path_factory) -> Path:
     from real2sim.cli import main
 
     out = tmp_path_factory.mktemp("sfm") / "phone"
-    assert main(["capture", "can", "--handheld", "--board", "--views", str(VIEWS), "--width", "320", "--height", "240",
+    assert main(["capture", "can", "--handheld", "--with-board", "--views", str(VIEWS), "--width-px", "320", "--height-px", "240",
                  "--out", str(out)]) == 0
     return out
 

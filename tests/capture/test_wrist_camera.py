@@ -237,7 +237,7 @@ def test_cli_capture(tmp_path, capsys):
     from real2sim.cli import main
 
     out = tmp_path / "cli"
-    assert main(["capture", "can", "--out", str(out), "--views", "3", "--width", "96", "--height", "72",
+    assert main(["capture", "can", "--out", str(out), "--views", "3", "--width-px", "96", "--height-px", "72",
                  "--seed", "2"]) == 0
     ds = read_dataset(out)
     assert len(ds.frames) == 3 and ds.intrinsics.width == 96

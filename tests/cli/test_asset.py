@@ -40,25 +40,25 @@ def bad_cases(tmp_path: Path, can_obj: Path):
     exists = tmp_path / "exists"
     exists.mkdir()
     return {
-        "missing file": [tmp_path / "nope.obj", "--mass", "0.3", "--out", tmp_path / "o1"],
-        "not a mesh": [garbage, "--mass", "0.3", "--out", tmp_path / "o2"],
-        "not a mesh suffix": [text, "--mass", "0.3", "--out", tmp_path / "o3"],
-        "empty mesh": [empty, "--mass", "0.3", "--out", tmp_path / "o4"],
-        "zero mass": [can_obj, "--mass", "0", "--out", tmp_path / "o5"],
-        "negative mass": [can_obj, "--mass", "-1", "--out", tmp_path / "o6"],
-        "nan mass": [can_obj, "--mass", "nan", "--out", tmp_path / "o7"],
-        "inf mass": [can_obj, "--mass", "inf", "--out", tmp_path / "o8"],
-        "word mass": [can_obj, "--mass", "heavy", "--out", tmp_path / "o9"],
-        "unknown spec": [can_obj, "--mass", "0.3", "--out", tmp_path / "o10", "--collision", "pyramids:3"],
-        "zero count": [can_obj, "--mass", "0.3", "--out", tmp_path / "o11", "--collision", "boxes:0"],
-        "too many": [can_obj, "--mass", "0.3", "--out", tmp_path / "o12", "--collision", "spheres:2001"],
-        "malformed mix": [can_obj, "--mass", "0.3", "--out", tmp_path / "o13", "--collision", "boxes:3+"],
-        "output exists": [can_obj, "--mass", "0.3", "--out", exists, "--collision", "mesh"],
-        "zero flat depth": [can_obj, "--mass", "0.3", "--out", tmp_path / "o14", "--cylinder-flat-depth", "0"],
-        "negative contact weight": [can_obj, "--mass", "0.3", "--out", tmp_path / "o15", "--contact-weight", "-1"],
-        "fill ball larger than the object": [can_obj, "--mass", "0.3", "--out", tmp_path / "o16", "--collision",
-                                             "spheres:2", "--fill-cavities", "0.5"],
-        "fill ball of no size": [can_obj, "--mass", "0.3", "--out", tmp_path / "o17", "--fill-cavities", "0"],
+        "missing file": [tmp_path / "nope.obj", "--mass-kg", "0.3", "--out", tmp_path / "o1"],
+        "not a mesh": [garbage, "--mass-kg", "0.3", "--out", tmp_path / "o2"],
+        "not a mesh suffix": [text, "--mass-kg", "0.3", "--out", tmp_path / "o3"],
+        "empty mesh": [empty, "--mass-kg", "0.3", "--out", tmp_path / "o4"],
+        "zero mass": [can_obj, "--mass-kg", "0", "--out", tmp_path / "o5"],
+        "negative mass": [can_obj, "--mass-kg", "-1", "--out", tmp_path / "o6"],
+        "nan mass": [can_obj, "--mass-kg", "nan", "--out", tmp_path / "o7"],
+        "inf mass": [can_obj, "--mass-kg", "inf", "--out", tmp_path / "o8"],
+        "word mass": [can_obj, "--mass-kg", "heavy", "--out", tmp_path / "o9"],
+        "unknown spec": [can_obj, "--mass-kg", "0.3", "--out", tmp_path / "o10", "--collision", "pyramids:3"],
+        "zero count": [can_obj, "--mass-kg", "0.3", "--out", tmp_path / "o11", "--collision", "boxes:0"],
+        "too many": [can_obj, "--mass-kg", "0.3", "--out", tmp_path / "o12", "--collision", "spheres:2001"],
+        "malformed mix": [can_obj, "--mass-kg", "0.3", "--out", tmp_path / "o13", "--collision", "boxes:3+"],
+        "output exists": [can_obj, "--mass-kg", "0.3", "--out", exists, "--collision", "mesh"],
+        "zero flat depth": [can_obj, "--mass-kg", "0.3", "--out", tmp_path / "o14", "--cylinder-flat-depth-m", "0"],
+        "negative contact weight": [can_obj, "--mass-kg", "0.3", "--out", tmp_path / "o15", "--contact-weight", "-1"],
+        "fill ball larger than the object": [can_obj, "--mass-kg", "0.3", "--out", tmp_path / "o16", "--collision",
+                                             "spheres:2", "--fill-cavities-m", "0.5"],
+        "fill ball of no size": [can_obj, "--mass-kg", "0.3", "--out", tmp_path / "o17", "--fill-cavities-m", "0"],
     }
 
 
@@ -84,7 +84,7 @@ def test_module_entry_point_and_console_script_help():
         assert verb in out
     exe = Path(sys.executable).with_name("real2sim")
     if exe.exists():
-        assert "--mass" in subprocess.run([exe, "asset", "--help"], capture_output=True, text=True, check=True).stdout
+        assert "--mass-kg" in subprocess.run([exe, "asset", "--help"], capture_output=True, text=True, check=True).stdout
 
 
 def _check_asset_folder(asset: Path, names: list[str], mass_kg: float) -> None:
@@ -115,10 +115,10 @@ def _check_asset_folder(asset: Path, names: list[str], mass_kg: float) -> None:
 
 def test_asset_end_to_end_small(tmp_path, can_obj, capsys):
     out = tmp_path / "can_asset"
-    code, stdout, err = run_cli(capsys, "asset", can_obj, "--mass", OBJECTS["can"].mass_kg, "--out", out,
+    code, stdout, err = run_cli(capsys, "asset", can_obj, "--mass-kg", OBJECTS["can"].mass_kg, "--out", out,
                                 "--collision", "mesh", "--collision", "vhacd", "--collision", "cylinders:2",
                                 "--collision", "boxes:1+spheres:2", "--iterations", "150", "--format", "sdf",
-                                "--cylinder-flat-depth", "1e-5")
+                                "--cylinder-flat-depth-m", "1e-5")
     assert code == 0, err
     sdf = (out / "cylinders_2" / "model.sdf").read_text()
     hints = {float(h) for h in re.findall(r"mesh_resolution_hint>([0-9.e-]+)<", sdf)}
@@ -152,7 +152,7 @@ def test_an_open_scan_is_decomposed_as_the_solid_it_bounds(tmp_path, capsys):
     mesh = tmp_path / "open_scan.obj"
     scan.export(mesh)
     out = tmp_path / "asset"
-    code, _, err = run_cli(capsys, "asset", mesh, "--mass", 0.3, "--out", out,
+    code, _, err = run_cli(capsys, "asset", mesh, "--mass-kg", 0.3, "--out", out,
                            "--collision", "vhacd", "--collision", "coacd")
     assert code == 0, err
     assert "vhacd decomposes it remeshed closed" in err
@@ -167,7 +167,7 @@ def test_an_open_scan_is_decomposed_as_the_solid_it_bounds(tmp_path, capsys):
 def test_asset_every_object_every_baseline(name, tmp_path, capsys):
     mesh = export_object(name, tmp_path / name / "model.obj")
     out = tmp_path / f"{name}_asset"
-    code, _, err = run_cli(capsys, "asset", mesh, "--mass", OBJECTS[name].mass_kg, "--out", out,
+    code, _, err = run_cli(capsys, "asset", mesh, "--mass-kg", OBJECTS[name].mass_kg, "--out", out,
                            "--collision", "coacd", "--collision", "vhacd", "--collision", "mesh")
     assert code == 0, err
     _check_asset_folder(out, ["coacd", "vhacd", "mesh"], OBJECTS[name].mass_kg)
@@ -178,9 +178,9 @@ def test_rewrite_models_changes_contact_without_refitting(tmp_path, can_obj, cap
     from real2sim.formats.contact import ContactProperties
 
     out = tmp_path / "can_asset"
-    assert run_cli(capsys, "asset", can_obj, "--mass", "0.35", "--out", out, "--collision", "mesh",
-                   "--point-dissipation", "0", "--no-split-point-stiffness")[0] == 0
-    assert not (out / "mesh" / "model_point.urdf").exists()  # --point-dissipation 0: no point-contact model
+    assert run_cli(capsys, "asset", can_obj, "--mass-kg", "0.35", "--out", out, "--collision", "mesh",
+                   "--point-dissipation-s-per-m", "0", "--no-point-stiffness-per-piece")[0] == 0
+    assert not (out / "mesh" / "model_point.urdf").exists()  # --point-dissipation-s-per-m 0: no point-contact model
     recorded = json.loads((out / "asset_config.json").read_text())["contact"]
     assert recorded["point_dissipation_s_per_m"] is None and recorded["point_stiffness_per_piece"] is False
     assert 'point_contact_stiffness value="10000.0"' in (out / "mesh" / "model.urdf").read_text()  # one piece
@@ -212,23 +212,23 @@ def test_mesh_in_millimetres(tmp_path, can_obj, capsys):
     mesh.apply_scale(1000.0)
     mm = tmp_path / "can_mm.stl"
     mesh.export(mm)
-    code, _, err = run_cli(capsys, "asset", mm, "--mass", "0.35", "--out", tmp_path / "refused", "--collision", "mesh")
+    code, _, err = run_cli(capsys, "asset", mm, "--mass-kg", "0.35", "--out", tmp_path / "refused", "--collision", "mesh")
     assert_one_line_error(code, err)
     assert "--mesh-units mm" in err and not (tmp_path / "refused").exists()
     props = {}
     for name, path, units in (("m", can_obj, "m"), ("mm", mm, "mm")):
-        code, _, err = run_cli(capsys, "asset", path, "--mass", "0.35", "--out", tmp_path / name, "--collision", "mesh",
+        code, _, err = run_cli(capsys, "asset", path, "--mass-kg", "0.35", "--out", tmp_path / name, "--collision", "mesh",
                                "--mesh-units", units)
         assert code == 0, err
         props[name] = json.loads((tmp_path / name / "physical_properties.json").read_text())
     assert json.loads((tmp_path / "mm" / "asset_config.json").read_text())["mesh_units"] == "mm"
     np.testing.assert_allclose(np.linalg.eigvalsh(props["mm"]["inertia_kg_m2"]),
                                np.linalg.eigvalsh(props["m"]["inertia_kg_m2"]), rtol=0.01)
-    code, _, err = run_cli(capsys, "capture", mm, "--out", tmp_path / "ds", "--views", "8", "--width", "32",
-                           "--height", "24")
+    code, _, err = run_cli(capsys, "capture", mm, "--out", tmp_path / "ds", "--views", "8", "--width-px", "32",
+                           "--height-px", "24")
     assert_one_line_error(code, err)
-    code, _, err = run_cli(capsys, "capture", mm, "--out", tmp_path / "ds", "--views", "8", "--width", "32",
-                           "--height", "24", "--mesh-units", "mm")
+    code, _, err = run_cli(capsys, "capture", mm, "--out", tmp_path / "ds", "--views", "8", "--width-px", "32",
+                           "--height-px", "24", "--mesh-units", "mm")
     assert code == 0, err
     truth = trimesh.load(tmp_path / "ds" / "ground_truth" / "mesh.obj", force="mesh")
     np.testing.assert_allclose(np.sort(truth.extents), np.sort(mesh.extents / 1000.0), rtol=1e-4)
@@ -247,12 +247,12 @@ def test_object_out_of_size_after_mesh_units_is_refused(tmp_path, can_obj, capsy
     mesh.export(cm)
     cases += ((cm, "m", "10 m across", "--mesh-units cm"),)
     for path, units, size, hint in cases:
-        code, _, err = run_cli(capsys, "asset", path, "--mass", "0.35", "--out", tmp_path / "a", "--collision", "mesh",
+        code, _, err = run_cli(capsys, "asset", path, "--mass-kg", "0.35", "--out", tmp_path / "a", "--collision", "mesh",
                                "--mesh-units", units)
         assert_one_line_error(code, err)
         assert size in err and hint in err, err
-        code, _, err = run_cli(capsys, "capture", path, "--out", tmp_path / "ds", "--views", "8", "--width", "32",
-                               "--height", "24", "--mesh-units", units)
+        code, _, err = run_cli(capsys, "capture", path, "--out", tmp_path / "ds", "--views", "8", "--width-px", "32",
+                               "--height-px", "24", "--mesh-units", units)
         assert_one_line_error(code, err)
         assert size in err and hint in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["can_cm.stl"]
@@ -281,7 +281,7 @@ def test_contact_weight_flag_reaches_the_fit():
     from real2sim.cli import build_parser
     from real2sim.cli.asset import config_from_args
 
-    argv = ["asset", "m.obj", "--mass", "0.3", "--out", "o", "--collision", "cylinders:2"]
+    argv = ["asset", "m.obj", "--mass-kg", "0.3", "--out", "o", "--collision", "cylinders:2"]
     default = config_from_args(build_parser().parse_args(argv))
     assert default.fit_config is None  # FitConfig's own default: the gain by family
     off = config_from_args(build_parser().parse_args([*argv, "--contact-weight", "0"]))

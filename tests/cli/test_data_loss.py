@@ -47,7 +47,7 @@ def workdir(tmp_path, monkeypatch) -> Path:
 
 def test_overwrite_never_removes_the_working_folder(workdir, capsys):
     before = snapshot(workdir)
-    code, _, err = run_cli(capsys, "asset", "box.obj", "--mass", "1", "--out", ".", "--overwrite")
+    code, _, err = run_cli(capsys, "asset", "box.obj", "--mass-kg", "1", "--out", ".", "--overwrite")
     assert_refused(code, err)
     assert "working folder" in err
     assert snapshot(workdir) == before
@@ -58,7 +58,7 @@ def test_overwrite_never_removes_a_folder_holding_the_input(workdir, capsys):
     data.mkdir()
     (data / "box.obj").write_bytes((workdir / "box.obj").read_bytes())
     before = snapshot(workdir)
-    code, _, err = run_cli(capsys, "asset", data / "box.obj", "--mass", "1", "--out", data, "--overwrite")
+    code, _, err = run_cli(capsys, "asset", data / "box.obj", "--mass-kg", "1", "--out", data, "--overwrite")
     assert_refused(code, err)
     assert "input" in err
     assert snapshot(workdir) == before
@@ -68,7 +68,7 @@ def test_overwrite_never_removes_a_folder_real2sim_did_not_make(workdir, capsys)
     theirs = workdir / "thesis"
     theirs.mkdir()
     (theirs / "chapter1.tex").write_text("precious")
-    code, _, err = run_cli(capsys, "asset", "box.obj", "--mass", "1", "--out", theirs, "--overwrite")
+    code, _, err = run_cli(capsys, "asset", "box.obj", "--mass-kg", "1", "--out", theirs, "--overwrite")
     assert_refused(code, err)
     assert MARKER_NAME in err
     assert (theirs / "chapter1.tex").read_text() == "precious"
@@ -135,7 +135,7 @@ def test_second_writer_of_one_output_is_refused(workdir, capsys):
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline().strip() == "held"
-        code, _, err = run_cli(capsys, "asset", "box.obj", "--mass", "1", "--out", workdir / "asset")
+        code, _, err = run_cli(capsys, "asset", "box.obj", "--mass-kg", "1", "--out", workdir / "asset")
         assert_refused(code, err)
         assert "another real2sim process" in err
     finally:
@@ -145,10 +145,10 @@ def test_second_writer_of_one_output_is_refused(workdir, capsys):
 
 
 def test_output_path_mistakes_are_one_line(workdir, capsys):
-    code, _, err = run_cli(capsys, "asset", "box.obj", "--mass", "1", "--out", workdir / "notes.txt" / "asset")
+    code, _, err = run_cli(capsys, "asset", "box.obj", "--mass-kg", "1", "--out", workdir / "notes.txt" / "asset")
     assert_refused(code, err)
     assert "is a file" in err
-    code, _, err = run_cli(capsys, "asset", "box.obj", "--mass", "1", "--out", workdir / ("x" * 300))
+    code, _, err = run_cli(capsys, "asset", "box.obj", "--mass-kg", "1", "--out", workdir / ("x" * 300))
     assert_refused(code, err)
     assert "longer than" in err
     code, _, err = run_cli(capsys, "objects", "export", "can", workdir / "notes.txt" / "can.obj")
@@ -168,7 +168,7 @@ def test_unwritable_parent_is_one_line(capsys):
         locked = base / "locked"
         locked.mkdir(mode=0o555)
         locked.chmod(0o555)
-        argv = ["asset", str(base / "box.obj"), "--mass", "1", "--out", str(locked / "asset")]
+        argv = ["asset", str(base / "box.obj"), "--mass-kg", "1", "--out", str(locked / "asset")]
         if os.geteuid() != 0:
             code, _, err = run_cli(capsys, *argv)
         else:
@@ -204,7 +204,7 @@ def test_internal_error_is_one_line_and_debug_shows_the_traceback(monkeypatch, c
 def test_sigterm_during_capture_leaves_no_temporary_folder(tmp_path):
     out = tmp_path / "dataset"
     proc = subprocess.Popen([sys.executable, "-m", "real2sim", "capture", "can", "--out", str(out),
-                             "--views", "200", "--width", "64", "--height", "48"],
+                             "--views", "200", "--width-px", "64", "--height-px", "48"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     # Wait until rendering has begun (the temporary dataset has images), then terminate.
@@ -272,10 +272,10 @@ def test_mask_rerun_keeps_files_it_did_not_write(dataset, capsys):
     first, second = sorted(ours.glob("*.png"))[:2]
     first.write_bytes(second.read_bytes())
     edited = first.read_bytes()
-    code, _, err = run_cli(capsys, "mask", dataset, "--method", "background", "--threshold", "20")
+    code, _, err = run_cli(capsys, "mask", dataset, "--method", "background", "--background-threshold", "20")
     assert_refused(code, err)
     assert first.name in err and "--overwrite" in err and first.read_bytes() == edited
-    code, _, err = run_cli(capsys, "mask", dataset, "--method", "background", "--threshold", "20", "--overwrite")
+    code, _, err = run_cli(capsys, "mask", dataset, "--method", "background", "--background-threshold", "20", "--overwrite")
     assert code == 0, err
     assert first.read_bytes() != edited and not (ours / "README_MINE.txt").exists()
     # nothing but its own masks, as written: a plain rerun replaces the folder
@@ -296,7 +296,7 @@ def test_run_masks_a_copy_whatever_masks_folder_the_dataset_has(dataset, tmp_pat
     theirs = dataset / "masks_background"
     theirs.mkdir()
     (theirs / "README_MINE.txt").write_text("mine")
-    code, _, err = run_cli(capsys, "run", dataset, "--mass", "0.35", "--out", tmp_path / "A", "--mask", "background",
+    code, _, err = run_cli(capsys, "run", dataset, "--mass-kg", "0.35", "--out", tmp_path / "A", "--mask", "background",
                            "--backend", "hull", "--voxels", "32", "--max-faces", "1000", "--texture-px", "64",
                            "--collision", "mesh", "--no-refine-poses")
     assert code == 0, err

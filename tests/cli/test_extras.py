@@ -49,7 +49,7 @@ def test_every_verb_and_extra_is_known():
     (["evaluate", "A", "--out", "R"], "sim"),
     (["capture", "can", "--out", "D"], "sim"),
     (["board", "--out", "b.pdf"], "phone"),
-    (["asset", "m.obj", "--mass", "1", "--out", "A", "--format", "usd"], "usd"),
+    (["asset", "m.obj", "--mass-kg", "1", "--out", "A", "--format", "usd"], "usd"),
 ])
 def test_a_missing_extra_is_one_line_naming_it(tmp_path, argv, extra):
     done = run_without(",".join(EXTRA_MODULES[extra]), *argv, cwd=tmp_path)
@@ -62,7 +62,7 @@ def test_a_missing_extra_is_one_line_naming_it(tmp_path, argv, extra):
 def test_asset_needs_no_extra(tmp_path):
     hidden = ",".join(m for extra, modules in EXTRA_MODULES.items() for m in modules)
     assert run_without(hidden, "objects", "export", "can", "can.obj", cwd=tmp_path).returncode == 0
-    done = run_without(hidden, "asset", "can.obj", "--mass", "0.4", "--collision", "spheres:4", "--iterations", "20",
+    done = run_without(hidden, "asset", "can.obj", "--mass-kg", "0.4", "--collision", "spheres:4", "--iterations", "20",
                        "--out", "can_asset", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "can_asset" / "spheres_4" / "model.urdf").is_file()
@@ -87,7 +87,7 @@ def test_the_wheel_installs_with_the_core_alone(tmp_path):
     exe = env_dir / "bin" / "real2sim"
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     subprocess.run([str(exe), "objects", "export", "can", "can.obj"], check=True, cwd=work, env=env)
-    subprocess.run([str(exe), "asset", "can.obj", "--mass", "0.4", "--collision", "spheres:4", "--iterations", "20",
+    subprocess.run([str(exe), "asset", "can.obj", "--mass-kg", "0.4", "--collision", "spheres:4", "--iterations", "20",
                     "--out", "can_asset"], check=True, cwd=work, env=env)
     assert (work / "can_asset" / "spheres_4" / "model.urdf").is_file()
     done = subprocess.run([str(exe), "evaluate", "can_asset", "--out", "results"], cwd=work, env=env,

@@ -21,7 +21,7 @@ from tests.cli_helpers import run_cli
 @pytest.fixture(scope="module")
 def tiny_dataset(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("messages") / "ds"
-    assert main(["capture", "can", "--out", str(out), "--views", "8", "--width", "64", "--height", "48"]) == 0
+    assert main(["capture", "can", "--out", str(out), "--views", "8", "--width-px", "64", "--height-px", "48"]) == 0
     return out
 
 
@@ -44,7 +44,7 @@ def _proc_takes_nothing() -> bool:
 @pytest.mark.parametrize("argv", [
     ["demo", "--out", "/proc/d"],
     ["reconstruct", "{ds}", "--out", "/proc/m"],
-    ["run", "{ds}", "--mass", "0.35", "--out", "/proc/a"],
+    ["run", "{ds}", "--mass-kg", "0.35", "--out", "/proc/a"],
     ["capture", "can", "--out", "/proc/c", "--views", "2"],
 ])
 def test_output_under_proc_is_one_line(argv, tiny_dataset, capsys):
@@ -74,12 +74,12 @@ def test_empty_path_is_refused(argv, tiny_dataset, tmp_path, capsys):
 @pytest.mark.parametrize("argv", [
     ["reconstruct", "{loop}", "--out", "{tmp}/m"],
     ["reconstruct", "{ds}", "--out", "{loop}/m"],
-    ["asset", "{loop}", "--mass", "1", "--out", "{tmp}/a"],
+    ["asset", "{loop}", "--mass-kg", "1", "--out", "{tmp}/a"],
     ["capture", "{loop}", "--out", "{tmp}/c", "--views", "2"],
     ["capture", "can", "--out", "{loop}", "--views", "2"],
     ["refine-poses", "{loop}"],
     ["mask", "{loop}", "--method", "parallax"],
-    ["run", "{loop}", "--mass", "1", "--out", "{tmp}/r"],
+    ["run", "{loop}", "--mass-kg", "1", "--out", "{tmp}/r"],
     ["report", "{loop}"],
     ["view", "{loop}"],
 ])
@@ -110,7 +110,7 @@ def test_garbage_weights_file_is_named_plainly(tiny_dataset, tmp_path, capsys):
         pytest.skip("torchvision is not installed")
     garbage = tmp_path / "garbage.bin"
     garbage.write_bytes(bytes(range(256)) * 20)
-    code, _, err = run_cli(capsys, "mask", tiny_dataset, "--method", "maskrcnn", "--weights", garbage)
+    code, _, err = run_cli(capsys, "mask", tiny_dataset, "--method", "maskrcnn", "--mask-weights", garbage)
     assert_one_line(code, err, "is not a Mask R-CNN weights file")
     assert "weights_only" not in err
 
@@ -138,10 +138,10 @@ def test_sigterm_in_a_verb_that_catches_ctrl_c_exits_143(tmp_path):
     """`run` catches Ctrl-C to say what it kept, and returned 130 for SIGTERM too (Terminated is a
     KeyboardInterrupt so that the same clean-up runs); a SIGTERM now exits 143."""
     ds = tmp_path / "ds"
-    assert main(["capture", "can", "--out", str(ds), "--views", "16", "--width", "160", "--height", "120"]) == 0
+    assert main(["capture", "can", "--out", str(ds), "--views", "16", "--width-px", "160", "--height-px", "120"]) == 0
     temp = tmp_path / "tmp"
     temp.mkdir()
-    proc = subprocess.Popen([sys.executable, "-m", "real2sim", "run", str(ds), "--mass", "0.35", "--out",
+    proc = subprocess.Popen([sys.executable, "-m", "real2sim", "run", str(ds), "--mass-kg", "0.35", "--out",
                              str(tmp_path / "A"), "--refine-poses", "--backend", "hull"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env={**os.environ, "TMPDIR": str(temp)})
     seen = []
@@ -178,7 +178,7 @@ def test_fifo_urdf_and_file_for_a_folder(tmp_path, capsys):
     "asset folder not found"; a FIFO as weights file was "not found"."""
     (tmp_path / "asset" / "mesh").mkdir(parents=True)
     os.mkfifo(tmp_path / "asset" / "mesh" / "model.urdf")
-    proc = subprocess.run([sys.executable, "-m", "real2sim", "view", str(tmp_path / "asset"), "--seconds", "0"],
+    proc = subprocess.run([sys.executable, "-m", "real2sim", "view", str(tmp_path / "asset"), "--duration-s", "0"],
                           capture_output=True, text=True, timeout=120)
     assert_one_line(proc.returncode, proc.stderr, "is not a regular file")
     (tmp_path / "afile").write_text("x")
@@ -194,7 +194,7 @@ def test_sigterm_during_evaluate_says_what_is_kept(tmp_path):
 
     mesh = export_object("can", tmp_path / "can" / "model.obj")
     asset = tmp_path / "asset"
-    assert main(["asset", str(mesh), "--mass", "0.35", "--out", str(asset), "--collision", "mesh"]) == 0
+    assert main(["asset", str(mesh), "--mass-kg", "0.35", "--out", str(asset), "--collision", "mesh"]) == 0
     proc = subprocess.Popen([sys.executable, "-m", "real2sim", "evaluate", str(asset), "--out", str(tmp_path / "e"),
                              "--tasks", "push", "--runs", "4", "--contact", "point", "--jobs", "1", "--no-animations"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

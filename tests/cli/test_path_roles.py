@@ -28,10 +28,10 @@ FOLDER_INPUTS = {"dataset", "datasets", "log", "shape", "assets", "asset", "resu
 REQUIRED = {
     "capture": {"mesh": None},
     "reconstruct": {"dataset": None},
-    "asset": {"mesh": None, "--mass": "0.4"},
-    "run": {"dataset": None, "--mass": "0.4"},
-    "batch": {"datasets": None, "--mass": "0.4"},
-    "excite": {"object": None, "--mass": "0.4"},
+    "asset": {"mesh": None, "--mass-kg": "0.4"},
+    "run": {"dataset": None, "--mass-kg": "0.4"},
+    "batch": {"datasets": None, "--mass-kg": "0.4"},
+    "excite": {"object": None, "--mass-kg": "0.4"},
     "identify": {"log": None},
     "evaluate": {"assets": None},
 }
@@ -81,8 +81,8 @@ def argv_for(verb: str, dest: str, value: Path, out: Path) -> list[str]:
     parser = verb_parsers()[verb]
     actions = {a.dest: a for a in parser._actions}
     given = dict(REQUIRED[verb])
-    if dest == "masses":  # one of --mass, --masses, --mass-from
-        given.pop("--mass")
+    if dest == "masses":  # one of --mass-kg, --masses, --mass-from
+        given.pop("--mass-kg")
     argv = [verb]
     for key, text in given.items():
         if key.startswith("--"):
@@ -154,7 +154,7 @@ def test_files_an_obj_reads_are_inputs_too(tmp_path, monkeypatch, capsys):
     assert set(companion_files(obj)) >= {mtl, materials / mtl.read_text().split("map_Kd")[1].split()[0]}
     (materials / MARKER_NAME).write_text("{}")
     before = texture.read_bytes()
-    code, _, err = run_cli(capsys, "asset", obj, "--mass", "0.4", "--out", materials, "--overwrite")
+    code, _, err = run_cli(capsys, "asset", obj, "--mass-kg", "0.4", "--out", materials, "--overwrite")
     assert code == 2 and "a file that MESH reads" in err, err
     assert texture.read_bytes() == before
 

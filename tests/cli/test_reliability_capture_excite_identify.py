@@ -22,7 +22,7 @@ from real2sim.geometry.objects import make_object
 from real2sim.identify.excite import payload_truth
 from tests.cli_helpers import run_cli
 
-SMALL_CAPTURE = ("--views", "12", "--width", "96", "--height", "72")
+SMALL_CAPTURE = ("--views", "12", "--width-px", "96", "--height-px", "72")
 
 
 def assert_refused(code: int, err: str, *says: str) -> None:
@@ -57,7 +57,7 @@ def test_capture_video_without_fps_is_30_fps(tmp_path, capsys):
 # --- excite -------------------------------------------------------------------------------------------
 
 def _excite(capsys, mesh_path, out):
-    return run_cli(capsys, "excite", mesh_path, "--mass", "0.4", "--duration", "8", "--out", out)
+    return run_cli(capsys, "excite", mesh_path, "--mass-kg", "0.4", "--duration-s", "8", "--out", out)
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +73,7 @@ def work(tmp_path_factory):
 def can_log(work):
     """The log of `excite` on the OBJ that `objects export can` writes; identify's tests reuse it."""
     assert main(["objects", "export", "can", str(work / "can.obj")]) == 0  # pytest's capsys is per test
-    assert main(["excite", str(work / "can.obj"), "--mass", "0.4", "--duration", "8", "--out",
+    assert main(["excite", str(work / "can.obj"), "--mass-kg", "0.4", "--duration-s", "8", "--out",
                  str(work / "can_log")]) == 0
     return work / "can_log"
 

@@ -41,9 +41,9 @@ def assert_refused_before_work(code: int, err: str, folder: Path) -> None:
 
 
 @pytest.mark.parametrize("argv", [
-    ["asset", "{mesh}", "--mass", "0.4", "--collision", "spheres:4"],
-    ["capture", "can", "--views", "12", "--width", "96", "--height", "72"],
-    ["excite", "can", "--mass", "0.4", "--duration", "8"],
+    ["asset", "{mesh}", "--mass-kg", "0.4", "--collision", "spheres:4"],
+    ["capture", "can", "--views", "12", "--width-px", "96", "--height-px", "72"],
+    ["excite", "can", "--mass-kg", "0.4", "--duration-s", "8"],
 ], ids=lambda a: a[0])
 def test_an_immutable_output_is_refused_before_the_work(tmp_path, monkeypatch, capsys, immutable, argv):
     monkeypatch.chdir(tmp_path)
@@ -68,11 +68,11 @@ def test_an_immutable_entry_inside_the_output_is_found_too(tmp_path):
 
 def test_board_that_cannot_be_made_leaves_no_folders(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    code, _, err = run_cli(capsys, "board", "--out", "new/deeper/b.pdf", "--square-mm", "100")
+    code, _, err = run_cli(capsys, "board", "--out", "new/deeper/b.pdf", "--board-square-mm", "100")
     assert code == 2 and "does not fit" in err
     assert not (tmp_path / "new").exists()
     (tmp_path / "mine").mkdir()  # a folder that was there before is kept, even empty
-    code, _, _ = run_cli(capsys, "board", "--out", "mine/deeper/b.pdf", "--square-mm", "100")
+    code, _, _ = run_cli(capsys, "board", "--out", "mine/deeper/b.pdf", "--board-square-mm", "100")
     assert code == 2 and (tmp_path / "mine").is_dir() and not (tmp_path / "mine" / "deeper").exists()
 
 

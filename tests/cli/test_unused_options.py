@@ -15,17 +15,17 @@ def dataset(tmp_path_factory):
     root = tmp_path_factory.mktemp("unused")
     from real2sim.cli import main
 
-    assert main(["capture", "can", "--views", "12", "--width", "96", "--height", "72", "--out", str(root / "ds")]) == 0
+    assert main(["capture", "can", "--views", "12", "--width-px", "96", "--height-px", "72", "--out", str(root / "ds")]) == 0
     (root / "weights.pth").write_bytes(b"not weights")
     return root
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["run", "{ds}", "--mass", "0.4", "--tasks", ""], "--tasks is for --evaluate"),
-    (["run", "{ds}", "--mass", "0.4", "--contact", "bogus"], "--contact is for --evaluate"),
-    (["run", "{ds}", "--mass", "0.4", "--runs", "3"], "--runs is for --evaluate"),
-    (["run", "{ds}", "--mass", "0.4", "--mask-weights", "{w}"], "--mask-weights is for --mask maskrcnn"),
-    (["mask", "{ds}", "--method", "provided", "--weights", "{w}"], "--weights is for --method maskrcnn"),
+    (["run", "{ds}", "--mass-kg", "0.4", "--tasks", ""], "--tasks is for --evaluate"),
+    (["run", "{ds}", "--mass-kg", "0.4", "--contact", "bogus"], "--contact is for --evaluate"),
+    (["run", "{ds}", "--mass-kg", "0.4", "--runs", "3"], "--runs is for --evaluate"),
+    (["run", "{ds}", "--mass-kg", "0.4", "--mask-weights", "{w}"], "--mask-weights is for --mask maskrcnn"),
+    (["mask", "{ds}", "--method", "provided", "--mask-weights", "{w}"], "--mask-weights is for --method maskrcnn"),
     (["evaluate", "{ds}", "--ray-address", "bogus"], "--ray-address is for --executor ray"),
 ])
 def test_an_option_that_would_be_ignored_is_refused(dataset, capsys, argv, words):

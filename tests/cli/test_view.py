@@ -1,5 +1,5 @@
 """`real2sim view`: serves an asset in Meshcat (loopback only unless --host says otherwise) and exits
-after --seconds; a model Drake cannot load, or a port it cannot listen on, is one line and exit 2."""
+after --duration-s; a model Drake cannot load, or a port it cannot listen on, is one line and exit 2."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def can_asset(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("view")
     mesh = export_object("can", root / "can" / "model.obj")
     asset = root / "asset"
-    assert main(["asset", str(mesh), "--mass", "0.35", "--out", str(asset), "--collision", "mesh"]) == 0
+    assert main(["asset", str(mesh), "--mass-kg", "0.35", "--out", str(asset), "--collision", "mesh"]) == 0
     return asset
 
 
@@ -34,7 +34,7 @@ def assert_one_line(code: int, err: str, text: str) -> None:
 
 def test_view_serves_asset_then_exits(can_asset, capsys):
     capsys.readouterr()
-    assert main(["view", str(can_asset), "--seconds", "0.2"]) == 0
+    assert main(["view", str(can_asset), "--duration-s", "0.2"]) == 0
     out = capsys.readouterr().out
     assert "mesh/model.urdf" in out and "http://127.0.0.1:" in out
 
@@ -84,7 +84,7 @@ def test_busy_port_is_one_line(can_asset, capsys):
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        code, _, err = run_cli(capsys, "view", can_asset, "--port", port, "--seconds", "0")
+        code, _, err = run_cli(capsys, "view", can_asset, "--port", port, "--duration-s", "0")
     assert_one_line(code, err, f"--port {port}: cannot listen on 127.0.0.1:{port}")
 
 
@@ -105,7 +105,7 @@ def test_model_drake_cannot_load_is_one_line(case, text, can_asset, tmp_path, ca
         (asset / "visual" / "model.obj").unlink()
     else:
         shutil.rmtree(asset / "mesh" / "pieces")
-    code, out, err = run_cli(capsys, "view", asset, "--seconds", "0")
+    code, out, err = run_cli(capsys, "view", asset, "--duration-s", "0")
     assert_one_line(code, err, text)
     assert "http://" not in out, "no server for a model that does not load"
 
@@ -121,7 +121,7 @@ def test_unresolvable_host_is_one_line_at_once(can_asset):
 
     for name in ("no.such.host.invalid", "nosuchhost"):
         proc = subprocess.run([sys.executable, "-m", "real2sim", "view", str(can_asset), "--host", name,
-                               "--seconds", "1"], capture_output=True, text=True, timeout=60)
+                               "--duration-s", "1"], capture_output=True, text=True, timeout=60)
         assert_one_line(proc.returncode, proc.stderr, f"--host {name}: no such host")
         assert "http://" not in proc.stdout
 
@@ -165,7 +165,7 @@ def test_every_interface_prints_an_address_a_browser_can_open(can_asset, capsys)
     """Issue 33 #10: --host 0.0.0.0 (or '*') printed http://0.0.0.0:7000, which no browser opens."""
     for host in ("0.0.0.0", "*"):
         capsys.readouterr()
-        assert main(["view", str(can_asset), "--host", host, "--seconds", "0.1"]) == 0
+        assert main(["view", str(can_asset), "--host", host, "--duration-s", "0.1"]) == 0
         out = capsys.readouterr().out
         assert "0.0.0.0:" not in out and "http://localhost:" in out and "all interfaces" in out, out
 
@@ -178,7 +178,7 @@ def test_sigterm_while_serving_exits_143(can_asset):
     import sys
     import time
 
-    proc = subprocess.Popen([sys.executable, "-m", "real2sim", "view", str(can_asset), "--seconds", "600"],
+    proc = subprocess.Popen([sys.executable, "-m", "real2sim", "view", str(can_asset), "--duration-s", "600"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().startswith("showing ")

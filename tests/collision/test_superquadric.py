@@ -152,7 +152,7 @@ def test_asset_cli_writes_a_drake_loadable_superquadric_representation(tmp_path,
     mesh_path = tmp_path / "can.obj"
     make_object("can").export(mesh_path)
     out = tmp_path / "asset"
-    code = main(["asset", str(mesh_path), "--mass", str(OBJECTS["can"].mass_kg), "--out", str(out),
+    code = main(["asset", str(mesh_path), "--mass-kg", str(OBJECTS["can"].mass_kg), "--out", str(out),
                  "--collision", "superquadrics:2", "--iterations", "200"])
     assert code == 0, capsys.readouterr().err
     rep = out / "superquadrics_2"

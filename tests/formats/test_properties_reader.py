@@ -1,6 +1,6 @@
 """The one reader of properties files (``--properties``, physical_properties.json): every unphysical or
 malformed field refused in one line naming the file and the field; a centre of mass outside the object
-and a --mass that disagrees with the file refused before any fitting."""
+and a --mass-kg that disagrees with the file refused before any fitting."""
 
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ BAD = {
     "mass Infinity": (_with(mass_kg=float("inf")), "mass_kg must be a finite number > 0"),
     "mass zero": (_with(mass_kg=0), "mass_kg must be a finite number > 0"),
     "mass negative": (_with(mass_kg=-0.4), "mass_kg must be a finite number > 0"),
-    "mass over the --mass range": (_with(mass_kg=MAX_MASS_KG * 1.001), f"mass_kg must be at most {MAX_MASS_KG:g} kg"),
+    "mass over the --mass-kg range": (_with(mass_kg=MAX_MASS_KG * 1.001), f"mass_kg must be at most {MAX_MASS_KG:g} kg"),
     "mass missing": (_without("mass_kg"), "mass_kg is missing"),
     "com a string": (_with(com_m="123"), "com_m must be a list of 3 finite numbers"),
     "com two values": (_with(com_m=[0.0, 0.0]), "com_m must be a list of 3 finite numbers"),
@@ -199,7 +199,7 @@ def test_asset_refuses_a_com_outside_the_object_before_fitting(tmp_path, capsys,
 
 @pytest.fixture(scope="module")
 def identified_asset(tmp_path_factory, box_obj):
-    """An asset built with --mass 0.4 and identify's 0.40003 +- 0.0002 kg: (props.json, asset folder, stderr)."""
+    """An asset built with --mass-kg 0.4 and identify's 0.40003 +- 0.0002 kg: (props.json, asset folder, stderr)."""
     import contextlib
     import io
 
@@ -210,7 +210,7 @@ def identified_asset(tmp_path_factory, box_obj):
     path.write_text(json.dumps(identify_output()))
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        code = main(["asset", str(box_obj), "--mass", "0.4", "--properties", str(path), "--out", str(root / "asset"),
+        code = main(["asset", str(box_obj), "--mass-kg", "0.4", "--properties", str(path), "--out", str(root / "asset"),
                      "--collision", "mesh"])
     assert code == 0, err.getvalue()
     return path, root / "asset"
@@ -224,7 +224,7 @@ def test_asset_builds_with_a_mass_that_agrees_within_the_standard_error(identifi
 
 def test_a_mass_further_than_three_standard_errors_is_refused(tmp_path, capsys, box_obj, identified_asset):
     path, _ = identified_asset
-    code, _, err = run_cli(capsys, "asset", box_obj, "--mass", "0.401", "--properties", path, "--out",
+    code, _, err = run_cli(capsys, "asset", box_obj, "--mass-kg", "0.401", "--properties", path, "--out",
                            tmp_path / "asset", "--collision", "mesh")
     line = _one_line(code, err)
     assert "disagrees with the properties' mass" in line and "3 x its standard error, 0.0002 kg" in line, line

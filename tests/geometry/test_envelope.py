@@ -1,4 +1,4 @@
-"""The solid with its open cavities filled (geometry/envelope.py) and `asset --fill-cavities`."""
+"""The solid with its open cavities filled (geometry/envelope.py) and `asset --fill-cavities-m`."""
 
 from __future__ import annotations
 
@@ -76,7 +76,7 @@ def test_a_ball_out_of_range_is_a_user_error(cup):
 def test_asset_fits_the_filled_cup_and_keeps_the_true_one_everywhere_else(cup, tmp_path):
     mesh = tmp_path / "cup.obj"
     cup.export(mesh)
-    config = AssetConfig(mass_kg=0.3, specs=(parse_spec("ellipsoids:2"),), keep_up=True, fill_cavities_m=0.045,
+    config = AssetConfig(mass_kg=0.3, specs=(parse_spec("ellipsoids:2"),), fill_cavities_m=0.045,
                          fit_config=None)
     result = build_asset(mesh, tmp_path / "filled", config)
     report = json.loads((tmp_path / "filled" / "ellipsoids_2" / "fit_report.json").read_text())

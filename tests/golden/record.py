@@ -62,9 +62,9 @@ SMALL_HULL = ["--backend", "hull", "--voxels", "48", "--max-faces", "2000", "--t
 PIPELINES: dict[str, list[list[str]]] = {
     # a. a seeded simulated robot capture of the bundled can -> run: visual hull, no pose refinement
     "robot_capture": [
-        ["capture", "can", "--views", "24", "--width", "96", "--height", "72", "--seed", "0",
+        ["capture", "can", "--views", "24", "--width-px", "96", "--height-px", "72", "--seed", "0",
          "--out", "{root}/DS"],
-        ["run", "{root}/DS", "--mass", "0.35", "--out", "{root}/A", *SMALL_HULL,
+        ["run", "{root}/DS", "--mass-kg", "0.35", "--out", "{root}/A", *SMALL_HULL,
          "--collision", "cylinders:4", "--collision", "spheres:8", "--iterations", "50", "--no-refine-poses"],
     ],
     # b. a seeded phone capture on the printed board -> run: SfM, board frame, parallax masks, hull, asset.
@@ -72,15 +72,15 @@ PIPELINES: dict[str, list[list[str]]] = {
     #    tests/pipeline/test_phone.py, or 192x144) they warn that they cannot be trusted, and the reconstruct
     #    stage refused about one run in eight (a hull three times the can's size); 60 at 160x120: 5 of 5 ran.
     "phone_capture": [
-        ["capture", "can", "--handheld", "--board", "--views", "60", "--width", "160", "--height", "120",
+        ["capture", "can", "--handheld", "--with-board", "--views", "60", "--width-px", "160", "--height-px", "120",
          "--seed", "0", "--out", "{root}/PHOTOS"],
-        ["run", "{root}/PHOTOS", "--mass", "0.35", "--out", "{root}/B", *SMALL_HULL,
+        ["run", "{root}/PHOTOS", "--mass-kg", "0.35", "--out", "{root}/B", *SMALL_HULL,
          "--collision", "spheres:4", "--iterations", "30"],
     ],
     # c. asset of a bundled mesh with every collision family once, small counts, every model format
     "asset": [
         ["objects", "export", "bottle", "{root}/bottle.obj"],
-        ["asset", "{root}/bottle.obj", "--mass", "0.6", "--out", "{root}/C",
+        ["asset", "{root}/bottle.obj", "--mass-kg", "0.6", "--out", "{root}/C",
          "--collision", "spheres:4", "--collision", "boxes:2", "--collision", "rotated_boxes:2",
          "--collision", "cylinders:2", "--collision", "ellipsoids:2", "--collision", "capsules:2",
          "--collision", "superquadrics:1", "--collision", "coacd", "--collision", "vhacd",

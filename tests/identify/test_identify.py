@@ -18,7 +18,7 @@ def small_log(tmp_path_factory):
     """The can (0.3 kg) with 0.1 kg off-centre inside, one 6 s period of the exciting motion."""
     root = tmp_path_factory.mktemp("identify")
     mesh = make_object("can")
-    config = ExciteConfig(mass_kg=0.3, extra_mass_kg=0.1, extra_at_m=(0.02, 0.0, 0.03), torque_noise_n_m=0.05,
+    config = ExciteConfig(mass_kg=0.3, extra_mass_kg=0.1, extra_mass_at_m=(0.02, 0.0, 0.03), torque_noise_n_m=0.05,
                           periods=1)
     with pytest.MonkeyPatch.context() as env:
         env.setenv("REAL2SIM_CACHE", str(root / "cache"))  # the trajectory's cache stays in the test's folder
@@ -31,7 +31,7 @@ def small_log(tmp_path_factory):
 def noise_free_log(small_log):
     """small_log's motion and payload with no torque noise: (log folder, truth)."""
     log_dir, _ = small_log
-    config = ExciteConfig(mass_kg=0.3, extra_mass_kg=0.1, extra_at_m=(0.02, 0.0, 0.03), torque_noise_n_m=0.0,
+    config = ExciteConfig(mass_kg=0.3, extra_mass_kg=0.1, extra_mass_at_m=(0.02, 0.0, 0.03), torque_noise_n_m=0.0,
                           periods=1)
     with pytest.MonkeyPatch.context() as env:
         env.setenv("REAL2SIM_CACHE", str(log_dir.parent / "cache"))  # small_log's design: no new search

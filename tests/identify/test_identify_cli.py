@@ -61,8 +61,8 @@ def test_identified_properties_go_into_the_asset_frame(tmp_path, capsys):
     page = _truth_table({"physical_properties": {"com_error_mm": 0.0, "inertia_eigenvalue_max_rel_error": 0.0},
                          "physical_properties_uniform_density": beside})
     assert "uniform density instead" in page
-    # a different --mass beside the properties is a contradiction
-    code, _, err = run_cli(capsys, "asset", mesh_path, "--properties", props_path, "--mass", "0.3", "--out",
+    # a different --mass-kg beside the properties is a contradiction
+    code, _, err = run_cli(capsys, "asset", mesh_path, "--properties", props_path, "--mass-kg", "0.3", "--out",
                            tmp_path / "asset2", "--collision", "mesh")
     _one_line(code, err)
     assert not (tmp_path / "asset2").exists()
@@ -118,12 +118,12 @@ def test_bad_logs_are_one_line_and_exit_2(good_log, tmp_path, capsys, case):
 
 def test_bad_excite_inputs_are_one_line_and_exit_2(tmp_path, capsys):
     cases = [
-        ["can", "--mass", "0.3", "--extra-mass", "0.1", "--extra-mass-at", "1", "0", "0", "--out", tmp_path / "a"],
-        ["can", "--mass", "0.3", "--extra-mass", "0.1", "--out", tmp_path / "b"],
-        ["can", "--mass", "0", "--out", tmp_path / "c"],
-        ["no_such.obj", "--mass", "0.3", "--out", tmp_path / "d"],
-        ["can", "--mass", "0.3", "--extra-mass-at", "0", "0", "0.03", "--out", tmp_path / "e"],
-        ["can", "--mass", "0.3", "--duration", "2", "--out", tmp_path / "f"],
+        ["can", "--mass-kg", "0.3", "--extra-mass-kg", "0.1", "--extra-mass-at-m", "1", "0", "0", "--out", tmp_path / "a"],
+        ["can", "--mass-kg", "0.3", "--extra-mass-kg", "0.1", "--out", tmp_path / "b"],
+        ["can", "--mass-kg", "0", "--out", tmp_path / "c"],
+        ["no_such.obj", "--mass-kg", "0.3", "--out", tmp_path / "d"],
+        ["can", "--mass-kg", "0.3", "--extra-mass-at-m", "0", "0", "0.03", "--out", tmp_path / "e"],
+        ["can", "--mass-kg", "0.3", "--duration-s", "2", "--out", tmp_path / "f"],
     ]
     for argv in cases:
         code, _, err = run_cli(capsys, "excite", *argv)
@@ -135,7 +135,7 @@ def test_bad_excite_inputs_are_one_line_and_exit_2(tmp_path, capsys):
 def test_excite_then_identify_from_the_command_line_meets_the_mass_and_com_targets(tmp_path, capsys, monkeypatch):
     """The verbs as typed, with the default 6-minute trajectory and noise: mass within 2 %, CoM within 2 mm."""
     monkeypatch.setenv("REAL2SIM_CACHE", str(tmp_path / "cache"))
-    code, out, err = run_cli(capsys, "excite", "bottle", "--mass", "0.4", "--extra-mass", "0.2", "--extra-mass-at",
+    code, out, err = run_cli(capsys, "excite", "bottle", "--mass-kg", "0.4", "--extra-mass-kg", "0.2", "--extra-mass-at-m",
                              "0.01", "0.01", "0.05", "--out", tmp_path / "log")
     assert code == 0, err
     code, out, err = run_cli(capsys, "identify", tmp_path / "log", "--out", tmp_path / "props.json")

@@ -109,7 +109,7 @@ def test_an_object_split_into_tasks_pauses_before_each_tasks_stages_and_ends_as_
     from real2sim.pipeline.batch import PHASES, run_object
 
     out = tmp_path / "cat"
-    args = build_parser().parse_args(["batch", str(datasets["can"]), "--mass", "0.35", "--out", str(out), *FAST])
+    args = build_parser().parse_args(["batch", str(datasets["can"]), "--mass-kg", "0.35", "--out", str(out), *FAST])
     (job,), out, _ = plan(args)
     (out / ".batch").mkdir(parents=True)
     outcomes = [run_object(replace(job, phase=phase, gpu=phase == "gpu")) for phase in PHASES]
@@ -129,10 +129,10 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(capsys, datasets, tmp_
     not_ds = tmp_path / "photos_of_nothing"
     not_ds.mkdir()
     (not_ds / "notes.txt").write_text("not a dataset")
-    assert "photos_of_nothing" in _one_line_exit_2(capsys, "batch", can, not_ds, "--mass", "1", "--out", out, *FAST)
+    assert "photos_of_nothing" in _one_line_exit_2(capsys, "batch", can, not_ds, "--mass-kg", "1", "--out", out, *FAST)
     twin = tmp_path / "elsewhere" / "can_ds"
     shutil.copytree(can, twin)
-    assert "both named 'can_ds'" in _one_line_exit_2(capsys, "batch", can, twin, "--mass", "1", "--out", out)
+    assert "both named 'can_ds'" in _one_line_exit_2(capsys, "batch", can, twin, "--mass-kg", "1", "--out", out)
     for text, expected in (("name,mass_kg\ncan_ds,\n", "can_ds has no mass"),
                            ("name,mass_kg\ncan_ds,-0.2\n", "must be a number > 0"),
                            ("name,mass_kg\ncan_ds,0\n", "must be a number > 0"),
@@ -140,16 +140,16 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(capsys, datasets, tmp_
         masses = tmp_path / "masses.csv"
         masses.write_text(text)
         assert expected in _one_line_exit_2(capsys, "batch", can, "--masses", masses, "--out", out, *FAST)
-    assert "--address is for --executor ray" in _one_line_exit_2(
-        capsys, "batch", can, "--mass", "1", "--out", out, "--address", "127.0.0.1:1")
+    assert "--ray-address is for --executor ray" in _one_line_exit_2(
+        capsys, "batch", can, "--mass-kg", "1", "--out", out, "--ray-address", "127.0.0.1:1")
     # nothing listens on port 1 of the loopback: refused at once, well within the 30 s bound
-    line = _one_line_exit_2(capsys, "batch", can, "--mass", "1", "--out", out, "--executor", "ray",
-                            "--address", "127.0.0.1:1", *FAST)
+    line = _one_line_exit_2(capsys, "batch", can, "--mass-kg", "1", "--out", out, "--executor", "ray",
+                            "--ray-address", "127.0.0.1:1", *FAST)
     assert "could not reach the Ray cluster at 127.0.0.1:1" in line
     asset = tmp_path / "an_asset"
     asset.mkdir()
     (asset / ".real2sim").write_text(json.dumps({"made_by": "real2sim run"}))
-    assert "not a batch's" in _one_line_exit_2(capsys, "batch", can, "--mass", "1", "--out", asset, *FAST)
+    assert "not a batch's" in _one_line_exit_2(capsys, "batch", can, "--mass-kg", "1", "--out", asset, *FAST)
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["an_asset", "elsewhere", "masses.csv", "photos_of_nothing"]
 
@@ -162,7 +162,7 @@ def test_a_second_batch_on_the_same_catalogue_is_refused(capsys, datasets, tmp_p
         stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline().strip() == "held"
-        line = _one_line_exit_2(capsys, "batch", datasets["can"], "--mass", "1", "--out", out, *FAST)
+        line = _one_line_exit_2(capsys, "batch", datasets["can"], "--mass-kg", "1", "--out", out, *FAST)
         assert "another real2sim process is writing" in line
     finally:
         holder.kill()
@@ -241,7 +241,7 @@ def test_an_evaluated_batch_recommends_from_the_simulations(capsys, datasets, tm
     """`--evaluate` reaches every object's run; its row takes OCAE and simulation time from results/ (a
     minute or two; the row's reading of summary.csv is checked quickly above)."""
     out = tmp_path / "cat"
-    code, stdout, err = run_cli(capsys, "batch", datasets["can"], "--mass", "0.35", "--out", out, *FAST,
+    code, stdout, err = run_cli(capsys, "batch", datasets["can"], "--mass-kg", "0.35", "--out", out, *FAST,
                                 "--evaluate", "--tasks", "push", "--contact", "point", "--runs", "1", "--jobs", "2",
                                 "--duration-scale", "0.2")
     assert code == 0, (stdout, err)

@@ -23,7 +23,7 @@ def _rows(out):
 def test_one_object_on_a_local_ray_cluster(capsys, tmp_path):
     ds = capture(tmp_path / "can_ds", "can")
     out = tmp_path / "cat"
-    code, stdout, err = run_cli(capsys, "batch", ds, "--mass", "0.35", "--out", out, "--executor", "ray", *FAST)
+    code, stdout, err = run_cli(capsys, "batch", ds, "--mass-kg", "0.35", "--out", out, "--executor", "ray", *FAST)
     assert code == 0, (stdout, err)
     assert "can_ds: done (ran reconstruct, asset, truth)" in stdout
     assert not ray.is_initialized()  # the batch stopped the cluster it started
@@ -63,7 +63,7 @@ def test_an_object_that_asks_for_a_gpu_holds_it_only_for_its_gpu_stages(tmp_path
 
     ds = capture(tmp_path / "can_ds", "can")
     out = tmp_path / "cat"
-    args = build_parser().parse_args(["batch", str(ds), "--mass", "0.35", "--out", str(out), "--executor", "ray",
+    args = build_parser().parse_args(["batch", str(ds), "--mass-kg", "0.35", "--out", str(out), "--executor", "ray",
                                       *FAST])
     jobs, out, batch = plan(args)
     jobs = [replace(job, gpu=True) for job in jobs]  # as --device cuda makes them

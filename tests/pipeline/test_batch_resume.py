@@ -24,7 +24,7 @@ def two(tmp_path_factory) -> list[Path]:
 
 
 def _batch(datasets, out: Path, *extra) -> subprocess.Popen:
-    argv = [sys.executable, "-m", "real2sim", "batch", *map(str, datasets), "--mass", "0.3", "--out", str(out),
+    argv = [sys.executable, "-m", "real2sim", "batch", *map(str, datasets), "--mass-kg", "0.3", "--out", str(out),
             *FAST, *extra]
     return subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONWARNINGS": "ignore"})

@@ -21,7 +21,7 @@ import pytest
 from tests.cli_helpers import run_cli
 
 HULL = ["--backend", "hull", "--voxels", "48", "--max-faces", "2000", "--texture-px", "64", "--collision", "mesh",
-        "--mass", "0.35"]
+        "--mass-kg", "0.35"]
 KEPT = "pose refinement kept the given poses"
 
 

@@ -25,14 +25,14 @@ from real2sim.cli import main
 from tests.reconstruct.conftest import edit_transforms, raised_dataset
 
 FAST = ["--backend", "hull", "--voxels", "48", "--max-faces", "2000", "--texture-px", "64", "--collision", "mesh",
-        "--mass", "0.35", "--no-refine-poses"]
+        "--mass-kg", "0.35", "--no-refine-poses"]
 RAISE_M = 0.03
 
 
 @pytest.fixture(scope="module")
 def stand_capture(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("no_table")
-    assert main(["capture", "can", "--out", str(root / "can"), "--views", "24", "--width", "80", "--height", "60",
+    assert main(["capture", "can", "--out", str(root / "can"), "--views", "24", "--width-px", "80", "--height-px", "60",
                  "--no-table", "--pose-noise-mm", "0", "--pose-noise-deg", "0"]) == 0
     return root / "can"
 
@@ -134,7 +134,7 @@ def test_the_same_capture_with_a_table_plane_closes_the_bottom_at_z_0(stand_capt
 
 
 def test_a_table_height_for_a_dataset_without_a_table_is_refused(stand_capture, tmp_path, capsys):
-    code = main(["run", str(stand_capture), "--out", str(tmp_path / "asset"), "--table-z", "0.01", *FAST])
+    code = main(["run", str(stand_capture), "--out", str(tmp_path / "asset"), "--table-z-m", "0.01", *FAST])
     err = capsys.readouterr().err
     assert code == 2 and "has no table plane" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "asset").exists()

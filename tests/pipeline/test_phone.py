@@ -39,7 +39,7 @@ def capture_cli(*args) -> None:
 @pytest.fixture(scope="module")
 def handheld(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("phone") / "photos"
-    capture_cli("can", "--handheld", "--board", "--views", VIEWS, "--width", 320, "--height", 240, "--out", out)
+    capture_cli("can", "--handheld", "--with-board", "--views", VIEWS, "--width-px", 320, "--height-px", 240, "--out", out)
     return out
 
 
@@ -143,7 +143,7 @@ def test_run_reads_a_custom_board_file_and_refuses_a_wrong_one(tmp_path, capsys)
     (tmp_path / "photos").mkdir()
     for i in range(9):
         Image.new("RGB", (64, 48), (128, 128, 128)).save(tmp_path / "photos" / f"IMG_{i:04d}.png")
-    png = _board_file(tmp_path, "--squares", "9x6", "--square-mm", "20")
+    png = _board_file(tmp_path, "--squares", "9x6", "--board-square-mm", "20")
     args = argparse.Namespace(dataset=tmp_path / "photos", frames=None, board_square_mm=25.0, board=png, seed=0)
     config = phone_config(args)
     assert (config.board.squares_x, config.board.squares_y, config.board.square_m) == (9, 6, 0.02)
@@ -151,7 +151,7 @@ def test_run_reads_a_custom_board_file_and_refuses_a_wrong_one(tmp_path, capsys)
 
     assert isinstance(config.board, BoardSpec) and abs(board_spec(config).square_m - 0.025) < 1e-12
     Image.new("RGB", (64, 48)).save(tmp_path / "plain.png")
-    code, out, err = run_cli(capsys, tmp_path / "photos", "--mass", 0.3, "--out", tmp_path / "asset",
+    code, out, err = run_cli(capsys, tmp_path / "photos", "--mass-kg", 0.3, "--out", tmp_path / "asset",
                              "--board", tmp_path / "plain.png")
     _one_line_exit_2(code, out, err, "not a board written by `real2sim board`", tmp_path / "asset")
 
@@ -211,7 +211,7 @@ def _one_line_exit_2(code: int, out: str, err: str, text: str, asset: Path) -> N
 def test_folder_with_no_images(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     (tmp_path / "empty" / "notes.txt").write_text("no photos here")
-    code, out, err = run_cli(capsys, tmp_path / "empty", "--mass", 0.3, "--out", tmp_path / "asset")
+    code, out, err = run_cli(capsys, tmp_path / "empty", "--mass-kg", 0.3, "--out", tmp_path / "asset")
     _one_line_exit_2(code, out, err, "holds no images", tmp_path / "asset")
 
 
@@ -221,13 +221,13 @@ def test_mixed_sizes(tmp_path, capsys):
     (tmp_path / "photos").mkdir()
     for i in range(8):
         Image.new("RGB", (40 + 8 * i, 30 + 4 * i)).save(tmp_path / "photos" / f"p{i}.png")
-    code, out, err = run_cli(capsys, tmp_path / "photos", "--mass", 0.3, "--out", tmp_path / "asset")
+    code, out, err = run_cli(capsys, tmp_path / "photos", "--mass-kg", 0.3, "--out", tmp_path / "asset")
     _one_line_exit_2(code, out, err, "do not form camera groups", tmp_path / "asset")
 
 
 def test_undecodable_video(tmp_path, capsys):
     (tmp_path / "clip.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42" + b"garbage" * 50)
-    code, out, err = run_cli(capsys, tmp_path / "clip.mp4", "--mass", 0.3, "--out", tmp_path / "asset")
+    code, out, err = run_cli(capsys, tmp_path / "clip.mp4", "--mass-kg", 0.3, "--out", tmp_path / "asset")
     _one_line_exit_2(code, out, err, "cannot decode video", tmp_path / "asset")
 
 
@@ -237,15 +237,15 @@ def test_too_few_registered(tmp_path, capsys):
     (tmp_path / "photos").mkdir()
     for i in range(9):
         Image.new("RGB", (64, 48), (128, 128, 128)).save(tmp_path / "photos" / f"IMG_{i:04d}.png")
-    code, out, err = run_cli(capsys, tmp_path / "photos", "--mass", 0.3, "--out", tmp_path / "asset")
+    code, out, err = run_cli(capsys, tmp_path / "photos", "--mass-kg", 0.3, "--out", tmp_path / "asset")
     _one_line_exit_2(code, out, err, "registered 0 of 9 images", tmp_path / "asset")
 
 
 def test_phone_flags_refused_on_a_dataset(tmp_path, capsys):
-    capture_cli("can", "--views", 4, "--width", 32, "--height", 24, "--out", tmp_path / "ds")
-    code, out, err = run_cli(capsys, tmp_path / "ds", "--mass", 0.3, "--out", tmp_path / "asset", "--frames", 20)
+    capture_cli("can", "--views", 4, "--width-px", 32, "--height-px", 24, "--out", tmp_path / "ds")
+    code, out, err = run_cli(capsys, tmp_path / "ds", "--mass-kg", 0.3, "--out", tmp_path / "asset", "--frames", 20)
     _one_line_exit_2(code, out, err, "--frames is for photos or a video", tmp_path / "asset")
-    code, out, err = run_cli(capsys, tmp_path / "ds", "--mass", 0.3, "--out", tmp_path / "asset", "--board",
+    code, out, err = run_cli(capsys, tmp_path / "ds", "--mass-kg", 0.3, "--out", tmp_path / "asset", "--board",
                              tmp_path / "board.png")
     _one_line_exit_2(code, out, err, "--board is for photos or a video", tmp_path / "asset")
 
@@ -261,8 +261,8 @@ def _stages_run(out: str) -> str:
 def test_run_photos_with_the_board(tmp_path, capsys):
     """About 3 minutes on 2 cores: 24 photos, the board, the visual hull; then a rerun skips every stage."""
     photos = tmp_path / "photos"
-    capture_cli("can", "--handheld", "--board", "--views", 24, "--width", 320, "--height", 240, "--out", photos)
-    args = (photos, "--mass", 0.35, "--out", tmp_path / "asset", "--backend", "hull", "--collision", "boxes:8")
+    capture_cli("can", "--handheld", "--with-board", "--views", 24, "--width-px", 320, "--height-px", 240, "--out", photos)
+    args = (photos, "--mass-kg", 0.35, "--out", tmp_path / "asset", "--backend", "hull", "--collision", "boxes:8")
     code, out, err = run_cli(capsys, *args)
     assert code == 0, err
     assert "sfm" in _stages_run(out) and "board_frame" in _stages_run(out)
@@ -276,8 +276,8 @@ def test_run_photos_with_the_board(tmp_path, capsys):
 def test_run_without_the_board_asks_for_the_height(tmp_path, capsys):
     """The board never found and no --object-height-m: one line, exit 2, the SfM kept for the next run."""
     photos = tmp_path / "photos"
-    capture_cli("can", "--handheld", "--views", 24, "--width", 320, "--height", 240, "--out", photos)
-    code, out, err = run_cli(capsys, photos, "--mass", 0.35, "--out", tmp_path / "asset", "--backend", "hull")
+    capture_cli("can", "--handheld", "--views", 24, "--width-px", 320, "--height-px", 240, "--out", photos)
+    code, out, err = run_cli(capsys, photos, "--mass-kg", 0.35, "--out", tmp_path / "asset", "--backend", "hull")
     assert code == 2
     lines = [line for line in err.splitlines() if line.startswith("real2sim")]
     assert len(lines) == 1 and "was not found" in lines[0] and "--object-height-m" in lines[0], err
@@ -289,8 +289,8 @@ def test_run_by_height_then_by_the_board_reuses_the_sfm(tmp_path, capsys):
     """--object-height-m takes the COLMAP route (robot_frame: table plane from the sparse points, scale from
     the height); the same photos then without it take the board's frame, the SfM not redone."""
     photos = tmp_path / "photos"
-    capture_cli("can", "--handheld", "--board", "--views", 24, "--width", 320, "--height", 240, "--out", photos)
-    args = (photos, "--mass", 0.35, "--out", tmp_path / "asset", "--backend", "hull", "--collision", "boxes:8")
+    capture_cli("can", "--handheld", "--with-board", "--views", 24, "--width-px", 320, "--height-px", 240, "--out", photos)
+    args = (photos, "--mass-kg", 0.35, "--out", tmp_path / "asset", "--backend", "hull", "--collision", "boxes:8")
     code, out, err = run_cli(capsys, *args, "--object-height-m", 0.10)
     assert code == 0, err
     assert "robot_frame" in _stages_run(out) and "board_frame" not in _stages_run(out)
@@ -306,9 +306,9 @@ def test_run_by_height_then_by_the_board_reuses_the_sfm(tmp_path, capsys):
 @pytest.mark.slow
 def test_run_video_with_the_board(tmp_path, capsys):
     clip_dir = tmp_path / "clip"
-    capture_cli("can", "--handheld", "--board", "--video", "--views", 90, "--width", 320, "--height", 240,
+    capture_cli("can", "--handheld", "--with-board", "--video", "--views", 90, "--width-px", 320, "--height-px", 240,
                 "--out", clip_dir)
-    code, out, err = run_cli(capsys, clip_dir / "clip.mp4", "--frames", 24, "--mass", 0.35, "--out", tmp_path / "asset",
+    code, out, err = run_cli(capsys, clip_dir / "clip.mp4", "--frames", 24, "--mass-kg", 0.35, "--out", tmp_path / "asset",
                              "--backend", "hull", "--collision", "boxes:8")
     assert code == 0, err
     record = json.loads((tmp_path / "asset" / ".run" / "sfm" / SFM_RECORD).read_text())

@@ -23,7 +23,7 @@ def photos(tmp_path_factory) -> Path:
     from real2sim.cli import main
 
     out = tmp_path_factory.mktemp("phone") / "photos"
-    assert main(["capture", "can", "--handheld", "--board", "--views", str(VIEWS), "--width", "320", "--height", "240",
+    assert main(["capture", "can", "--handheld", "--with-board", "--views", str(VIEWS), "--width-px", "320", "--height-px", "240",
                  "--out", str(out)]) == 0
     return out
 
@@ -67,7 +67,7 @@ def background_capture(tmp_path_factory) -> Path:
 
 def test_a_mask_stage_warning_names_the_masked_folder_not_its_temporary(background_capture, tmp_path, capsys):
     asset = tmp_path / "asset"
-    args = ("run", background_capture, "--out", asset, "--mask", "background", "--no-refine-poses", "--mass", 0.3,
+    args = ("run", background_capture, "--out", asset, "--mask", "background", "--no-refine-poses", "--mass-kg", 0.3,
             *HULL)
     code, out, err = run_cli(capsys, *args)
     assert code == 0, err
@@ -94,11 +94,11 @@ def test_a_board_file_that_is_not_the_board_in_the_photos_stops_at_the_board_fra
     """The photos show the default 7x5 board of 32 mm squares; the file is a 9x6 board of 20 mm squares."""
     from real2sim.capture.phone.board_frame import MIN_BOARD_VIEWS
 
-    code, _, err = run_cli(capsys, "board", "--out", tmp_path / "b.pdf", "--squares", "9x6", "--square-mm", 20)
+    code, _, err = run_cli(capsys, "board", "--out", tmp_path / "b.pdf", "--squares", "9x6", "--board-square-mm", 20)
     assert code == 0, err
     board = tmp_path / "b.png"
     asset = tmp_path / "asset"
-    code, out, err = run_cli(capsys, "run", photos, "--mass", 0.4, "--out", asset, "--backend", "hull",
+    code, out, err = run_cli(capsys, "run", photos, "--mass-kg", 0.4, "--out", asset, "--backend", "hull",
                              "--board", board)
     assert code == 2, (out, err)
     lines = _error_lines(err)
@@ -120,7 +120,7 @@ def test_a_truncated_photo_is_one_line_before_any_work(photos, tmp_path, capsys)
     data = cut.read_bytes()
     cut.write_bytes(data[:len(data) // 2])  # the first half of a valid JPEG: its header still reads
     asset = tmp_path / "asset"
-    code, out, err = run_cli(capsys, "run", copy, "--mass", 0.4, "--out", asset, "--backend", "hull")
+    code, out, err = run_cli(capsys, "run", copy, "--mass-kg", 0.4, "--out", asset, "--backend", "hull")
     assert code == 2, (out, err)
     lines = _error_lines(err)
     assert len(lines) == 1 and "Traceback" not in err and "internal error" not in err, err

@@ -37,7 +37,7 @@ def tiny_ds(tmp_path_factory) -> Path:
 
 
 def _run(capsys, ds: Path, out: Path, *extra) -> tuple[int, str, str]:
-    return run_cli(capsys, "run", ds, "--mass", extra[0] if extra else "0.35", "--out", out, *FAST, *extra[1:])
+    return run_cli(capsys, "run", ds, "--mass-kg", extra[0] if extra else "0.35", "--out", out, *FAST, *extra[1:])
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def first_run(tiny_ds, tmp_path_factory) -> Path:
     from real2sim.cli import main
 
     out = tmp_path_factory.mktemp("rerun_first") / "A"
-    assert main(["run", str(tiny_ds), "--mass", "0.35", "--out", str(out), *FAST, "--collision", "spheres:4"]) == 0
+    assert main(["run", str(tiny_ds), "--mass-kg", "0.35", "--out", str(out), *FAST, "--collision", "spheres:4"]) == 0
     return out
 
 
@@ -145,7 +145,7 @@ def evaluated_run(first_run, tiny_ds, tmp_path_factory) -> Path:
 
     out = tmp_path_factory.mktemp("rerun_evaluated") / "A"
     shutil.copytree(first_run, out, symlinks=True)
-    assert main(["run", str(tiny_ds), "--mass", "0.35", "--out", str(out), *FAST, "--collision", "spheres:4",
+    assert main(["run", str(tiny_ds), "--mass-kg", "0.35", "--out", str(out), *FAST, "--collision", "spheres:4",
                  *EVALUATE]) == 0
     return out
 

@@ -36,7 +36,7 @@ from tests.pipeline.colmap_capture import make_colmap_capture, make_nerfstudio_c
 from tests.reconstruct.conftest import raised_dataset
 
 HULL = ["--backend", "hull", "--voxels", "64", "--max-faces", "4000", "--texture-px", "256",
-        "--collision", "mesh", "--mass", "0.35"]
+        "--collision", "mesh", "--mass-kg", "0.35"]
 FAST = [*HULL, "--no-refine-poses"]  # a metric capture's poses as given (refining them is run's default)
 CAN_HEIGHT_M = 0.1
 
@@ -222,7 +222,7 @@ def assets(captures, tmp_path_factory) -> dict[str, Path]:
             # ns-process-data's layout: transforms.json in COLMAP's frame turned by applied_transform
             "nerfstudio": [captures["nerfstudio"], "--object-height-m", CAN_HEIGHT_M],
             # a metric capture whose table top is not at z = 0 (a robot base below the table)
-            "raised": [captures["raised"], "--table-z", "0.25"]}
+            "raised": [captures["raised"], "--table-z-m", "0.25"]}
     for name, (dataset, *extra) in runs.items():
         assert main(["run", str(dataset), "--out", str(out / name), *map(str, extra), *FAST]) == 0, name
     return {name: out / name for name in runs}
@@ -259,7 +259,7 @@ def test_asset_up_is_the_table_normal(assets, run):
     transform = np.asarray(json.loads((assets[run] / "canonical_transform.json").read_text())["T_asset_from_input"])
     np.testing.assert_allclose(transform[:3, :3] @ [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], atol=1e-9)
     config = json.loads((assets[run] / "asset_config.json").read_text())
-    assert config["keep_up"] is True
+    assert config["pca_up"] is False
 
 
 def _yaw_xy_removed(est: np.ndarray, ref: np.ndarray) -> np.ndarray:
@@ -330,7 +330,7 @@ def test_bad_colmap_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
         "metric dataset": ([robot, "--scale", "0.2"], "COLMAP model dataset"),
         "zero height": ([moved, "--object-height-m", "0"], "--object-height-m: expected a number > 0"),
         "few points": ([captures["few_points"], "--object-height-m", "0.1"], "sparse points"),
-        "table z for colmap": ([moved, "--object-height-m", "0.1", "--table-z", "0.2"], "--table-z is for"),
+        "table z for colmap": ([moved, "--object-height-m", "0.1", "--table-z-m", "0.2"], "--table-z-m is for"),
     }
     _assert_refused(cases, tmp_path, capsys)
     code, _, err = run_cli(capsys, moved, "--out", tmp_path / "x", *FAST)

@@ -179,18 +179,18 @@ def test_summary_line_reports_the_truth(hull_result, tmp_path):
 
 @pytest.mark.slow
 def test_hull_reconstruction_with_truth(can_capture, tmp_path):
-    """`real2sim reconstruct DATASET --out X --backend hull --texture-px 256 --table-z 0.25` at its
+    """`real2sim reconstruct DATASET --out X --backend hull --texture-px 256 --table-z-m 0.25` at its
     default 192-voxel hull, on the capture with its world frame 0.25 m lower (the table top at z = 0.25,
     as in a robot's frame whose base is below the table).
 
     About 36 s on 2 cores (xatlas unwraps the 40k-face mesh in ~12 s, the truth comparison takes
     ~13 s); measured Chamfer 0.25 mm, IoU 0.980, F@1mm 1.000, the bottom at z = 0.2501 (as at z = 0
-    on the original capture). Without --table-z the hull runs 14 mm below the table (Chamfer 0.87 mm).
+    on the original capture). Without --table-z-m the hull runs 14 mm below the table (Chamfer 0.87 mm).
     """
     dataset = raised_dataset(can_capture, tmp_path / "raised", 0.25)
     out = tmp_path / "mesh_out"
     proc = subprocess.run([sys.executable, "-m", "real2sim", "reconstruct", str(dataset), "--out", str(out),
-                           "--backend", "hull", "--texture-px", "256", "--table-z", "0.25"],
+                           "--backend", "hull", "--texture-px", "256", "--table-z-m", "0.25"],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.strip().splitlines()

@@ -5,7 +5,7 @@ few: measured mean IoU 0.70, min 0.45, since the hull around the can does not cl
 algorithm's small steps on synthetic arrays. Measured on that capture (2 cores, ~7-10 s per run):
 mean IoU 0.947, min 0.916 against ground_truth/masks; the lowest mask row within 2 px of the truth's
 in 57 of 60 views. Without the bottom fill (step 4) the IoU drops to 0.926 / 0.881 and only 33 of
-60 views reach the bottom within 2 px. The same capture raised 5 cm, masked with ``--table-z 0.05``:
+60 views reach the bottom within 2 px. The same capture raised 5 cm, masked with ``--table-z-m 0.05``:
 0.947 / 0.916.
 
 ``make_masks`` writes into the dataset, so every test that masks works on its own copy: the shared
@@ -49,8 +49,8 @@ def _lowest_rows(masks: np.ndarray) -> np.ndarray:
 @pytest.fixture(scope="module")
 def parallax_result(can_capture, tmp_path_factory):
     """The capture with everything raised 5 cm (the table top at z = 0.05; ground truth kept) masked as a
-    user does it, ``real2sim mask DS --method parallax --table-z 0.05`` (about 40 s): (the folder, the exit
-    status, stdout, stderr). Raised, so that every test below also checks that --table-z reaches the warp:
+    user does it, ``real2sim mask DS --method parallax --table-z-m 0.05`` (about 40 s): (the folder, the exit
+    status, stdout, stderr). Raised, so that every test below also checks that --table-z-m reaches the warp:
     through the wrong plane the hull does not close (measured: exit status 2)."""
     import contextlib
     import io
@@ -60,7 +60,7 @@ def parallax_result(can_capture, tmp_path_factory):
     root = raised_dataset(can_capture, tmp_path_factory.mktemp("parallax") / "raised", 0.05)
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = main(["mask", str(root), "--method", "parallax", "--table-z", "0.05"])
+        code = main(["mask", str(root), "--method", "parallax", "--table-z-m", "0.05"])
     return root, code, out.getvalue(), err.getvalue()
 
 
@@ -539,8 +539,8 @@ def test_mask_doubts_measure_border_and_coverage():
 def test_parallax_masks_that_cannot_work_warn(tmp_path, capsys):
     """The issue's case end to end (about 30 s on 2 cores): 16 views at 96x72, noise-free. The masks reached the
     image border in 16 of 16 views (mean IoU 0.47 against the truth, min 0.19): one plain WARNING line says so."""
-    code, _, err = run_cli(capsys, "capture", "can", "--out", tmp_path / "ds", "--views", "16", "--width", "96",
-                           "--height", "72", "--pose-noise-mm", "0", "--pose-noise-deg", "0")
+    code, _, err = run_cli(capsys, "capture", "can", "--out", tmp_path / "ds", "--views", "16", "--width-px", "96",
+                           "--height-px", "72", "--pose-noise-mm", "0", "--pose-noise-deg", "0")
     assert code == 0, err
     code, _, err = run_cli(capsys, "mask", tmp_path / "ds", "--method", "parallax")
     assert code == 0, err

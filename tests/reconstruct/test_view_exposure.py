@@ -65,7 +65,7 @@ def test_corrected_images_divide_the_gains_out_in_linear_light():
 @pytest.fixture(scope="module")
 def jittered_can(tmp_path_factory):
     """The can, 60 noise-free views at 160x120, each with its own exposure (0.5 stops RMS) and white
-    balance (10 % RMS on red and blue), as `capture --exposure-jitter 0.5 --white-balance-jitter 0.1`."""
+    balance (10 % RMS on red and blue), as `capture --exposure-jitter-stops 0.5 --white-balance-jitter 0.1`."""
     from real2sim.capture.sim.wrist_camera import CaptureConfig, capture
     from real2sim.geometry.objects import make_textured_object
 

@@ -172,7 +172,7 @@ def build_asset(
         if solid.metadata["floater_faces_dropped"]:
             say(f"dropped {solid.metadata['floater_faces_dropped']} faces of debris apart from the object "
                 "(under 1 % of its surface)", 0, 0)
-        transform = canonical_transform(solid, up_axis=(0.0, 0.0, 1.0) if config.keep_up else None)
+        transform = canonical_transform(solid, up_axis=None if config.pca_up else (0.0, 0.0, 1.0))
         solid = solid.copy()
         solid.apply_transform(transform)
         if config.given_properties_frame != MESH_FRAME:
@@ -222,7 +222,7 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
 
         say(f"filling cavities narrower than a {config.fill_cavities_m:g} m ball for the collision fits", 0, 0)
         fitted_solid = filled_envelope(solid, config.fill_cavities_m)
-        filled = {"fitted_to": f"the solid closed by a {config.fill_cavities_m:g} m ball (--fill-cavities)",
+        filled = {"fitted_to": f"the solid closed by a {config.fill_cavities_m:g} m ball (--fill-cavities-m)",
                   "filled_volume_m3": float(fitted_solid.volume - solid.volume)}
         say(f"filled {1e6 * filled['filled_volume_m3']:.1f} cm^3 ({100 * filled['filled_volume_m3'] / solid.volume:.0f} % "
             "of the solid)", 0, 0)

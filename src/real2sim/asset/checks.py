@@ -73,8 +73,8 @@ def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str
     hint = config.contact.resolution_hint_m
     if config.contact.hydroelastic != "none" and extent > MAX_EXTENT_PER_RESOLUTION_HINT * hint:
         raise UserInputError(f"{label} is {extent:.4g} m across, over {MAX_EXTENT_PER_RESOLUTION_HINT:g} x "
-                             f"--resolution-hint {hint:g} m = {MAX_EXTENT_PER_RESOLUTION_HINT * hint:.4g} m: Drake would "
-                             f"mesh its shapes with millions of elements; use --resolution-hint "
+                             f"--resolution-hint-m {hint:g} m = {MAX_EXTENT_PER_RESOLUTION_HINT * hint:.4g} m: Drake would "
+                             f"mesh its shapes with millions of elements; use --resolution-hint-m "
                              f">= {extent / MAX_EXTENT_PER_RESOLUTION_HINT:.3g}")
     if config.fill_cavities_m is not None:
         from real2sim.geometry.envelope import check_fill_radius
@@ -84,11 +84,11 @@ def check_mesh_for_config(mesh: trimesh.Trimesh, config: AssetConfig, label: str
         height = config.support_height_m
         bottom, top = float(lo[2]), float(hi[2])
         if not np.isfinite(height):
-            raise UserInputError(f"--support-height must be a finite number of metres, got {height}")
+            raise UserInputError(f"--support-height-m must be a finite number of metres, got {height}")
         if height >= top:
-            raise UserInputError(f"--support-height {height:g} m leaves nothing of {label} above it "
+            raise UserInputError(f"--support-height-m {height:g} m leaves nothing of {label} above it "
                                  f"(the mesh spans z = {bottom:.4g} .. {top:.4g} m)")
         if support_below_mesh(bottom, top, height):
-            raise UserInputError(f"--support-height {height:g} m lies {bottom - height:.4g} m below {label} "
+            raise UserInputError(f"--support-height-m {height:g} m lies {bottom - height:.4g} m below {label} "
                                  f"(the mesh spans z = {bottom:.4g} .. {top:.4g} m): nothing to crop and no bottom to "
                                  "close there; give the table's height in the mesh frame")

@@ -13,13 +13,13 @@ from real2sim.formats.physical import PhysicalProperties
 from real2sim.formats.spec import CollisionSpec
 from real2sim.plumbing.errors import UserInputError
 
-#: Relative tolerance of ``--mass`` against a properties file's mass when the file gives no standard
+#: Relative tolerance of ``--mass-kg`` against a properties file's mass when the file gives no standard
 #: error of it (or a smaller one): the rounding of a mass typed to three or four digits.
 MASS_AGREEMENT_RTOL = 1e-3
 
 
 def mass_agreement_kg(given: PhysicalProperties) -> float:
-    """How far ``--mass`` may lie from ``given.mass_kg`` and still agree with it: the larger of 3 x the
+    """How far ``--mass-kg`` may lie from ``given.mass_kg`` and still agree with it: the larger of 3 x the
     file's standard error of the mass (when it gives one) and :data:`MASS_AGREEMENT_RTOL` of the mass."""
     return max(3.0 * (given.mass_standard_error_kg or 0.0), MASS_AGREEMENT_RTOL * given.mass_kg)
 
@@ -42,9 +42,11 @@ class AssetConfig:
     says; used by :attr:`flat_bottom`. Finite, below the mesh's top, and no further below its bottom
     than :data:`~real2sim.asset.checks.SUPPORT_BELOW_TOLERANCE` of its height. A capture stands the
     object on z = 0."""
-    keep_up: bool = False
-    """Keep the input's +z as the asset's +z (PCA then picks only x, in the horizontal plane). False:
-    the longest principal axis becomes +z, as the paper does, which tilts squat objects such as a mug."""
+    pca_up: bool = False
+    """True: the longest principal axis becomes the asset's +z, as the paper does (which tilts squat objects
+    such as a mug). False: the input's +z stays the asset's +z, and PCA picks only x, in the horizontal
+    plane; a capture's input stands on its table, and robotics meshes are z-up
+    (why: docs/design-notes/pipeline.md#keep-up)."""
     mesh_units: str = "m"
     """Units of the mesh file's coordinates: a key of :data:`~real2sim.geometry.mesh_io.MESH_UNITS_M`
     (m, cm, mm, in); everything else, :attr:`support_height_m` included, is in metres."""
@@ -97,12 +99,12 @@ class AssetConfig:
         if given is not None and abs(self.mass_kg - given.mass_kg) > mass_agreement_kg(given):
             se = given.mass_standard_error_kg
             raise UserInputError(
-                f"--mass {self.mass_kg:g} kg disagrees with the properties' mass {given.mass_kg:g} kg: they differ by "
+                f"--mass-kg {self.mass_kg:g} kg disagrees with the properties' mass {given.mass_kg:g} kg: they differ by "
                 f"{abs(self.mass_kg - given.mass_kg):.3g} kg, more than {mass_agreement_kg(given):.3g} kg (the larger of "
                 f"3 x its standard error, {'%.3g kg' % se if se is not None else 'none given'}, and "
                 f"{100 * MASS_AGREEMENT_RTOL:g} % of it); give one of them")
         if self.fill_cavities_m is not None and not (np.isfinite(self.fill_cavities_m) and self.fill_cavities_m > 0):
-            raise UserInputError(f"--fill-cavities must be a radius > 0 m, got {self.fill_cavities_m}")
+            raise UserInputError(f"--fill-cavities-m must be a radius > 0 m, got {self.fill_cavities_m}")
         names = [s.name for s in self.specs]
         if len(set(names)) != len(names):
             raise UserInputError(f"a collision SPEC is given twice: {names}")
@@ -138,7 +140,7 @@ def config_record(config: AssetConfig) -> dict:
         "collision": [spec.text for spec in config.specs],
         "flat_bottom": config.flat_bottom,
         "support_height_m": config.support_height_m,
-        "keep_up": config.keep_up,
+        "pca_up": config.pca_up,
         "mesh_units": config.mesh_units,
         "formats": list(config.formats),
         "seed": config.seed,

@@ -16,28 +16,28 @@ def add_contact_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("contact properties (Drake proximity properties of the object)")
     g.add_argument("--hydroelastic", choices=["compliant", "rigid", "none"], default="compliant",
                    help="hydroelastic type of the collision shapes (default: compliant, as the paper)")
-    g.add_argument("--hydroelastic-modulus", type=number(1.0e3, 1.0e12), default=1.0e7, metavar="PA",
+    g.add_argument("--hydroelastic-modulus-pa", type=number(1.0e3, 1.0e12), default=1.0e7, metavar="PA",
                    help="hydroelastic modulus, Pa (default 1e7)")
-    g.add_argument("--point-stiffness", type=positive(1.0e9), default=1.0e4, metavar="N_PER_M",
+    g.add_argument("--point-stiffness-n-per-m", type=positive(1.0e9), default=1.0e4, metavar="N_PER_M",
                    help="point-contact stiffness, N/m (default 1e4), of every collision piece (see "
-                        "--split-point-stiffness)")
-    g.add_argument("--split-point-stiffness", action=argparse.BooleanOptionalAction, default=True,
-                   help="make --point-stiffness the body's: each piece gets it divided by the mean number of "
+                        "--point-stiffness-per-piece)")
+    g.add_argument("--point-stiffness-per-piece", action=argparse.BooleanOptionalAction, default=True,
+                   help="make --point-stiffness-n-per-m the body's: each piece gets it divided by the mean number of "
                         "pieces that touch a plane laid on the hull, so a union of primitives rests as stiffly "
-                        "as one piece (default on; --no-split-point-stiffness gives every piece all of it: "
+                        "as one piece (default on; --no-point-stiffness-per-piece gives every piece all of it: "
                         "docs/design-notes/asset.md#point-stiffness-per-piece)")
-    g.add_argument("--dissipation", type=positive(100.0), default=1.0, metavar="S_PER_M",
+    g.add_argument("--dissipation-s-per-m", type=positive(100.0), default=1.0, metavar="S_PER_M",
                    help="Hunt-Crossley dissipation, s/m (default 1.0)")
-    g.add_argument("--point-dissipation", type=number(0.0, 100.0), default=20.0, metavar="S_PER_M",
+    g.add_argument("--point-dissipation-s-per-m", type=number(0.0, 100.0), default=20.0, metavar="S_PER_M",
                    help="Hunt-Crossley dissipation of each representation's model_point.urdf, the model for "
                         "Drake's point contact, s/m (default 20; 0 writes none, and point contact then uses "
-                        "model.urdf with --dissipation)")
+                        "model.urdf with --dissipation-s-per-m)")
     g.add_argument("--mu-static", type=positive(10.0), default=0.5, help="static friction coefficient (default 0.5)")
     g.add_argument("--mu-dynamic", type=positive(10.0), default=0.5,
                    help="dynamic friction coefficient, at most --mu-static (default 0.5)")
-    g.add_argument("--resolution-hint", type=number(1.0e-4, 1.0), default=0.01, metavar="M",
+    g.add_argument("--resolution-hint-m", type=number(1.0e-4, 1.0), default=0.01, metavar="M",
                    help="edge length Drake meshes curved compliant primitives with, m (default 0.01)")
-    g.add_argument("--cylinder-flat-depth", type=positive(0.01), default=None, metavar="M",
+    g.add_argument("--cylinder-flat-depth-m", type=positive(0.01), default=None, metavar="M",
                    help="give each compliant cylinder its own, finer resolution hint so that the flats of "
                         "Drake's polygon around its circle lie at most M inside it (default: off). At the "
                         "default hint a 34 mm cylinder is a 22-gon with flats 0.35 mm deep, and a rolling "
@@ -57,14 +57,14 @@ def add_mesh_units_argument(p: argparse.ArgumentParser) -> None:
 
 def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX) -> None:
     """Flags shared by `asset` and verbs that build assets (demo, run); ``seed_max``: the largest --seed."""
-    from real2sim.formats.physical import MAX_MASS_KG  # one mass range for --mass and properties files
+    from real2sim.formats.physical import MAX_MASS_KG  # one mass range for --mass-kg and properties files
 
-    p.add_argument("--mass", type=positive(MAX_MASS_KG), metavar="KG",
+    p.add_argument("--mass-kg", type=positive(MAX_MASS_KG), metavar="KG",
                    help="measured mass of the object, kg (required unless --properties gives it)")
     p.add_argument("--properties", type=Path, metavar="FILE",
                    help="mass, centre of mass and inertia measured rather than assumed: the props.json of "
                    "`real2sim identify` (object mesh frame) or a physical_properties.json (asset frame); "
-                   "default: uniform density for --mass")
+                   "default: uniform density for --mass-kg")
     p.add_argument("--collision", action="append", metavar="SPEC",
                    help="collision representation, repeatable: spheres:128, boxes:100, rotated_boxes:50, "
                    "cylinders:10, ellipsoids:64, capsules:16, superquadrics:2 (written as convex mesh pieces), "
@@ -72,12 +72,12 @@ def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX)
                    f"baselines coacd, vhacd, mesh (default: {' '.join(DEFAULT_SPECS)})")
     p.add_argument("--flat-bottom", action="store_true",
                    help="crop below the support plane and close the bottom flat (paper IV-C1)")
-    p.add_argument("--support-height", type=number(-100.0, 100.0), default=0.0, metavar="M",
+    p.add_argument("--support-height-m", type=number(-100.0, 100.0), default=0.0, metavar="M",
                    help="support (table) height in the input mesh frame, +z up, m (default 0); it must cut the mesh "
                    "or lie just below it")
-    p.add_argument("--keep-up", action="store_true",
-                   help="keep the input's +z as the asset's up axis instead of the longest principal axis "
-                   "(for squat objects such as mugs)")
+    p.add_argument("--pca-up", action="store_true",
+                   help="make the longest principal axis the asset's +z, as the paper does (default: the input's +z "
+                   "stays up, so an object stands in the asset as it stood in the mesh or on the table)")
     p.add_argument("--format", action="append", choices=["urdf", "sdf", "mjcf", "usd"], dest="formats",
                    help="model formats to write (repeatable; model.urdf for Drake and model_portable.urdf for "
                    "PyBullet and other URDF readers always): sdf writes model.sdf, mjcf model.xml + scene.xml "
@@ -95,7 +95,7 @@ def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX)
                    help="weight 1 + GAIN for the signed-distance samples near the convex hull (the surfaces the "
                    "object stands, rolls and tips on); 0 is the paper's plain fit (default: 5 for cylinders and "
                    "ellipsoids alone, 0 for the other families: docs/design-notes/collision.md#contact-aware-fitting)")
-    g.add_argument("--fill-cavities", type=number(1e-4, 10.0), default=None, metavar="M",
+    g.add_argument("--fill-cavities-m", type=number(1e-4, 10.0), default=None, metavar="M",
                    help="fit every collision SPEC (CoACD's included) to the solid with its cavities and holes "
                    "narrower than a ball of radius M metres filled: a cup's inside, a handle's hole. For "
                    "pushing, tilting and placing, where nothing enters them; not for grasping by a rim. Mass "
@@ -118,7 +118,7 @@ def register(sub) -> None:
         "optional flat bottom, mass properties for the given mass (uniform density), and one folder per "
         "collision representation with model.urdf (Drake loads it as it is), collision.json and fit_report.json.",
         epilog="example: real2sim objects export bottle bottle.obj && "
-        "real2sim asset bottle.obj --mass 0.6 --out bottle_asset --collision coacd --collision cylinders:10",
+        "real2sim asset bottle.obj --mass-kg 0.6 --out bottle_asset --collision coacd --collision cylinders:10",
     )
     p.add_argument("mesh", type=Path, help="object mesh (metres, or --mesh-units)")
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR", help="output asset folder (must not exist)")
@@ -151,15 +151,15 @@ def config_from_args(args: argparse.Namespace):
             raise UserInputError(f"--device {args.device} asked for, but torch sees no CUDA GPU here; use --device cpu")
     contact = ContactProperties(
         hydroelastic=args.hydroelastic,
-        hydroelastic_modulus_pa=args.hydroelastic_modulus,
-        point_contact_stiffness_n_per_m=args.point_stiffness,
-        point_stiffness_per_piece=args.split_point_stiffness,
-        hunt_crossley_dissipation_s_per_m=args.dissipation,
-        point_dissipation_s_per_m=args.point_dissipation or None,
+        hydroelastic_modulus_pa=args.hydroelastic_modulus_pa,
+        point_contact_stiffness_n_per_m=args.point_stiffness_n_per_m,
+        point_stiffness_per_piece=args.point_stiffness_per_piece,
+        hunt_crossley_dissipation_s_per_m=args.dissipation_s_per_m,
+        point_dissipation_s_per_m=args.point_dissipation_s_per_m or None,
         mu_static=args.mu_static,
         mu_dynamic=args.mu_dynamic,
-        resolution_hint_m=args.resolution_hint,
-        cylinder_flat_depth_m=args.cylinder_flat_depth,
+        resolution_hint_m=args.resolution_hint_m,
+        cylinder_flat_depth_m=args.cylinder_flat_depth_m,
     )
     fit_config = coacd_config = vhacd_config = None
     fit_overrides = {}
@@ -198,15 +198,15 @@ def config_from_args(args: argparse.Namespace):
 
         given, frame = read_given_properties(args.properties)
         source = str(args.properties)
-    if args.mass is None and given is None:
-        raise UserInputError("--mass KG is required (or --properties FILE with the measured mass properties)")
+    if args.mass_kg is None and given is None:
+        raise UserInputError("--mass-kg KG is required (or --properties FILE with the measured mass properties)")
     return AssetConfig(
-        mass_kg=args.mass if args.mass is not None else given.mass_kg,
+        mass_kg=args.mass_kg if args.mass_kg is not None else given.mass_kg,
         given_properties=given, given_properties_frame=frame, given_properties_source=source,
         specs=specs,
         flat_bottom=args.flat_bottom,
-        support_height_m=args.support_height,
-        keep_up=args.keep_up,
+        support_height_m=args.support_height_m,
+        pca_up=args.pca_up,
         mesh_units=getattr(args, "mesh_units", "m"),
         formats=formats,
         seed=args.seed,
@@ -216,7 +216,7 @@ def config_from_args(args: argparse.Namespace):
         coacd_config=coacd_config,
         vhacd_config=vhacd_config,
         sdf_cache_dir=args.sdf_cache,
-        fill_cavities_m=getattr(args, "fill_cavities", None),
+        fill_cavities_m=getattr(args, "fill_cavities_m", None),
     )
 
 

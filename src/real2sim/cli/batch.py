@@ -17,7 +17,7 @@ WORKERS = integer(1, 1024)
 TIMEOUT_S = positive(3600.0)
 MASS_KG = positive(1000.0)
 #: run's flags that batch sets per object itself, or does not take
-_NOT_FORWARDED = {"dataset", "out", "overwrite", "mass", "help", "frames", "board_square_mm", "board"}
+_NOT_FORWARDED = {"dataset", "out", "overwrite", "mass_kg", "help", "frames", "board_square_mm", "board"}
 
 
 def _run_parser() -> argparse.ArgumentParser:
@@ -54,16 +54,16 @@ def register(sub) -> None:
     masses.add_argument("--mass-from", metavar="NAME.json",
                         help="a JSON file inside each dataset with its mass_kg; a dataset without it is reported "
                         "as failed")
-    masses.add_argument("--mass", type=MASS_KG, metavar="KG", help="one mass for every object, kg")
+    masses.add_argument("--mass-kg", type=MASS_KG, metavar="KG", help="one mass for every object, kg")
     p.add_argument("--executor", choices=["local", "ray"], default="local",
                    help="local: a process pool on this machine (default); ray: one task per object on a Ray cluster")
-    p.add_argument("--address", default=None, metavar="ADDR",
+    p.add_argument("--ray-address", default=None, metavar="ADDR",
                    help="--executor ray: the cluster (host:port, ray://host:port, or auto); default: a private "
                    "Ray on this machine")
     p.add_argument("--workers", type=WORKERS, default=None, metavar="N",
                    help="objects at once (default: the CPUs, at most the objects)")
     p.add_argument("--ray-timeout-s", type=TIMEOUT_S, default=30.0, metavar="S",
-                   help="how long to wait for the Ray cluster at --address, s (default 30)")
+                   help="how long to wait for the Ray cluster at --ray-address, s (default 30)")
     g = p.add_argument_group("`real2sim run` options, for every object")
     for action in _run_parser()._actions:
         if action.dest not in _NOT_FORWARDED:
@@ -117,8 +117,8 @@ def read_masses(path: Path) -> dict[str, float]:
 
 def _mass_of(name: str, dataset: Path, args: argparse.Namespace, table: dict[str, float]) -> tuple[float | None, str]:
     """The object's mass, or None and why not (that object fails; the others go on)."""
-    if args.mass is not None:
-        return args.mass, ""
+    if args.mass_kg is not None:
+        return args.mass_kg, ""
     if args.masses is not None:
         if name in table:
             return table[name], ""
@@ -143,7 +143,7 @@ def _mass_of(name: str, dataset: Path, args: argparse.Namespace, table: dict[str
         if not (math.isfinite(mass) and 0 < mass <= 1000.0):
             return None, f"no mass: mass_kg in {args.mass_from} must be > 0 and <= 1000 (got {mass:g})"
         return mass, ""
-    return None, "no mass: give --mass, --masses or --mass-from"
+    return None, "no mass: give --mass-kg, --masses or --mass-from"
 
 
 def check_first(args: argparse.Namespace) -> tuple[list[str], dict[str, float], Path]:
@@ -152,8 +152,8 @@ def check_first(args: argparse.Namespace) -> tuple[list[str], dict[str, float], 
     from real2sim.plumbing.errors import UserInputError
     from real2sim.pipeline.catalogue import check_catalogue, check_names
 
-    if args.address is not None and args.executor != "ray":
-        raise UserInputError("--address is for --executor ray")
+    if args.ray_address is not None and args.executor != "ray":
+        raise UserInputError("--ray-address is for --executor ray")
     if args.mass_from is not None and (Path(args.mass_from).name != args.mass_from or not args.mass_from):
         raise UserInputError(f"--mass-from names a file inside each dataset, not a path (got {args.mass_from!r})")
     names = check_names(args.datasets)
@@ -172,8 +172,8 @@ def plan(args: argparse.Namespace, first: tuple[list[str], dict[str, float], Pat
     from real2sim.pipeline.catalogue import dataset_folder
 
     names, table, out = first or check_first(args)
-    batch = BatchConfig(executor=args.executor, address=args.address, workers=args.workers,
-                        timeout_s=args.ray_timeout_s)
+    batch = BatchConfig(executor=args.executor, ray_address=args.ray_address, workers=args.workers,
+                        ray_timeout_s=args.ray_timeout_s)
     workers = max(1, min(args.workers or cpu_count(), len(names)))
     # Ray gives a task with one CPU one thread (OMP_NUM_THREADS); numpy's BLAS is held to it as well
     threads = max(1, cpu_count() // workers) if args.executor == "local" else 1

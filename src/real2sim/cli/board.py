@@ -8,7 +8,7 @@ from pathlib import Path
 from real2sim.cli import options
 from real2sim.cli.options import number
 
-#: --square-mm: the printed square side, mm (the page's margins bound it too).
+#: --board-square-mm: the printed square side, mm (the page's margins bound it too).
 SQUARE_MM = number(2.0, 200.0)
 
 
@@ -38,7 +38,7 @@ def register(sub) -> None:
     p.add_argument("--paper", choices=["a4", "letter"], default="a4", help="paper size, landscape (default a4)")
     p.add_argument("--squares", type=squares, default=None, metavar="COLSxROWS",
                    help="chessboard squares (default 7x5); the longer side is the board's x axis")
-    p.add_argument("--square-mm", type=SQUARE_MM, default=None, metavar="MM",
+    p.add_argument("--board-square-mm", type=SQUARE_MM, default=None, metavar="MM",
                    help="printed square side, mm (default 32 for 7x5; other --squares: the largest whole mm that "
                    "fits the paper); markers are 3/4 of it")
     p.add_argument("--overwrite", action="store_true", help="replace the PDF and PNG if they exist")
@@ -64,7 +64,7 @@ def run_board(args: argparse.Namespace) -> int:
             raise UserInputError(f"{path} exists (use --overwrite to replace it)")
         check_replaceable(path, what="board")
     cols, rows = args.squares or (DEFAULT_BOARD.squares_x, DEFAULT_BOARD.squares_y)
-    spec = board_spec_for_paper(args.paper, cols, rows, None if args.square_mm is None else args.square_mm / 1000.0)
+    spec = board_spec_for_paper(args.paper, cols, rows, None if args.board_square_mm is None else args.board_square_mm / 1000.0)
     made = [folder for folder in (pdf.parent, *pdf.parent.parents) if not folder.exists()]
     pdf.parent.mkdir(parents=True, exist_ok=True)
     try:

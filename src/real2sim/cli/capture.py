@@ -48,8 +48,8 @@ def register(sub) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace DATASET if it exists")
     p.add_argument("--views", type=integer(1, 2000), default=None,
                    help="number of images (default 200; --handheld 60; --video: frames, e.g. 600 = 20 s at 30 fps)")
-    p.add_argument("--width", type=IMAGE_PX, default=640, help="image width, px (default 640)")
-    p.add_argument("--height", type=IMAGE_PX, default=480, help="image height, px (default 480)")
+    p.add_argument("--width-px", type=IMAGE_PX, default=640, help="image width, px (default 640)")
+    p.add_argument("--height-px", type=IMAGE_PX, default=480, help="image height, px (default 480)")
     p.add_argument("--pose-noise-mm", type=NOISE_MM, default=5.0, metavar="MM",
                    help="RMS camera-position error of the robot poses, mm (default 5)")
     p.add_argument("--pose-noise-deg", type=NOISE_DEG, default=1.0, metavar="DEG",
@@ -105,23 +105,23 @@ def register(sub) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="replace masks_<method>/ even where you edited masks `mask` wrote earlier; a folder `mask` "
                    "did not make, and files in it that `mask` did not write, are never replaced")
-    p.add_argument("--table-z", type=TABLE_Z_M, default=0.0, metavar="M",
+    p.add_argument("--table-z-m", type=TABLE_Z_M, default=0.0, metavar="M",
                    help="--method parallax: height of the table top in the dataset's frame, m (default 0; a COLMAP "
                    "model's table is fitted to its sparse points)")
-    p.add_argument("--weights", type=Path, default=None, metavar="PATH",
+    p.add_argument("--mask-weights", type=Path, default=None, metavar="PATH",
                    help="Mask R-CNN (torchvision ResNet-50 FPN) weights file, for --method maskrcnn")
-    p.add_argument("--threshold", type=nonnegative(255.0), default=12.0,
+    p.add_argument("--background-threshold", type=nonnegative(255.0), default=12.0,
                    help="background difference threshold, 0-255 (default 12)")
     p.add_argument("--device", type=device, default="cpu", help="torch device for Mask R-CNN: cpu, cuda, cuda:N (default cpu)")
-    p.add_argument("--maskrcnn-min-size", type=integer(32, 4096), default=800, metavar="PX",
+    p.add_argument("--maskrcnn-min-size-px", type=integer(32, 4096), default=800, metavar="PX",
                    help="Mask R-CNN resizes the shorter image side to this, px (default 800, as trained; "
                    "smaller is faster on a CPU)")
-    p.add_argument("--maskrcnn-max-size", type=integer(32, 8192), default=1333, metavar="PX",
+    p.add_argument("--maskrcnn-max-size-px", type=integer(32, 8192), default=1333, metavar="PX",
                    help="upper bound on the longer side after resizing, px (default 1333)")
     p.add_argument("--maskrcnn-max-instances", type=integer(1, 1000), default=100, metavar="N",
                    help="detections kept per image before choosing the object (default 100)")
     options.finish(p)
-    options.declare_paths(p, in_place=("dataset",), reads=("weights",))
+    options.declare_paths(p, in_place=("dataset",), reads=("mask_weights",))
     p.set_defaults(func=run_mask)
 
 
@@ -145,7 +145,7 @@ def _add_hard_rig_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-table", action="store_true",
                    help="no table: the object on a thin grey post (not in the masks) against a dark background, its "
                    "lowest point at z = 0; transforms.json says \"table_plane\": false")
-    g.add_argument("--exposure-jitter", type=EXPOSURE_STOPS, default=0.0, metavar="STOPS",
+    g.add_argument("--exposure-jitter-stops", type=EXPOSURE_STOPS, default=0.0, metavar="STOPS",
                    help="RMS per-view exposure change, stops (factors of 2 in linear light; default 0)")
     g.add_argument("--white-balance-jitter", type=WHITE_BALANCE, default=0.0, metavar="FRACTION",
                    help="RMS per-view change of the red and blue gains against green, as a fraction "
@@ -163,7 +163,7 @@ def _add_handheld_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--handheld", action="store_true",
                    help="an orbit at varying height and distance, camera rolled a few degrees, some views close enough "
                    "to cut the object, a phone lens (--fov-deg, default 65), motion blur, JPEG (default 60 views)")
-    g.add_argument("--board", action="store_true",
+    g.add_argument("--with-board", action="store_true",
                    help="with --handheld: the printed board of `real2sim board` (default 7x5, 32 mm) lies flat on the "
                    "table under the object; its frame is the world frame")
     g.add_argument("--video", action="store_true",
@@ -174,7 +174,7 @@ def _add_handheld_arguments(p: argparse.ArgumentParser) -> None:
                    "-0.1 is a visible barrel), stated in ground_truth/")
     g.add_argument("--video-rotation-deg", choices=["0", "90", "180", "270"], default="0",
                    help="with --video: store the frames turned, with rotation metadata that turns them back by this "
-                   "much counter-clockwise, as phones do (270: held upright); --width x --height is the upright picture")
+                   "much counter-clockwise, as phones do (270: held upright); --width-px x --height-px is the upright picture")
 
 
 #: --fps of a handheld video; --distortion-k1 of its lens.
@@ -225,9 +225,9 @@ def run_capture(args: argparse.Namespace) -> int:
                              "with a table, use 0 or more")
     if args.handheld:
         return _run_handheld(args)
-    for flag in ("board", "video"):
+    for flag in ("with_board", "video"):
         if getattr(args, flag):
-            raise UserInputError(f"--{flag} needs --handheld")
+            raise UserInputError(f"--{flag.replace('_', '-')} needs --handheld")
     if args.video_rotation_deg != "0":
         raise UserInputError("--video-rotation-deg needs --handheld --video")
     if args.distortion_k1 != 0.0:
@@ -235,11 +235,11 @@ def run_capture(args: argparse.Namespace) -> int:
     if args.jpeg_quality is not None and not args.jpeg:
         raise UserInputError("--jpeg-quality needs --jpeg")
     args.views = 200 if args.views is None else args.views
-    cfg = CaptureConfig(views=args.views, width=args.width, height=args.height, pose_noise_mm=args.pose_noise_mm,
+    cfg = CaptureConfig(views=args.views, width=args.width_px, height=args.height_px, pose_noise_mm=args.pose_noise_mm,
                         pose_noise_deg=args.pose_noise_deg, seed=args.seed, with_background=args.with_background,
                         ring_elevation_deg=args.ring_elevation_deg, focal_px=args.focal_px, fov_deg=args.fov_deg,
                         cut_off_fraction=args.cut_off_fraction, no_table=args.no_table,
-                        exposure_jitter_stops=args.exposure_jitter, white_balance_jitter=args.white_balance_jitter,
+                        exposure_jitter_stops=args.exposure_jitter_stops, white_balance_jitter=args.white_balance_jitter,
                         jpeg_quality=(args.jpeg_quality or DEFAULT_JPEG_QUALITY) if args.jpeg else None)
     cfg.validate()
     mesh = _checked_input(args)
@@ -287,15 +287,15 @@ def run_mask(args: argparse.Namespace) -> int:
     from real2sim.plumbing.outputs import output_lock
     from real2sim.capture.masks.stage import make_masks
 
-    if args.weights is not None and args.method != "maskrcnn":
+    if args.mask_weights is not None and args.method != "maskrcnn":
         from real2sim.plumbing.errors import UserInputError
 
-        raise UserInputError(f"--weights is for --method maskrcnn, not --method {args.method}")
-    cfg = MaskConfig(threshold=args.threshold, weights=args.weights, device=args.device,
-                     maskrcnn_min_size_px=args.maskrcnn_min_size, maskrcnn_max_size_px=args.maskrcnn_max_size,
+        raise UserInputError(f"--mask-weights is for --method maskrcnn, not --method {args.method}")
+    cfg = MaskConfig(background_threshold=args.background_threshold, mask_weights=args.mask_weights, device=args.device,
+                     maskrcnn_min_size_px=args.maskrcnn_min_size_px, maskrcnn_max_size_px=args.maskrcnn_max_size_px,
                      maskrcnn_max_instances=args.maskrcnn_max_instances)
     with output_lock(args.dataset, inside=True), progress_display() as progress:  # masks are written into the dataset
-        result = make_masks(args.dataset, args.method, cfg, table_z_m=args.table_z, progress=progress,
+        result = make_masks(args.dataset, args.method, cfg, table_z_m=args.table_z_m, progress=progress,
                             may_replace="edited" if args.overwrite else "unchanged")
     line = f"masks: {result.num_frames} frames in {result.mask_dir}/, object covers {100 * result.mean_object_fraction:.1f}% of pixels"
     if result.mean_iou is not None:
@@ -306,7 +306,7 @@ def run_mask(args: argparse.Namespace) -> int:
 
 #: Flags of the robot capture that a handheld one has no use for, with their defaults.
 _NOT_HANDHELD = {"pose_noise_mm": 5.0, "pose_noise_deg": 1.0, "with_background": False, "ring_elevation_deg": None,
-                 "focal_px": None, "cut_off_fraction": 0.0, "no_table": False, "exposure_jitter": 0.0,
+                 "focal_px": None, "cut_off_fraction": 0.0, "no_table": False, "exposure_jitter_stops": 0.0,
                  "white_balance_jitter": 0.0}
 
 
@@ -319,9 +319,9 @@ def _run_handheld(args: argparse.Namespace) -> int:
     for name, default in _NOT_HANDHELD.items():
         if getattr(args, name) != default:
             raise UserInputError(f"--{name.replace('_', '-')} is not a handheld capture's setting (drop it or --handheld)")
-    cfg = HandheldConfig(views=60 if args.views is None else args.views, width=args.width, height=args.height,
+    cfg = HandheldConfig(views=60 if args.views is None else args.views, width=args.width_px, height=args.height_px,
                          fov_deg=65.0 if args.fov_deg is None else args.fov_deg, seed=args.seed,
-                         board=DEFAULT_BOARD if args.board else None, video=args.video,
+                         board=DEFAULT_BOARD if args.with_board else None, video=args.video,
                          fps=DEFAULT_FPS if args.fps is None else args.fps,
                          video_rotation_deg=int(args.video_rotation_deg), distortion_k1=args.distortion_k1,
                          jpeg_quality=args.jpeg_quality or DEFAULT_JPEG_QUALITY)

@@ -22,17 +22,17 @@ def register(sub) -> None:
         "(cached per robot and grasp). The log is what a torque-sensing arm records at 1 kHz: quantised encoder "
         "positions, velocities from them, and motor torques with noise and joint friction. LOG/truth.json holds the "
         "payload's true mass properties. Real robots write the same layout (docs/identify.md).",
-        epilog="example: real2sim excite can --mass 0.4 --extra-mass 0.15 --extra-mass-at 0.02 0 0.03 --out can_log",
+        epilog="example: real2sim excite can --mass-kg 0.4 --extra-mass-kg 0.15 --extra-mass-at-m 0.02 0 0.03 --out can_log",
     )
     p.add_argument("object", metavar="OBJECT|MESH", help="a bundled object (bottle, can, mug) or a closed mesh file")
-    p.add_argument("--mass", type=MASS_KG, required=True, metavar="KG", help="the object's body at uniform density, kg")
-    p.add_argument("--extra-mass", type=nonnegative(1000.0), default=0.0, metavar="KG",
-                   help="a point mass inside the object, kg (the payload weighs --mass + --extra-mass)")
-    p.add_argument("--extra-mass-at", type=POSITION_M, nargs=3, default=None, metavar=("X", "Y", "Z"),
+    p.add_argument("--mass-kg", type=MASS_KG, required=True, metavar="KG", help="the object's body at uniform density, kg")
+    p.add_argument("--extra-mass-kg", type=nonnegative(1000.0), default=0.0, metavar="KG",
+                   help="a point mass inside the object, kg (the payload weighs --mass-kg + --extra-mass-kg)")
+    p.add_argument("--extra-mass-at-m", type=POSITION_M, nargs=3, default=None, metavar=("X", "Y", "Z"),
                    help="where the point mass is, metres, in the mesh's own frame")
-    p.add_argument("--torque-noise", type=nonnegative(10.0), default=0.05, metavar="NM",
+    p.add_argument("--torque-noise-n-m", type=nonnegative(10.0), default=0.05, metavar="NM",
                    help="RMS joint torque noise, N m (default 0.05)")
-    p.add_argument("--duration", type=number(8.0, 3600.0), default=None, metavar="S",
+    p.add_argument("--duration-s", type=number(8.0, 3600.0), default=None, metavar="S",
                    help="how long the arm moves, seconds (default 362, whole 6 s periods plus 2 s of rise and fall): "
                    "the rotational inertia's error falls with one over its square root")
     p.add_argument("--robot", type=Path, default=None, metavar="URDF",
@@ -62,12 +62,12 @@ def run(args: argparse.Namespace) -> int:
 
         mesh = load_mesh(args.object, args.mesh_units)
         check_object_size(mesh, args.object, args.mesh_units)
-    if args.extra_mass_at is not None and args.extra_mass == 0:
-        raise UserInputError("--extra-mass-at needs --extra-mass KG")
-    config = ExciteConfig(mass_kg=args.mass, extra_mass_kg=args.extra_mass,
-                          extra_at_m=tuple(args.extra_mass_at) if args.extra_mass_at else None,
-                          torque_noise_n_m=args.torque_noise, seed=args.seed, robot_urdf=args.robot,
-                          periods=periods_for(args.duration if args.duration is not None else DEFAULT_DURATION_S))
+    if args.extra_mass_at_m is not None and args.extra_mass_kg == 0:
+        raise UserInputError("--extra-mass-at-m needs --extra-mass-kg KG")
+    config = ExciteConfig(mass_kg=args.mass_kg, extra_mass_kg=args.extra_mass_kg,
+                          extra_mass_at_m=tuple(args.extra_mass_at_m) if args.extra_mass_at_m else None,
+                          torque_noise_n_m=args.torque_noise_n_m, seed=args.seed, robot_urdf=args.robot,
+                          periods=periods_for(args.duration_s if args.duration_s is not None else DEFAULT_DURATION_S))
     with progress_display() as progress:
         truth = run_excite(mesh, config, Path(args.out), overwrite=args.overwrite, progress=progress,
                            inputs=() if args.object in OBJECTS else (Path(args.object),))

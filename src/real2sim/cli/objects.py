@@ -56,5 +56,5 @@ def run(args: argparse.Namespace) -> int:
         write_bytes_atomic(target, files[target.name])
     mass = OBJECTS[args.name].mass_kg
     print(f"wrote {path} and {', '.join(t.name for t in targets[1:])} "
-          f"({mass} kg suggested: real2sim asset {path} --mass {mass} ...)")
+          f"({mass} kg suggested: real2sim asset {path} --mass-kg {mass} ...)")
     return 0

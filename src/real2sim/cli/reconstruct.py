@@ -48,7 +48,7 @@ def register(sub) -> None:
     p.add_argument("--max-image-px", type=IMAGE_PX, default=640,
                    help="work on images reduced to this many px on their longer side (default 640; larger "
                         "photos cost memory and time the field's grid cannot use)")
-    p.add_argument("--table-z", type=TABLE_Z_M, default=0.0, metavar="M", help=TABLE_Z_HELP)
+    p.add_argument("--table-z-m", type=TABLE_Z_M, default=0.0, metavar="M", help=TABLE_Z_HELP)
     add_field_arguments(p)
     p.add_argument("--from-mesh", type=existing_file, default=None, metavar="MESH",
                    help="import this mesh exported by nerfstudio instead of reconstructing")
@@ -107,7 +107,7 @@ def reconstruct_config(args: argparse.Namespace, field_voxels: int | None):
                     colour_correction=getattr(args, "field_colours", True))
     return ReconstructConfig(backend=args.backend, extraction=args.extraction, surface_level=args.surface_level,
                              field=field, texture_px=args.texture_px, max_image_side_px=args.max_image_px,
-                             table_z_m=args.table_z, mask_edges=getattr(args, "mask_edges", "auto"),
+                             table_z_m=args.table_z_m, mask_edges=getattr(args, "mask_edges", "auto"),
                              silhouette_poses=getattr(args, "silhouette_poses", True))
 
 
@@ -134,7 +134,7 @@ def _reconstruct(args: argparse.Namespace, out: Path) -> int:
     with recorded_warnings() as raised:
         if args.from_mesh is not None:
             result = import_external(args.dataset, args.from_mesh, args.dataparser_transforms,
-                                     config=ReconstructConfig(table_z_m=args.table_z))
+                                     config=ReconstructConfig(table_z_m=args.table_z_m))
         else:
             config = reconstruct_config(args, args.voxels)
             config.validate()

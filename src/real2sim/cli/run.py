@@ -17,9 +17,8 @@ RUNS = integer(1, 1000)
 DURATION_SCALE = positive(100.0)
 
 # run always closes the bottom at the support (the table plane, or the object's lowest seen points
-# without one: real2sim.pipeline.support) and keeps the table's normal
-# as the asset's +z (unless --pca-up), so these `asset` flags are hidden (and ignored).
-_FORCED_ASSET_FLAGS = ("flat_bottom", "support_height", "keep_up")
+# without one: real2sim.pipeline.support), so these `asset` flags are hidden (and ignored).
+_FORCED_ASSET_FLAGS = ("flat_bottom", "support_height_m")
 
 
 #: run's evaluation options (dest by flag): refused without --evaluate rather than silently unused.
@@ -45,7 +44,7 @@ def register(sub) -> None:
         "(a new --collision fits only that one), and resumes an interrupted run. A rerun replaces only what run "
         "wrote: your own files in ASSETDIR are kept, and an evaluation of an earlier asset is kept, marked stale.",
         epilog="example: real2sim capture can.obj --out can_ds && "
-        "real2sim run can_ds --mass 0.35 --out can_asset --collision cylinders:10 --backend hull",
+        "real2sim run can_ds --mass-kg 0.35 --out can_asset --collision cylinders:10 --backend hull",
     )
     p.add_argument("dataset", type=Path, metavar="DATASET|PHOTOS_DIR|VIDEO",
                    help="dataset folder (transforms.json, images/, masks/), or a folder of phone photos, or a video "
@@ -62,7 +61,7 @@ def register(sub) -> None:
                    "(images/ + sparse/0, no transforms.json) or an ns-process-data folder (transforms.json with "
                    "applied_transform, sparse_pc.ply): the object's height above the table, metres; sets the "
                    "scale (the table plane is found in the sparse points)")
-    p.add_argument("--scale", type=positive(1e6), default=None, metavar="S",
+    p.add_argument("--scale", type=positive(1e6), default=None, metavar="M_PER_UNIT",
                    help="COLMAP or ns-process-data dataset: metres per model unit, instead of --object-height-m")
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR",
                    help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
@@ -82,7 +81,7 @@ def register(sub) -> None:
                    "the masks the frames name, all frames must have one")
     p.add_argument("--mask-weights", type=existing_file, default=None, metavar="PATH",
                    help="local Mask R-CNN weights file for --mask maskrcnn")
-    p.add_argument("--mask-threshold", type=nonnegative(255.0), default=12.0,
+    p.add_argument("--background-threshold", type=nonnegative(255.0), default=12.0,
                    help="--mask background: difference threshold, 0-255 (default 12)")
     g = p.add_argument_group("reconstruction")
     g.add_argument("--backend", choices=["field", "hull"], default="field",
@@ -93,15 +92,12 @@ def register(sub) -> None:
     g.add_argument("--texture-px", type=TEXTURE_PX, default=1024, help="texture image size, px (default 1024)")
     g.add_argument("--max-image-px", type=IMAGE_PX, default=640,
                    help="reconstruct from images reduced to this many px on their longer side (default 640)")
-    g.add_argument("--table-z", type=TABLE_Z_M, default=0.0, metavar="M",
+    g.add_argument("--table-z-m", type=TABLE_Z_M, default=0.0, metavar="M",
                    help=TABLE_Z_HELP + "; the flat bottom is closed there")
     add_field_arguments(g)
     g.add_argument("--max-faces", type=integer(100, 5_000_000), default=None, help="simplify the mesh to this many faces "
                    "(default 40000)")
     add_asset_arguments(p, seed_max=COLMAP_SEED_MAX)  # the seed reaches COLMAP with --refine-poses
-    p.add_argument("--pca-up", action="store_true",
-                   help="make the longest principal axis the asset's +z, as the paper does, instead of the table's "
-                   "normal (default: the object stands in the asset as it stood on the table)")
     for action in p._actions:  # argparse has no public way to hide an inherited flag
         if action.dest in _FORCED_ASSET_FLAGS:
             action.help = argparse.SUPPRESS
@@ -141,10 +137,10 @@ def config_from_args(args: argparse.Namespace):
         check_dataset(args.dataset, masks_needed=args.mask is None, scale_given=scale_given)
     elif args.mask is None:
         args.mask = "parallax"  # the board's texture is what parallax masks need
-    if scale_given and args.table_z != 0.0:
-        raise UserInputError("--table-z is for a dataset in metres; a COLMAP capture's table is found in its "
+    if scale_given and args.table_z_m != 0.0:
+        raise UserInputError("--table-z-m is for a dataset in metres; a COLMAP capture's table is found in its "
                              "sparse points and put at z = 0")
-    args.flat_bottom, args.support_height = True, 0.0
+    args.flat_bottom, args.support_height_m = True, 0.0
     asset = asset_config(args)
     resolve_device(args.device)
     # --voxels is the field's grid for the field, the carving grid for the hull
@@ -168,9 +164,9 @@ def config_from_args(args: argparse.Namespace):
 
         if args.mask == "maskrcnn" and (args.mask_weights is None or not args.mask_weights.is_file()):
             raise UserInputError("--mask maskrcnn needs --mask-weights PATH, a local weights file")
-        if not 0 <= args.mask_threshold <= 255:
-            raise UserInputError(f"--mask-threshold must be in 0..255 (got {args.mask_threshold})")
-        mask = MaskConfig(threshold=args.mask_threshold, weights=args.mask_weights, device=args.device)
+        if not 0 <= args.background_threshold <= 255:
+            raise UserInputError(f"--background-threshold must be in 0..255 (got {args.background_threshold})")
+        mask = MaskConfig(background_threshold=args.background_threshold, mask_weights=args.mask_weights, device=args.device)
     refine = None
     if phone is not None and args.refine_poses:
         raise UserInputError("--refine-poses is for given poses; photos and videos get theirs from structure from motion")
@@ -187,7 +183,7 @@ def config_from_args(args: argparse.Namespace):
         evaluation = evaluation_config(args)
     return RunConfig(asset=asset, reconstruct=recon, mask_method=args.mask, mask=mask, refine=refine,
                      evaluation=evaluation, device=args.device, seed=args.seed,
-                     object_height_m=args.object_height_m, scale=args.scale, pca_up=args.pca_up, phone=phone)
+                     object_height_m=args.object_height_m, scale=args.scale, phone=phone)
 
 
 def phone_config(args: argparse.Namespace):

@@ -23,7 +23,7 @@ def register(sub) -> None:
                    "interface, so that other machines can connect)")
     p.add_argument("--port", type=options.port, default=None,
                    help="Meshcat port (default: Drake's, 7000 or the next free one up to 7099)")
-    p.add_argument("--seconds", type=options.nonnegative(1.0e6), default=None, metavar="S",
+    p.add_argument("--duration-s", type=options.nonnegative(1.0e6), default=None, metavar="S",
                    help="serve this long then exit, s (default: until Ctrl-C)")
     options.finish(p)
     options.declare_paths(p, reads=("asset",))
@@ -186,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"showing {urdf} at {url}  (Ctrl-C to stop)", flush=True)
     if note:
         print(note, flush=True)
-    deadline = None if args.seconds is None else time.monotonic() + args.seconds
+    deadline = None if args.duration_s is None else time.monotonic() + args.duration_s
     try:
         while deadline is None or time.monotonic() < deadline:
             time.sleep(0.2)

@@ -42,7 +42,7 @@ def write_physical_properties(props: PhysicalProperties, path: Path, extra: dict
     Path(path).write_text(json.dumps({**props.to_json(), **(extra or {})}, indent=1))
 
 
-#: Heaviest object real2sim takes, kg: the range of ``--mass`` and of a properties file's ``mass_kg``.
+#: Heaviest object real2sim takes, kg: the range of ``--mass-kg`` and of a properties file's ``mass_kg``.
 MAX_MASS_KG = 1000.0
 #: ``frame`` of a properties file whose CoM and inertia are in the object's own mesh frame (what
 #: `real2sim identify` writes); without the key a file is in the asset frame (physical_properties.json).

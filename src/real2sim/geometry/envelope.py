@@ -36,7 +36,7 @@ def check_fill_radius(radius_m: float, extent_m: float, label: str = "the object
     (a ball that large fills like the convex hull; use a convex representation instead)."""
     least_m = 2.0 * extent_m / voxels
     if not (math.isfinite(radius_m) and least_m <= radius_m <= extent_m):
-        raise UserInputError(f"--fill-cavities {radius_m:g} m: must lie between {least_m:.3g} m (two voxels of the "
+        raise UserInputError(f"--fill-cavities-m {radius_m:g} m: must lie between {least_m:.3g} m (two voxels of the "
                              f"{voxels} across {label}) and its longest side, {extent_m:.3g} m")
 
 

@@ -65,9 +65,9 @@ def closed_solid(mesh):
     return solid
 
 
-def payload_truth(mesh, mass_kg: float, extra_mass_kg: float = 0.0, extra_at_m=None) -> PayloadTruth:
+def payload_truth(mesh, mass_kg: float, extra_mass_kg: float = 0.0, extra_mass_at_m=None) -> PayloadTruth:
     """A body of ``mass_kg`` at uniform density over the closed ``mesh`` (trimesh, metres), plus a point
-    mass ``extra_mass_kg`` at ``extra_at_m`` (mesh frame)."""
+    mass ``extra_mass_kg`` at ``extra_mass_at_m`` (mesh frame)."""
     mesh = closed_solid(mesh)
     volume = float(mesh.volume)
     if not (mesh.is_watertight and volume > 0):
@@ -76,7 +76,7 @@ def payload_truth(mesh, mass_kg: float, extra_mass_kg: float = 0.0, extra_at_m=N
     inertia = np.asarray(mesh.moment_inertia, dtype=float) * (mass_kg / volume)  # trimesh: unit density, about com
     phi = phi_from_properties(mass_kg, com, inertia)
     if extra_mass_kg > 0:
-        p = np.asarray(extra_at_m, dtype=float)
+        p = np.asarray(extra_mass_at_m, dtype=float)
         phi = phi + phi_from_properties(extra_mass_kg, p, np.zeros((3, 3)))
     from real2sim.identify.arm import properties_from_phi
 

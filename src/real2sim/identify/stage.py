@@ -28,8 +28,8 @@ class ExciteConfig:
     mass_kg: float
     """Mass of the object's body at uniform density, kg, > 0."""
     extra_mass_kg: float = 0.0
-    """A point mass added inside the object at ``extra_at_m``, kg, >= 0 (0: none)."""
-    extra_at_m: tuple[float, float, float] | None = None
+    """A point mass added inside the object at ``extra_mass_at_m``, kg, >= 0 (0: none)."""
+    extra_mass_at_m: tuple[float, float, float] | None = None
     """Where the extra mass sits, metres in the mesh's frame, inside the object; needed when
     ``extra_mass_kg`` > 0."""
     torque_noise_n_m: float = 0.05
@@ -69,10 +69,10 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
 
     mesh = closed_solid(mesh)
     if config.extra_mass_kg > 0:
-        if config.extra_at_m is None:
-            raise UserInputError("--extra-mass needs --extra-mass-at X Y Z (metres, the mesh's frame)")
-        if not bool(mesh.contains(np.asarray([config.extra_at_m], dtype=float))[0]):
-            raise UserInputError(f"--extra-mass-at {' '.join(f'{v:g}' for v in config.extra_at_m)} is not inside "
+        if config.extra_mass_at_m is None:
+            raise UserInputError("--extra-mass-kg needs --extra-mass-at-m X Y Z (metres, the mesh's frame)")
+        if not bool(mesh.contains(np.asarray([config.extra_mass_at_m], dtype=float))[0]):
+            raise UserInputError(f"--extra-mass-at-m {' '.join(f'{v:g}' for v in config.extra_mass_at_m)} is not inside "
                                  "the object (metres, the mesh's own frame)")
     if not mesh.is_watertight:
         raise UserInputError("the object's mesh must be a closed solid for its true mass properties")
@@ -87,13 +87,13 @@ def run_excite(mesh, config: ExciteConfig, out_dir: Path, *, overwrite: bool = F
     say(f"trajectory: {traj.duration_s:.0f} s, regressor condition number {quality.condition_number:.2f}, "
         f"smallest singular value {quality.smallest_singular_value:.3f}, predicted inertia standard error "
         f"{quality.inertia_standard_error_kg_m2:.2g} kg m^2 at 0.05 N m of torque noise")
-    truth = payload_truth(mesh, config.mass_kg, config.extra_mass_kg, config.extra_at_m)
+    truth = payload_truth(mesh, config.mass_kg, config.extra_mass_kg, config.extra_mass_at_m)
     say(f"simulating the arm holding {truth.mass_kg:.3f} kg for {traj.duration_s:.0f} s, logged at 1 kHz")
     report = None if progress is None else (lambda done, total: progress("simulating the arm", done, total))
     log = simulate_excitation(arm, nominal, traj, truth, Measurement(torque_noise_n_m=config.torque_noise_n_m),
                               seed=config.seed, progress=report)
     record = {**truth.to_json(), "mass_body_kg": config.mass_kg, "extra_mass_kg": config.extra_mass_kg,
-              "extra_mass_at_m": list(config.extra_at_m) if config.extra_at_m is not None else None,
+              "extra_mass_at_m": list(config.extra_mass_at_m) if config.extra_mass_at_m is not None else None,
               "torque_noise_n_m": config.torque_noise_n_m, "seed": config.seed,
               "trajectory": traj.to_json(), "condition_number": quality.condition_number,
               "predicted_inertia_standard_error_kg_m2_at_0_05_n_m": quality.inertia_standard_error_kg_m2}

@@ -89,18 +89,18 @@ class BatchConfig:
 
     executor: str = "local"
     """Where the objects run: "local" (a process pool on this machine) or "ray"."""
-    address: str | None = None
+    ray_address: str | None = None
     """The Ray cluster's address (``executor`` "ray" only); None: a private local Ray on the loopback address."""
     workers: int | None = None
     """Objects at once, >= 1; None: this process's CPUs, at most the objects to run."""
-    timeout_s: float = 30.0
-    """How long to wait for the Ray cluster at ``address`` to answer, s; > 0."""
+    ray_timeout_s: float = 30.0
+    """How long to wait for the Ray cluster at ``ray_address`` to answer, s; > 0."""
 
     def __post_init__(self) -> None:
         if self.executor not in EXECUTORS:
             raise UserInputError(f"unknown executor {self.executor!r}; choose local or ray")
-        if self.address is not None and self.executor != "ray":
-            raise UserInputError("--address is for --executor ray")
+        if self.ray_address is not None and self.executor != "ray":
+            raise UserInputError("--ray-address is for --executor ray")
 
 
 @dataclass
@@ -196,7 +196,7 @@ def _failed(name: str, reason: str, log) -> dict:
 class RayObjects:
     """One Ray task per object: one CPU, or one GPU for an object whose job asks for it (its
     reconstruction and fitting run on ``cuda``). Ray reruns a task whose worker died once; the rerun
-    resumes from run's cache. ``address`` None starts a private Ray on the loopback address."""
+    resumes from run's cache. ``ray_address`` None starts a private Ray on the loopback address."""
 
     def __init__(self, workers: int, address: str | None, timeout_s: float) -> None:
         import logging
@@ -284,7 +284,7 @@ class RayObjects:
 def make_executor(config: BatchConfig, workers: int):
     """The executor for ``config``: UserInputError (one line, within ``timeout_s``) when Ray is not reachable."""
     if config.executor == "ray":
-        return RayObjects(workers, config.address, config.timeout_s)
+        return RayObjects(workers, config.ray_address, config.ray_timeout_s)
     from real2sim.evaluate.executors import PoolExecutor
 
     return PoolExecutor(workers)

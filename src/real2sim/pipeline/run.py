@@ -99,11 +99,11 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     if phone is None and recon_cfg.table_z_m != 0.0 and not has_table_plane(read_dataset(dataset, check_files=False)):
         raise UserInputError(f"{dataset} has no table plane (transforms.json table_plane: false), so a table height "
                              "does not apply: the support is found from the object's own lowest points")
-    asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m, keep_up=not config.pca_up)
+    asset_cfg = replace(config.asset, flat_bottom=True, support_height_m=recon_cfg.table_z_m)
     # A run resumes in place, so an existing ASSETDIR passes the "exists" rule; every other rule of
     # the output helper (inputs, working folder, foreign folders) holds even for a resume.
     read = [dataset, *([config.asset.given_properties_source] if config.asset.given_properties_source else []),
-            *([config.mask.weights] if config.mask is not None and config.mask.weights else []),
+            *([config.mask.mask_weights] if getattr(config.mask, "mask_weights", None) else []),
             *([config.phone.board.source] if config.phone is not None and config.phone.board is not None
               and config.phone.board.source else [])]
     asset_dir = check_output_dir(asset_dir, overwrite=True, inputs=read, what="ASSETDIR")

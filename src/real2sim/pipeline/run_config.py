@@ -26,7 +26,7 @@ class RunConfig:
 
     asset: "AssetConfig"
     """The asset stage's settings (mass, SPECs, ...); `run` forces ``flat_bottom`` on, at the support it
-    finds, and ``keep_up`` unless ``pca_up``."""
+    finds; its ``pca_up`` (default off) keeps the table's normal as the asset's +z."""
     reconstruct: "ReconstructConfig | None" = None
     """The reconstruct stage's settings; None: its defaults."""
     mask_method: str | None = None
@@ -51,9 +51,6 @@ class RunConfig:
     a transforms.json dataset (metric, table at z = 0) neither."""
     scale: float | None = None
     """A COLMAP dataset's metres per model unit; > 0 (see ``object_height_m``)."""
-    pca_up: bool = False
-    """True: the asset's +z by the paper's PCA rule; False: the table's normal, so the object stands in the
-    asset as it stood when captured (why: docs/design-notes/pipeline.md#keep-up)."""
     phone: "PhoneConfig | None" = None
     """A phone capture's settings (video frames, the board's square, structure from motion); None: defaults."""
 

@@ -112,7 +112,7 @@ def check_reaches_table(mesh: Path, table_z_m: float) -> None:
     """UserInputError (one line) when the reconstruction ``mesh`` (world frame, metres) stops short
     of the table by more than the asset's flat-bottom tolerance: its lowest part was not
     reconstructed (masks that miss it near the table, a table height that is wrong), and there is
-    no bottom to close at the table. ``asset``'s own message speaks of ``--support-height``, which
+    no bottom to close at the table. ``asset``'s own message speaks of ``--support-height-m``, which
     ``run`` sets itself."""
     from real2sim.asset.checks import SUPPORT_BELOW_TOLERANCE, support_below_mesh
     from real2sim.plumbing.errors import UserInputError
@@ -126,7 +126,7 @@ def check_reaches_table(mesh: Path, table_z_m: float) -> None:
             f"the reconstruction's lowest point is {1000 * gap_m:.1f} mm above the table (z = {table_z_m:g} m), "
             f"more than {100 * SUPPORT_BELOW_TOLERANCE:g} % of its {1000 * height_m:.0f} mm height, so its bottom "
             "cannot be closed at the table: check that the masks reach the table in the low views, or give the "
-            "table's height with --table-z")
+            "table's height with --table-z-m")
 
 
 #: What the asset stage writes into ASSETDIR besides one folder per SPEC (real2sim.asset.build).

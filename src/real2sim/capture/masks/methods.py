@@ -47,12 +47,12 @@ class MaskConfig:
     """Settings of the background-difference and Mask R-CNN mask methods (``provided`` reads none). Masks
     always come back at the image's own size."""
 
-    threshold: float = 12.0
+    background_threshold: float = 12.0
     """Background difference: a pixel is object where its largest channel difference to the empty scene
     exceeds this (0-255)."""
     low_threshold: float | None = None
     """Hysteresis: pixels whose difference exceeds this (0-255) join the object where they touch pixels above
-    ``threshold``; None: off."""
+    ``background_threshold``; None: off."""
     max_hole_fraction: float = 0.01
     """Holes up to this fraction of the object's area are filled."""
     hole_background_max_diff: float = 3.0
@@ -66,9 +66,9 @@ class MaskConfig:
     """Connected parts smaller than this fraction of the largest are dropped."""
     score_threshold: float = 0.5
     """Mask R-CNN: an instance is picked only when it scores above this (0-1)."""
-    mask_threshold: float = 0.5
+    maskrcnn_mask_threshold: float = 0.5
     """Mask R-CNN: a pixel is object where the picked instance's mask probability exceeds this (0-1)."""
-    weights: Path | None = None
+    mask_weights: Path | None = None
     """Mask R-CNN: the local weights file (a state dict); required by ``maskrcnn``, never downloaded."""
     device: str = "cpu"
     """Mask R-CNN: the torch device it runs on."""
@@ -140,13 +140,13 @@ def background_difference_mask(image: np.ndarray, background: np.ndarray, cfg: M
                                ) -> np.ndarray:
     """(H, W) bool object mask from an image and the empty scene from the same pose (uint8 RGB).
 
-    A pixel is object when its largest channel difference exceeds ``threshold``, or
+    A pixel is object when its largest channel difference exceeds ``background_threshold``, or
     exceeds ``low_threshold`` and connects to such a pixel (hysteresis); then :func:`clean_mask`."""
     if image.shape != background.shape:
         raise UserInputError(f"background image size {background.shape[:2]} differs from image size {image.shape[:2]}")
     diff = np.abs(image.astype(np.int16) - background.astype(np.int16)).max(axis=2)
     weak = None if cfg.low_threshold is None else diff > cfg.low_threshold
-    return clean_mask(diff > cfg.threshold, cfg, weak=weak, diff=diff)
+    return clean_mask(diff > cfg.background_threshold, cfg, weak=weak, diff=diff)
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -173,7 +173,7 @@ def load_maskrcnn(weights: Path | str | None, device: str = "cpu", min_size_px: 
     CUDA build of torchvision usable on a CPU-only torch (its NMS replaced by ours).
     """
     if weights is None:
-        raise UserInputError("--method maskrcnn needs --weights PATH (a local Mask R-CNN weights file)")
+        raise UserInputError("--method maskrcnn needs --mask-weights PATH (a local Mask R-CNN weights file)")
     weights = Path(weights)
     if not weights.is_file():
         from real2sim.plumbing.paths import missing
@@ -213,7 +213,7 @@ def load_maskrcnn(weights: Path | str | None, device: str = "cpu", min_size_px: 
 
 
 def maskrcnn_mask(model, image: np.ndarray, cfg: MaskConfig) -> np.ndarray:
-    """(H, W) bool: the highest-scoring instance above ``score_threshold``, probability > ``mask_threshold``.
+    """(H, W) bool: the highest-scoring instance above ``score_threshold``, probability > ``maskrcnn_mask_threshold``.
 
     Among instances the one nearest the image centre wins ties of score within 0.05,
     since the capture points the camera at the object."""
@@ -233,7 +233,7 @@ def maskrcnn_mask(model, image: np.ndarray, cfg: MaskConfig) -> np.ndarray:
     centre_dist = np.hypot((boxes[:, 0] + boxes[:, 2]) / 2 - w / 2, (boxes[:, 1] + boxes[:, 3]) / 2 - h / 2)
     near_top = scores[good] >= scores[good].max() - 0.05
     pick = np.argmin(np.where(near_top, centre_dist, np.inf))
-    return probs[pick] > cfg.mask_threshold
+    return probs[pick] > cfg.maskrcnn_mask_threshold
 
 
 # ----------------------------------------------------------------------------- dataset level
@@ -307,7 +307,7 @@ def compute_masks(dataset_dir: Path | str, method: str, cfg: MaskConfig = MaskCo
                                  "capture with --with-background")
         model = None
     else:
-        model = load_maskrcnn(cfg.weights, cfg.device, cfg.maskrcnn_min_size_px, cfg.maskrcnn_max_size_px,
+        model = load_maskrcnn(cfg.mask_weights, cfg.device, cfg.maskrcnn_min_size_px, cfg.maskrcnn_max_size_px,
                               cfg.score_threshold, cfg.maskrcnn_max_instances)
 
     def mask_of(i: int, f: Frame) -> np.ndarray:

@@ -129,7 +129,7 @@ def _validate_hard_rig(c: CaptureConfig) -> None:
     """UserInputError (naming the flag) for hard-rig settings out of range; the CLI's types say the same."""
     checks = [("--ring-elevation-deg", c.ring_elevation_deg, -85.0, 85.0), ("--focal-px", c.focal_px, 1.0, 1e5),
               ("--fov-deg", c.fov_deg, 1.0, 170.0), ("--cut-off-fraction", c.cut_off_fraction, 0.0, 1.0),
-              ("--exposure-jitter", c.exposure_jitter_stops, 0.0, 3.0),
+              ("--exposure-jitter-stops", c.exposure_jitter_stops, 0.0, 3.0),
               ("--white-balance-jitter", c.white_balance_jitter, 0.0, 1.0), ("--jpeg-quality", c.jpeg_quality, 1, 100)]
     for flag, value, lo, hi in checks:
         if value is not None and not (np.isfinite(value) and lo <= value <= hi):

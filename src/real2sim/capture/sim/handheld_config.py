@@ -85,7 +85,7 @@ class HandheldConfig:
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
             raise UserInputError(f"image size {self.width}x{self.height} out of range (16..8192 px)")
         if self.video and (self.width % 2 or self.height % 2):
-            raise UserInputError(f"--video needs an even --width and --height (H.264), got {self.width}x{self.height}")
+            raise UserInputError(f"--video needs an even --width-px and --height-px (H.264), got {self.width}x{self.height}")
         if not (np.isfinite(self.fov_deg) and 20.0 <= self.fov_deg <= 120.0):
             raise UserInputError(f"--fov-deg must be in 20..120 for a handheld capture (got {self.fov_deg})")
         if not (np.isfinite(self.fps) and 1.0 <= self.fps <= 240.0):
