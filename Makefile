@@ -11,7 +11,7 @@ STAMP := $(VENV)/.installed
 # module's fixtures are made once); TEST_PARALLEL= runs it in one process.
 TEST_PARALLEL ?= -n auto --maxprocesses 4 --dist loadfile
 
-.PHONY: install demo demo-quick test test-slow bench clean
+.PHONY: install demo demo-quick test test-slow bench docs docs-serve clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -45,5 +45,12 @@ test-slow: $(STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
 
+# The docs site (mkdocs.yml) into site/, strict: a broken link or a docstring warning fails it.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
+docs-serve: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs serve
+
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache
+	rm -rf $(VENV) demo_out .pytest_cache site

@@ -20,15 +20,15 @@ from typing import Iterable, Sequence
 from real2sim.asset.build import AssetConfig
 from real2sim.asset.build import build_asset as _build
 from real2sim.collision.fit.config import FitConfig, iteration_limits
-from real2sim.evaluate.sweep import EvaluationConfig
+from real2sim.evaluate.sweep import EvaluationConfig, EvaluationResult
 from real2sim.evaluate.sweep import evaluate as _evaluate
 from real2sim.formats.contact import ContactProperties
 from real2sim.formats.physical import PhysicalProperties, read_given_properties, read_physical_properties
 from real2sim.formats.spec import CollisionSpec, parse_spec
-from real2sim.pipeline.run import RunConfig, run_pipeline
+from real2sim.pipeline.run import RunConfig, RunResult, run_pipeline
 from real2sim.plumbing.errors import UserInputError
+from real2sim.plumbing.progress import ProgressFn
 
-#: The file each simulator takes from a representation's folder, and the ``--format`` that writes it.
 SIMULATOR_FILES: dict[str, tuple[str, str]] = {
     "drake": ("model.urdf", "urdf"),
     "drake_point": ("model_point.urdf", "urdf"),
@@ -38,6 +38,8 @@ SIMULATOR_FILES: dict[str, tuple[str, str]] = {
     "gazebo": ("model.sdf", "sdf"),
     "urdf": ("model_portable.urdf", "urdf"),
 }
+"""The file each simulator takes from a representation's folder, and the ``--format`` that writes it:
+simulator -> (file name, format)."""
 FORMATS = ("urdf", "sdf", "mjcf", "usd")
 
 
@@ -58,7 +60,11 @@ def _formats(formats: str | Iterable[str]) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class Representation:
-    """One collision representation of an asset: its folder and what is in it."""
+    """One collision representation of an asset: its folder and what is in it.
+
+    Every file in the folder is in the asset frame: metres, kilograms, the centre of the visual
+    mesh's footprint at the origin, +z up.
+    """
 
     name: str
     """Canonical SPEC name, e.g. ``cylinders_10``."""
@@ -68,7 +74,19 @@ class Representation:
     """``fit_report.json``: ``num_primitives``, ``iou``, ``chamfer_mm``, ``fit_seconds``, ..."""
 
     def model_for(self, simulator: str) -> Path:
-        """The file ``simulator`` loads (:data:`SIMULATOR_FILES`); UserInputError when it was not written."""
+        """The file a simulator loads for this representation.
+
+        Args:
+            simulator: a key of `SIMULATOR_FILES`: ``"drake"``, ``"drake_point"``, ``"mujoco"``,
+                ``"pybullet"``, ``"isaac"``, ``"gazebo"`` or ``"urdf"``.
+
+        Returns:
+            The path of that file inside `folder`.
+
+        Raises:
+            UserInputError: an unknown simulator, or a file the asset was built without (the message
+                names the ``formats=`` / ``--format`` that writes it).
+        """
         if simulator not in SIMULATOR_FILES:
             raise UserInputError(f"unknown simulator {simulator!r}; known: {', '.join(SIMULATOR_FILES)}")
         name, fmt = SIMULATOR_FILES[simulator]
@@ -81,7 +99,10 @@ class Representation:
 
 @dataclass(frozen=True)
 class Asset:
-    """An asset folder as ``real2sim asset`` / ``run`` wrote it (docs/formats.md)."""
+    """An asset folder as ``real2sim asset`` / ``run`` wrote it (docs/formats.md), read by `load_asset`.
+
+    ``asset["cylinders:10"]`` is one representation, by SPEC or by folder name.
+    """
 
     folder: Path
     """The asset folder."""
@@ -91,7 +112,18 @@ class Asset:
     """One per collision SPEC, in the order they were asked for."""
 
     def __getitem__(self, name: str) -> Representation:
-        """The representation of canonical name or SPEC ``name`` (``"cylinders:10"`` or ``"cylinders_10"``)."""
+        """One representation, by SPEC or canonical name.
+
+        Args:
+            name: a SPEC (``"cylinders:10"``, ``"boxes:20+cylinders:20"``) or its folder's name
+                (``"cylinders_10"``).
+
+        Returns:
+            The `Representation` of that name.
+
+        Raises:
+            UserInputError: the asset has no such representation (the message lists those it has).
+        """
         wanted = name.replace(":", "_").replace("+", "_")
         for rep in self.representations:
             if rep.name == wanted:
@@ -100,7 +132,19 @@ class Asset:
                              f"{', '.join(r.name for r in self.representations) or 'none'}")
 
     def model_for(self, simulator: str, representation: str | None = None) -> Path:
-        """The file ``simulator`` loads, of ``representation`` (default: the first one)."""
+        """The file a simulator loads, of one representation.
+
+        Args:
+            simulator: a key of `SIMULATOR_FILES` (``"drake"``, ``"mujoco"``, ``"isaac"``, ...).
+            representation: a SPEC or folder name; None: the first representation built.
+
+        Returns:
+            The path of the file, e.g. ``ASSET/cylinders_10/scene.xml`` for ``"mujoco"``.
+
+        Raises:
+            UserInputError: the asset holds no representation, has no such one, or was built without
+                the file (see `Representation.model_for`).
+        """
         if not self.representations:
             raise UserInputError(f"{self.folder} holds no collision representation")
         rep = self[representation] if representation else self.representations[0]
@@ -108,8 +152,19 @@ class Asset:
 
 
 def load_asset(folder: str | Path) -> Asset:
-    """Read an asset folder: its physical properties and representations (UserInputError when it is
-    not one)."""
+    """Read an asset folder: its physical properties and representations.
+
+    Args:
+        folder: an asset folder written by `build_asset`, ``real2sim asset`` or ``real2sim run``
+            (it holds ``asset_config.json`` and ``physical_properties.json``).
+
+    Returns:
+        The `Asset`: mass (kg), centre of mass (m) and inertia (kg m^2) in the asset frame, and one
+        `Representation` per collision SPEC, in the order they were asked for.
+
+    Raises:
+        UserInputError: ``folder`` is not an asset folder, or its ``asset_config.json`` is not readable JSON.
+    """
     folder = Path(folder)
     config_path = folder / "asset_config.json"
     if not config_path.is_file():
@@ -138,7 +193,8 @@ def build_asset(mesh: str | Path, out: str | Path, *, mass_kg: float | None = No
                 formats: str | Sequence[str] = ("urdf",), properties: str | Path | None = None,
                 flat_bottom: bool = False, support_height_m: float = 0.0, pca_up: bool = False,
                 mesh_units: str = "m", contact: ContactProperties | None = None, max_iterations: int | None = None,
-                seed: int = 0, device: str = "cpu", overwrite: bool = False, progress=None) -> Asset:
+                seed: int = 0, device: str = "cpu", overwrite: bool = False,
+                progress: ProgressFn | None = None) -> Asset:
     """Build an asset folder from a mesh, as ``real2sim asset`` does.
 
     Args:
@@ -161,7 +217,11 @@ def build_asset(mesh: str | Path, out: str | Path, *, mass_kg: float | None = No
         progress: ``progress(label, done, total)`` for long work, or None.
 
     Returns:
-        The :class:`Asset` read back from ``out``.
+        The `Asset` read back from ``out``.
+
+    Raises:
+        UserInputError: a bad argument (an unknown SPEC or format, a mass out of range, an unreadable
+            mesh, an ``out`` that may not be written), with the line ``real2sim asset`` prints.
     """
     given, frame, source = None, "asset", ""
     if properties is not None:
@@ -183,18 +243,63 @@ def build_asset(mesh: str | Path, out: str | Path, *, mass_kg: float | None = No
     return load_asset(out)
 
 
-def run(dataset: str | Path, out: str | Path, *, config: RunConfig, overwrite: bool = False, progress=None):
-    """Images (a dataset folder, phone photos or a video) to an asset folder, as ``real2sim run`` does,
-    resumable. ``config``: a :class:`~real2sim.pipeline.run.RunConfig` (``RunConfig(asset=AssetConfig(...))``).
-    Returns the run's result (asset folder, stage statuses, warnings, truth)."""
+def run(dataset: str | Path, out: str | Path, *, config: RunConfig, overwrite: bool = False,
+        progress: ProgressFn | None = None) -> RunResult:
+    """Images (a dataset folder, phone photos or a video) to an asset folder, as ``real2sim run`` does.
+
+    Resumable: run again with the same ``out``, it skips the stages whose inputs and settings are
+    unchanged and resumes an interrupted run.
+
+    Args:
+        dataset: a dataset folder (nerfstudio ``transforms.json`` with ``images/``, poses in metres,
+            table top at z = 0), a COLMAP model (``images/`` + ``sparse/0``, with
+            ``config.object_height_m`` or ``config.scale``), a folder of phone photos, or a video file.
+        out: the asset folder: new, or an earlier run of the same dataset (resumed).
+        config: every stage's settings, e.g. ``RunConfig(asset=AssetConfig(mass_kg=0.35,
+            specs=(parse_spec("cylinders:10"),)))``. Unlike the command line, the API refines poses only
+            when ``config.refine`` is given, and photos need ``mask_method="parallax"`` (or another method).
+        overwrite: discard ``out`` first (its cached stages and results).
+        progress: ``progress(label, done, total)`` for long work, or None.
+
+    Returns:
+        The run's result: ``asset_dir``, each stage's status (``"ran"`` or ``"skipped"``), the URDFs
+        written, ``truth`` (errors against a simulated capture's ground truth, else None) and the
+        warnings of every stage.
+
+    Raises:
+        UserInputError: a bad dataset or setting, with the line ``real2sim run`` prints.
+    """
     return run_pipeline(Path(dataset), Path(out), config, overwrite=overwrite, progress=progress)
 
 
 def evaluate(assets: str | Path | Sequence[str | Path], out: str | Path, *, config: EvaluationConfig | None = None,
-             reference_mesh: str | Path | None = None, overwrite: bool = False, progress=None):
-    """Simulate every representation of ``assets`` against their reference in Drake (pushing and the
-    tilting ramp, point and hydroelastic contact), as ``real2sim evaluate`` does, into ``out``
-    (runs.csv, summary.csv, Pareto plots, report.html). Returns the evaluation's result."""
+             reference_mesh: str | Path | None = None, overwrite: bool = False,
+             progress: ProgressFn | None = None) -> EvaluationResult:
+    """Simulate every representation of some assets against their reference in Drake, as
+    ``real2sim evaluate`` does.
+
+    The paper's protocol: planar pushing by a sphere and a tilting ramp, point and hydroelastic
+    contact, the candidate's state reset onto the reference's every 0.1 s (equation error). Needs the
+    ``[sim]`` extra (Drake). Resumable: rows already in ``out/runs.csv`` are not simulated again.
+
+    Args:
+        assets: one asset folder or several.
+        out: the results folder to write (``runs.csv``, ``summary.csv``, Pareto plots, ``report.html``).
+        config: tasks, contact models, runs per task, parallel jobs, ...; None: the defaults
+            (both tasks, both contact models, 10 runs each).
+        reference_mesh: the mesh every asset is judged against, in the asset frame, metres; None: each
+            asset's own closed mesh (``visual/collision_reference.obj``).
+        overwrite: discard the results at ``out`` first.
+        progress: ``progress(label, done, total)`` for long work, or None.
+
+    Returns:
+        The evaluation: ``out_dir``, every run's row (``ate_m``, ``ocae_m``, ``cpd_m_per_s``,
+        ``sim_time_s``, ...), the summary rows (one per representation and contact model), the plots,
+        ``report_path``, and how many rows were simulated, skipped as done, or failed.
+
+    Raises:
+        UserInputError: a bad argument, with the line ``real2sim evaluate`` prints.
+    """
     folders = [Path(assets)] if isinstance(assets, (str, Path)) else [Path(a) for a in assets]
     return _evaluate(folders, Path(out), config or EvaluationConfig(), reference_mesh=reference_mesh,
                      overwrite=overwrite, progress=progress)
