@@ -1,0 +1,169 @@
+"""Where the whole job's time goes: wall and CPU seconds per stage and per phase inside each stage.
+
+    python benchmarks/bench_profile.py [--demo full|quick|none] [--phone VIEWS|0] [--note TEXT]
+
+Runs the demo's job (a simulated robot capture of the bundled bottle -> run -> evaluate, as
+`real2sim demo` does) and a handheld phone capture of the bundled mug through `run` (with the
+printed board), in this process, with a progress function that timestamps every report. A phase is
+what a stage reports while it works ("reconstruct / training field", "asset / collision
+cylinders:10 ..."); the time between two reports belongs to the later one's phase, since a report
+says what the work before it was. CPU seconds are this process's and all its children's (live and
+finished), so the simulation workers count. Nothing is instrumented: the profile sees what a user's
+progress display sees, at most one sample every 0.2 s per phase.
+
+Writes the profile section of the benchmark results (see common.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import psutil
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import markdown_table, write_result  # noqa: E402
+
+#: Seconds between two samples of one phase (a phase's end is always sampled).
+SAMPLE_S = 0.2
+
+
+def cpu_seconds(proc: psutil.Process) -> float:
+    """User + system seconds of ``proc``, its finished children and its live descendants."""
+    t = proc.cpu_times()
+    total = t.user + t.system + t.children_user + t.children_system
+    for child in proc.children(recursive=True):
+        try:
+            c = child.cpu_times()
+            total += c.user + c.system
+        except psutil.Error:
+            pass  # gone between listing and reading: its time is in children_* now
+    return total
+
+
+def phase_of(message: str) -> tuple[str, str]:
+    """(stage, phase) of a progress message: "[3/7] reconstruct - training field 12/400" ->
+    ("reconstruct", "training field #/#")."""
+    stage, _, rest = message.partition(" - ")
+    stage = re.sub(r"^\[\d+/\d+\]\s*", "", stage).split(":")[0].strip()
+    if not rest:
+        stage_name, _, rest = message.partition(": ")
+        stage = re.sub(r"^\[\d+/\d+\]\s*", "", stage_name).strip() or stage
+    rest = rest.split(", ")[0]
+    rest = re.sub(r"\d+(\.\d+)?", "#", rest)
+    return stage, rest[:70].strip()
+
+
+@dataclass
+class Profile:
+    """Wall and CPU seconds by (stage, phase), in the order phases first appeared."""
+
+    wall: dict = field(default_factory=dict)
+    cpu: dict = field(default_factory=dict)
+    start_wall: float = 0.0
+    start_cpu: float = 0.0
+    last: tuple = ("", "", 0.0, 0.0)  # phase key, wall, cpu of the last sample
+
+    def __post_init__(self):
+        self.proc = psutil.Process()
+        self.start_wall, self.start_cpu = time.perf_counter(), cpu_seconds(self.proc)
+        self.last = (("start", "start"), self.start_wall, self.start_cpu)
+
+    def __call__(self, message: str, done: int, total: int) -> None:
+        key = phase_of(message)
+        now = time.perf_counter()
+        if key == self.last[0] and now - self.last[1] < SAMPLE_S and not (total and done == total):
+            return
+        cpu = cpu_seconds(self.proc)
+        self.wall[key] = self.wall.get(key, 0.0) + now - self.last[1]
+        self.cpu[key] = self.cpu.get(key, 0.0) + cpu - self.last[2]
+        self.last = (key, now, cpu)
+        if total == 0:
+            print(f"{now - self.start_wall:7.1f} s  {message}", flush=True)
+
+    def close(self) -> None:
+        self("[end] end - end", 0, 0)
+
+    def rows(self) -> list[list]:
+        """Per stage: its total, then its phases of at least 1 % of the job's wall time."""
+        total_wall = sum(self.wall.values()) or 1.0
+        stages: dict[str, list] = {}
+        for key in self.wall:
+            stages.setdefault(key[0], []).append(key)
+        out = []
+        for stage, keys in stages.items():
+            wall, cpu = sum(self.wall[k] for k in keys), sum(self.cpu[k] for k in keys)
+            out.append([f"**{stage}**", "", wall, cpu, 100 * wall / total_wall])
+            for k in sorted(keys, key=lambda k: -self.wall[k]):
+                if self.wall[k] >= 0.01 * total_wall and len(keys) > 1:
+                    out.append(["", k[1], self.wall[k], self.cpu[k], 100 * self.wall[k] / total_wall])
+        out.append(["**total**", "", total_wall, sum(self.cpu.values()), 100.0])
+        return out
+
+
+def profile_demo(work: Path, quick: bool) -> Profile:
+    """The demo's job (cli/demo.py's plan) under a profiling progress function."""
+    from real2sim.capture.sim.wrist_camera import capture
+    from real2sim.cli.demo import FULL, QUICK, capture_config, run_config
+    from real2sim.evaluate.sweep import EvaluationConfig
+    from real2sim.geometry.objects import make_textured_object
+    from real2sim.pipeline.run import run_pipeline
+    from real2sim.plumbing.progress import prefixed
+
+    plan = QUICK if quick else FULL
+    prof = Profile()
+    capture(make_textured_object("bottle"), work / "capture", capture_config(plan), progress=prefixed(prof, "capture"))
+    evaluation = EvaluationConfig(tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs)
+    run_pipeline(work / "capture", work / "bottle_asset", replace(run_config(plan), evaluation=evaluation),
+                 progress=prof)
+    prof.close()
+    return prof
+
+
+def profile_phone(work: Path, views: int) -> Profile:
+    """A handheld capture of the bundled mug with the board, then `run` over its photos."""
+    from real2sim.asset.config import AssetConfig
+    from real2sim.capture.phone.board import DEFAULT_BOARD
+    from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld
+    from real2sim.formats.spec import parse_spec
+    from real2sim.geometry.objects import OBJECTS, make_textured_object
+    from real2sim.pipeline.run import RunConfig, run_pipeline
+    from real2sim.plumbing.progress import prefixed
+
+    prof = Profile()
+    capture_handheld(make_textured_object("mug"), work / "photos", HandheldConfig(views=views, board=DEFAULT_BOARD),
+                     progress=prefixed(prof, "capture"))
+    asset = AssetConfig(mass_kg=OBJECTS["mug"].mass_kg, specs=(parse_spec("cylinders:10"), parse_spec("coacd")))
+    run_pipeline(work / "photos", work / "mug_asset", RunConfig(asset=asset), progress=prof)
+    prof.close()
+    return prof
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--demo", choices=["full", "quick", "none"], default="full")
+    parser.add_argument("--phone", type=int, default=60, metavar="VIEWS", help="photos of the phone capture (0: none)")
+    parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
+    args = parser.parse_args()
+    header = ["stage", "phase", "wall s", "CPU s", "% of wall"]
+    parts = [args.note] if args.note else []
+    with tempfile.TemporaryDirectory(prefix="bench_profile-") as tmp:
+        if args.demo != "none":
+            prof = profile_demo(Path(tmp) / "demo", args.demo == "quick")
+            parts += [f"### The demo's job ({args.demo})", markdown_table(header, prof.rows())]
+        if args.phone:
+            prof = profile_phone(Path(tmp) / "phone", args.phone)
+            parts += [f"### A {args.phone}-photo phone capture of the mug through `run`", markdown_table(header, prof.rows())]
+    print(write_result("profile", "Profile: wall and CPU seconds per stage and phase", "\n\n".join(parts),
+                        "python benchmarks/bench_profile.py " + " ".join(sys.argv[1:])))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
