@@ -110,3 +110,33 @@ def test_mkdocs_build_strict(tmp_path):
     assert 'id="real2sim.asset.config.AssetConfig.mass_kg"' in config and ":attr:" not in config
     cli = (site / "cli" / "index.html").read_text()
     assert "real2sim asset" in cli and "config/#real2sim.asset.config.AssetConfig.mass_kg" in cli
+
+
+#: The how-to pages, whose Python snippets a reader copies.
+HOW_TO = ("index.md", "phone.md", "robot-capture.md", "assets.md", "evaluating.md", "identifying.md", "batch.md",
+          "api.md", "config.md")
+
+
+def test_python_snippets_of_the_how_to_pages_name_what_exists():
+    """Every snippet parses, every ``from real2sim... import name`` resolves, and every ``real2sim.name``
+    the snippets call is in the front door (running them is the README tests' and the stages' job)."""
+    import ast
+    import importlib
+
+    import real2sim
+
+    checked = 0
+    for name in HOW_TO:
+        for block in re.findall(r"^```python\n(.*?)^```", (DOCS / name).read_text(), re.M | re.S):
+            tree = ast.parse(block, filename=name)
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("real2sim"):
+                    module = importlib.import_module(node.module)
+                    for alias in node.names:
+                        assert hasattr(module, alias.name), f"{name}: {node.module} has no {alias.name}"
+                        checked += 1
+                elif (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                      and node.value.id == "real2sim"):
+                    assert node.attr in real2sim.__all__, f"{name}: real2sim has no {node.attr}"
+                    checked += 1
+    assert checked > 20
