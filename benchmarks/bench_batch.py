@@ -24,7 +24,7 @@ mean stage times (from timings.csv), which docs/scaling.md turns into the cost o
 the sizes the pipeline's stages use, and Python loops) run alone, then two copies at once, each in its
 own process; the two copies' throughput against one is the most any two workers can get here.
 
-Writes docs/benchmarks/batch.md (machine and date included).
+Writes benchmarks/results/batch.md (machine and date included).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 OBJECTS = ("can", "mug", "bottle")
 SEEDS = (0, 1)
@@ -133,7 +133,7 @@ def report(timings: dict, n: int, means: dict, args, views: str) -> None:
         body += ["", "Mean stage times per object (timings.csv of the first batch): "
                  + ", ".join(f"{s} {t:.1f} s" for s, t in means.items()) + "."]
     command = "python benchmarks/bench_batch.py " + " ".join(sys.argv[1:])
-    path = write_section(args.tag, "real2sim batch: throughput with workers (issue 31)", "\n".join(body), command)
+    path = write_result(args.tag, "real2sim batch: throughput with workers (issue 31)", "\n".join(body), command)
     print("\n".join(body))
     print(f"wrote {path}", flush=True)
 
@@ -174,7 +174,7 @@ def calibrate(rounds: int, repeats: int) -> None:
             + markdown_table(["repeat", "copies", "wall s", "CPU s of each"], rows)
             + f"\n\nMedians: alone {alone:.2f} s, two at once {both:.2f} s: two processes do "
             f"{2 * alone / both:.2f}x the work of one in the same time on this machine (2.00x: two free cores).")
-    path = write_section("batch_calibration", "real2sim batch: what two processes get from this machine",
+    path = write_result("batch_calibration", "real2sim batch: what two processes get from this machine",
                          body, "python benchmarks/bench_batch.py " + " ".join(sys.argv[1:]))
     print(body)
     print(f"wrote {path}", flush=True)
@@ -191,7 +191,7 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=160)
     parser.add_argument("--height", type=int, default=120)
     parser.add_argument("--no-serial", action="store_true", help="skip the one-by-one baseline")
-    parser.add_argument("--tag", default="batch", help="section name in docs/benchmarks/")
+    parser.add_argument("--tag", default="batch", help="section name in benchmarks/results/")
     parser.add_argument("--repeats", type=int, default=1, help="run every pass this many times, interleaved")
     args = parser.parse_args()
     if args.calibrate:

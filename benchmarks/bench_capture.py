@@ -15,7 +15,7 @@ process (all threads) are reported beside them.
     python benchmarks/bench_capture.py --views 120 --masks
     python benchmarks/bench_capture.py --quick           # 40 views at 320x240
 
-Writes docs/benchmarks/capture.md via benchmarks/common.py.
+Writes benchmarks/results/capture.md via benchmarks/common.py.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 
 def _cpu_s() -> float:
@@ -136,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
             markdown_table(["object", "views", "size", "mean IoU", "min IoU", "wall s"], rows_mask),
         ]
     cmd = "python benchmarks/bench_capture.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    path = write_section("capture", "Capture, pose refinement and masks (benchmarks/bench_capture.py)",
+    path = write_result("capture", "Capture, pose refinement and masks (benchmarks/bench_capture.py)",
                          "\n".join(body), cmd.strip())
     print(f"wrote {path}")
     return 0

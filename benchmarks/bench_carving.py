@@ -13,7 +13,7 @@ disagree on.
     python benchmarks/bench_carving.py --datasets DIR --device cuda --reconstruct   # the whole reconstruction
     python benchmarks/bench_carving.py --datasets DIR --objects mug,bowl --ratios 1.5,1.25,1.0:3,1.25:2:0   # the hollow prior
 
-Writes docs/benchmarks/carving_visibility[_TAG].md, with --ratios carving_ratio[_TAG].md (machine and date included).
+Writes benchmarks/results/carving_visibility[_TAG].md, with --ratios carving_ratio[_TAG].md (machine and date included).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 HEADER = ["object", "device", "visibility", "hull and carving s", "carved voxels", "rounds",
           "voxels the two disagree on"]
@@ -195,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
                 "CPU's default), every 10th view held out, judged against the true object (`hull / concave`: the "
                 "Chamfer of the parts a silhouette can judge and of the concave parts; `concave`: the share of the "
                 "true concave space left open).\n\n" + markdown_table(header, rows))
-        path = write_section(f"carving_ratio{suffix}", "Photo carving: the hollow prior's ratio", body, command.strip())
+        path = write_result(f"carving_ratio{suffix}", "Photo carving: the hollow prior's ratio", body, command.strip())
         print(f"wrote {path}")
         return 0
     body = ("Photo carving's visibility test, Embree on the solid's marching-cubes surface (`mesh`, rebuilt each "
@@ -206,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
             + (" (with --reconstruct: the whole field reconstruction, `reconstruct`'s defaults, every 10th view held "
                "out, judged against the true object)" if args.reconstruct else "") + ".\n\n"
             + markdown_table(header, rows))
-    path = write_section(f"carving_visibility{suffix}", "Photo carving: visibility by mesh or by voxels", body,
+    path = write_result(f"carving_visibility{suffix}", "Photo carving: visibility by mesh or by voxels", body,
                          command.strip())
     print(f"wrote {path}")
     return 0

@@ -14,7 +14,7 @@ it), and with ``--polytopes`` the ellipsoid fits once more as compliant convex p
     python benchmarks/bench_contact_cost.py
     python benchmarks/bench_contact_cost.py --objects bottle --specs coacd ellipsoids:16 --hints 0.01
 
-Assets are kept in benchmarks/out/contact_cost. Writes docs/benchmarks/contact_cost.md (or
+Assets are kept in benchmarks/out/contact_cost. Writes benchmarks/results/contact_cost.md (or
 contact_cost_TAG.md), machine, date and command included. Run it on an idle machine: the
 milliseconds are wall time.
 """
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import ROOT, markdown_table, write_section  # noqa: E402
+from common import ROOT, markdown_table, write_result  # noqa: E402
 
 SPECS = ("coacd", "boxes:10", "boxes:50", "cylinders:10", "spheres:128", "ellipsoids:16", "ellipsoids:64",
          "superquadrics:10")
@@ -146,7 +146,7 @@ def main() -> int:
             "convex polytopes of `model_portable.urdf`; `one_sphere` (`--floor`): the object's body with one sphere as its "
             "only collision, the cost of the rest of the scene plus one touching piece.\n\n" + markdown_table(HEADER, rows))
     section = "contact_cost" + (f"_{args.tag}" if args.tag else "")
-    write_section(section, "What a simulation step costs, per representation", body,
+    write_result(section, "What a simulation step costs, per representation", body,
                   "python benchmarks/bench_contact_cost.py " + " ".join(sys.argv[1:]))
     return 0
 

@@ -11,7 +11,7 @@ seconds.
     python benchmarks/bench_contact_weights.py                        # bottle, can, mug; cylinders:10, boxes:10
     python benchmarks/bench_contact_weights.py --objects mug --specs cylinders:10 --gains 0,5 --band 0.04
 
-Writes docs/benchmarks/contact_weights[_TAG].md.
+Writes benchmarks/results/contact_weights[_TAG].md.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 
 def directions(n: int = 500) -> np.ndarray:
@@ -121,7 +121,7 @@ def main() -> int:
             + markdown_table(["object", "SPEC", "gain", "all mm", "down mm", "sides mm", "IoU", "Chamfer mm",
                               "iterations", "fit s"], rows) + "\n")
     command = "python benchmarks/bench_contact_weights.py " + " ".join(sys.argv[1:])
-    path = write_section("contact_weights" + (f"_{args.tag}" if args.tag else ""),
+    path = write_result("contact_weights" + (f"_{args.tag}" if args.tag else ""),
                          "Contact-aware fitting: the surfaces that touch", body, command.strip())
     print(f"wrote {path}")
     return 0

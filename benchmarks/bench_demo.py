@@ -2,7 +2,7 @@
 
     python benchmarks/bench_demo.py [--quick-only]
 
-Writes docs/benchmarks/demo.md: the times, each demo's truth numbers (its asset against the
+Writes benchmarks/results/demo.md: the times, each demo's truth numbers (its asset against the
 true bottle, from truth.json) and the last demo's summary table. CPU minutes: user + system
 time of the demo process and its children (the simulation workers).
 """
@@ -21,7 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 
 def run_demo(out: Path, quick: bool) -> tuple[float, float]:
@@ -51,7 +51,7 @@ def write_result(rows: list, truths: list, table: str, note: str) -> None:
                               "pose error before", "pose error after"], truths)
             + "\n\nThe last demo's summary (bundled bottle from a simulated capture; the reference is the "
             "asset's own closed reconstructed mesh, the paper's protocol):\n\n" + table)
-    print(write_section("demo", "Demo: wall and CPU time, errors against the true bottle", body, "python benchmarks/bench_demo.py " + " ".join(sys.argv[1:])))
+    print(write_result("demo", "Demo: wall and CPU time, errors against the true bottle", body, "python benchmarks/bench_demo.py " + " ".join(sys.argv[1:])))
 
 
 def main() -> int:

@@ -12,7 +12,7 @@ operator and these waits, not the arithmetic, decide its time.
     python benchmarks/bench_field_step.py --datasets DIR --objects mug --device cuda --tag cuda
     python benchmarks/bench_field_step.py          # captures and refines the mug first (100 views, 320x240)
 
-Writes docs/benchmarks/field_step[_TAG].md via benchmarks/common.py.
+Writes benchmarks/results/field_step[_TAG].md via benchmarks/common.py.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from common import dataclass_settings, markdown_table, write_section  # noqa: E402
+from common import dataclass_settings, markdown_table, write_result  # noqa: E402
 
 # runtime calls that make the host wait for the device
 _WAITS = ("cudaStreamSynchronize", "cudaDeviceSynchronize", "cudaMemcpyAsync", "cudaMemcpy", "cudaEventSynchronize")
@@ -174,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
             print("\n".join(body), flush=True)
     name = "field_step" + (f"_{args.tag}" if args.tag else "")
     command = "python benchmarks/bench_field_step.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    write_section(name, f"One training step of the radiance field ({args.device})", "\n".join(body), command)
+    write_result(name, f"One training step of the radiance field ({args.device})", "\n".join(body), command)
     return 0
 
 

@@ -4,7 +4,7 @@ For each object: canonicalize, sample the SDF once (cached), then fit every SPEC
 measure fidelity against the canonical mesh: volumetric IoU, symmetric Chamfer (mm),
 pieces kept, fit seconds. ``--ablations`` adds the switches beyond the paper on one
 object/SPEC (k-means vs random init, network vs direct, dead removal, interior fill,
-inside loss). Prints tables and writes ``docs/benchmarks/fitting.md``.
+inside loss). Prints tables and writes ``benchmarks/results/fitting.md`` (or ``fitting_TAG.md``) and its .json via benchmarks/common.py.
 
     python benchmarks/bench_fitting.py                 # quick: targets of the issue
     python benchmarks/bench_fitting.py --full          # the Table I SPECs (hours on 2 cores)
@@ -15,9 +15,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime as dt
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -33,7 +31,6 @@ FULL_SPECS = (
     "ellipsoids:64", "ellipsoids:128",
     "boxes:20+cylinders:20", "boxes:50+cylinders:50", "boxes:100+cylinders:50",
 )  # fmt: skip
-NOTES_MARKER = "<!-- notes: everything below is kept when the benchmark rewrites this file -->"
 TARGETS = {"boxes:100": 0.95, "spheres:128": 0.90, "cylinders:10": 0.90}
 
 
@@ -107,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ablation-only", default=None, metavar="PREFIX",
                     help="run only the default and the ablations whose label starts with PREFIX")
     ap.add_argument("--no-main", action="store_true", help="only the ablations")
-    ap.add_argument("--out", default="docs/benchmarks/fitting.md")
+    ap.add_argument("--tag", default="", help="write benchmarks/results/fitting_TAG.md instead (a named configuration)")
     args = ap.parse_args(argv)
 
     import torch
@@ -122,14 +119,8 @@ def main(argv: list[str] | None = None) -> int:
     objects = tuple(args.objects.split(","))
 
     lines = [
-        "# Primitive fitting benchmark",
-        "",
-        f"Date: {dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M UTC}. Machine: {platform.node()} "
-        f"({platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load average "
-        f"{' '.join(f'{x:.1f}' for x in os.getloadavg())} at start), torch {torch.__version__}, "
-        f"{args.threads} torch threads, device {args.device}.",
-        "",
-        f"Command: `python benchmarks/bench_fitting.py {' '.join(argv if argv is not None else sys.argv[1:])}`",
+        f"Load average {' '.join(f'{x:.1f}' for x in os.getloadavg())} at start; {args.threads} torch threads, "
+        f"device {args.device}.",
         "",
         f"FitConfig: `{base}`",
         "",
@@ -190,12 +181,12 @@ def main(argv: list[str] | None = None) -> int:
             print(f"ablation {label:28s} iou={r['iou']:.3f} chamfer={r['chamfer_mm']:.2f}mm pieces={r['pieces']}/{r['requested']} fit={r['fit_s']:.1f}s loss={r['loss']:.3g}", flush=True)
         lines += [f"## Ablations ({name}, {args.ablation_spec})", ""] + _table(rows, ("variant",)) + [""]
 
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    notes = ""
-    if out.exists() and NOTES_MARKER in out.read_text():
-        notes = out.read_text().split(NOTES_MARKER, 1)[1]  # hand-written findings survive re-runs
-    out.write_text("\n".join(lines) + "\n" + NOTES_MARKER + notes)
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from common import write_result
+
+    command = "python benchmarks/bench_fitting.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    write_result("fitting" + (f"_{args.tag}" if args.tag else ""), "Primitive fitting benchmark", "\n".join(lines),
+                 command.strip())
     print("\n".join(lines))
     return 0
 

@@ -19,10 +19,10 @@ and the wall seconds of `run`. A run that fails is a row too, with its last erro
 --all-unrefined puts every view in the state refine-poses leaves when COLMAP registers too few frames
 (each frame marked not refined, the given noisy poses kept) and runs `run --no-refine-poses`: what the
 reconstruction does when COLMAP cannot refine (issue #28's 60-view 256x192 target), whatever COLMAP
-would have managed on this capture. Its rows go to docs/benchmarks/hard_captures_unrefined.md.
+would have managed on this capture. Its rows go to benchmarks/results/hard_captures_unrefined.md.
 
 --quick is a smoke test of the script, not of the targets: 16 views at 128x96 and `run --steps 300
---voxels 64`. Writes docs/benchmarks/hard_captures.md (machine, date, command) after each row.
+--voxels 64`. Writes benchmarks/results/hard_captures.md (machine, date, command) after each row.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 TARGET_CHAMFER_MM = 1.5
 TARGET_IOU = 0.90
@@ -235,7 +235,7 @@ def main() -> int:
     parser.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
     parser.add_argument("--keep", type=Path, default=None, help="keep the captures and assets here")
-    parser.add_argument("--tag", default="", help="write docs/benchmarks/hard_captures_TAG.md (a partial run beside "
+    parser.add_argument("--tag", default="", help="write benchmarks/results/hard_captures_TAG.md (a partial run beside "
                                                    "the main section)")
     parser.add_argument("--prepare", type=Path, default=None, metavar="DIR",
                         help="only capture and refine each case into DIR/<object>_<condition> (for --datasets)")
@@ -314,7 +314,7 @@ def main() -> int:
                 section, title = "hard_captures_unrefined", "Hard captures whose poses COLMAP cannot refine"
             if args.tag:
                 section, title = f"{section}_{args.tag}", f"{title} ({args.tag})"
-            print(write_section(section, title, body,
+            print(write_result(section, title, body,
                                 "python benchmarks/bench_hard_captures.py " + " ".join(sys.argv[1:])))
     return 0
 

@@ -12,7 +12,7 @@ uniform-density properties against a reference that has the true ones.
     python benchmarks/bench_identify.py                      # every object, case and noise level
     python benchmarks/bench_identify.py --objects can --no-sweep --evaluate
 
-Writes docs/benchmarks/identify.md (machine, date, command).
+Writes benchmarks/results/identify.md (machine, date, command).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 from real2sim.identify.stage import errors_against_truth  # noqa: E402
 
@@ -212,14 +212,14 @@ def main() -> int:
                  f"90th percentile {np.percentile(inertia, 90):.1f} %, largest {inertia.max():.1f} % "
                  f"({int(np.sum(inertia <= 15))} of {len(spread)} within 15 %); CoM error largest {com.max():.2f} mm.\n")
     command = "python benchmarks/bench_identify.py " + " ".join(sys.argv[1:])
-    write_section("identify", "Mass properties identified from joint torques (issue #30)", body, command)
+    write_result("identify", "Mass properties identified from joint torques (issue #30)", body, command)
     if args.evaluate:
         rows = [row for c in cases if c["case"] == "point mass"
                 for row in evaluate_case(c, work, args.runs, spec=args.representation)]
         body += (f"\nThe non-uniform objects in the evaluation ({args.representation}, hydroelastic, push and ramp, "
                  f"{args.runs} runs each) against a reference with the true mass properties:\n\n"
                  + markdown_table(["object", "properties", "representation", "task", "OCAE m", "ATE m"], rows) + "\n")
-    print(write_section("identify", "Mass properties identified from joint torques (issue #30)", body, command))
+    print(write_result("identify", "Mass properties identified from joint torques (issue #30)", body, command))
     return 0
 
 

@@ -7,7 +7,7 @@ weights on a cluttered image. Images: a capture of the bundled can at 640x480.
 
     python benchmarks/bench_maskrcnn.py [--images 3] [--sizes 800 480 240]
 
-Writes docs/benchmarks/maskrcnn.md.
+Writes benchmarks/results/maskrcnn.md.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 
 def main() -> int:
@@ -76,7 +76,7 @@ def main() -> int:
         "instances: real COCO weights on a cluttered image cost more.\n\n"
         + markdown_table(["short side px", "first image s", "mean s / image", "max s / image"], rows)
     )
-    path = write_section("maskrcnn", "Mask R-CNN inference (CPU)", body,
+    path = write_result("maskrcnn", "Mask R-CNN inference (CPU)", body,
                          "python benchmarks/bench_maskrcnn.py " + " ".join(sys.argv[1:]))
     print(f"wrote {path}")
     return 0

@@ -10,7 +10,7 @@ parallax masks beside the same reconstruction from the rendered masks, against t
     python benchmarks/bench_masks.py --objects box,bowl       # shapes of bench_shapes.py too
     python benchmarks/bench_masks.py --field                  # also the radiance field (minutes per object)
 
-Writes docs/benchmarks/masks.md via benchmarks/common.py (after each object).
+Writes benchmarks/results/masks.md via benchmarks/common.py (after each object).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 
 def _object(name: str):
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--height", type=int, default=240)
     ap.add_argument("--field", action="store_true", help="also reconstruct with the radiance field")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--tag", default="", help="write docs/benchmarks/masks_TAG.md instead")
+    ap.add_argument("--tag", default="", help="write benchmarks/results/masks_TAG.md instead")
     args = ap.parse_args(argv)
 
     from real2sim.capture.poses.refinement import RefineConfig, refine_poses
@@ -114,7 +114,7 @@ def _write(args, argv, mask_rows: list, recon_rows: list) -> None:
     )
     command = "python benchmarks/bench_masks.py " + " ".join(argv if argv is not None else sys.argv[1:])
     tag = f"_{args.tag}" if args.tag else ""
-    print(write_section(f"masks{tag}", "Parallax masks (benchmarks/bench_masks.py" + (f", {args.tag})" if tag else ")"),
+    print(write_result(f"masks{tag}", "Parallax masks (benchmarks/bench_masks.py" + (f", {args.tag})" if tag else ")"),
                         body, command.strip()))
 
 

@@ -17,7 +17,7 @@ timed run without logging (see real2sim.evaluate.simulate).
     python benchmarks/bench_mujoco.py            # builds the asset (about a minute)
     python benchmarks/bench_mujoco.py --asset ASSETDIR
 
-Writes docs/benchmarks/mujoco.md (machine and date included).
+Writes benchmarks/results/mujoco.md (machine and date included).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 SPECS = ("cylinders:10", "boxes:50", "spheres:64", "ellipsoids:32", "rotated_boxes:20", "superquadrics:5", "coacd",
          "mesh")
@@ -127,7 +127,7 @@ def main() -> int:
         + markdown_table(["representation", "MuJoCo rest", "MuJoCo push", "Drake push (point)",
                           "Drake / MuJoCo (push)", "MuJoCo push travel (mm)"], rows)
     )
-    path = write_section("mujoco", "MuJoCo vs Drake simulation speed per representation (bench_mujoco.py)", body,
+    path = write_result("mujoco", "MuJoCo vs Drake simulation speed per representation (bench_mujoco.py)", body,
                          "python benchmarks/bench_mujoco.py" + (f" --asset {args.asset}" if args.asset else ""))
     print(f"wrote {path}")
     return 0

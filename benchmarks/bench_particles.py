@@ -13,7 +13,7 @@ is present its ``measure_fidelity`` numbers (IoU, Chamfer) are added for up to
     python benchmarks/bench_particles.py            # 64 .. 10,000 particles
     python benchmarks/bench_particles.py --quick    # 64 .. 1,024
 
-Writes docs/benchmarks/particles.md via benchmarks/common.py.
+Writes benchmarks/results/particles.md via benchmarks/common.py.
 """
 
 from __future__ import annotations
@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
             print(" | ".join(str(v) for v in row), flush=True)
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from common import markdown_table, write_section
+    from common import markdown_table, write_result
 
     body = (
         "One sphere per voxel whose centre is inside the mesh (GPU Gems 3; the paper's Fig. 10 baseline). "
@@ -101,11 +101,11 @@ def main(argv: list[str] | None = None) -> int:
         "covering: radius = voxel * sqrt(3) / 2. IoU from 200k uniform samples in the padded bounding box; "
         "surface error = mean |SDF of the union| at 50k points on the mesh surface. Build time includes "
         "choosing the voxel size for the target count (a few voxelisations). The paper reports that 256 fitted "
-        "spheres match the fidelity of about 10,000 particles; compare with `docs/benchmarks/fitting.md`.\n\n"
+        "spheres match the fidelity of about 10,000 particles; compare with `benchmarks/results/fitting.md`.\n\n"
         + markdown_table(header, rows)
     )
     if not args.no_write:
-        path = write_section("particles", "Voxel-particle baseline", body,
+        path = write_result("particles", "Voxel-particle baseline", body,
                              "python benchmarks/bench_particles.py" + (" --quick" if args.quick else ""))
         print(f"wrote {path}")
     return 0

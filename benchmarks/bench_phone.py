@@ -11,19 +11,20 @@ Issue #29's targets: scale within 0.5 %, plane within 0.5 deg and 1 mm, origin w
     python benchmarks/bench_phone.py                       # bottle and mug, 60 views, 640x480
     python benchmarks/bench_phone.py --objects mug --views 30
 
-Writes docs/benchmarks/phone.md via benchmarks/common.py.
+Writes benchmarks/results/phone.md via benchmarks/common.py.
 
 ``--run``: the whole ``real2sim run`` (structure from motion from scratch, the board's world frame,
 parallax masks, reconstruction, asset, truth) on the same kind of capture, as photos (``board``), as a
 20 s video at 30 fps with ``--frames 80`` (``video``), and as photos without the board with
 ``--object-height-m`` (``height``); errors of the world frame (the true world against the one found,
 through the SfM model's similarity to the true camera centres), the reconstruction's Chamfer distance
-against the true object, and wall times per stage. Writes docs/benchmarks/phone_run.md.
+against the true object, and wall times per stage. Writes benchmarks/results/phone_run.md.
 
     python benchmarks/bench_phone.py --run --objects mug --variants board --backend hull
 
 ``--true-masks KEPT...``: kept runs (``--run --keep DIR``) reconstructed again, same poses, with the true
-silhouettes as masks: how much of each run's error its masks make (``--section`` names the file).
+silhouettes as masks: how much of each run's error its masks make (benchmarks/results/phone_true_masks.md;
+``--section`` names another file).
 
     python benchmarks/bench_phone.py --true-masks DIR/mug_board_seed2 --section phone_true_masks
 
@@ -49,7 +50,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from common import dataclass_settings, markdown_table, write_section  # noqa: E402
+from common import dataclass_settings, markdown_table, write_result  # noqa: E402
 
 #: The arbitrary SfM frame the true poses are moved into: scale, rotation (z-y-x Euler, degrees), shift.
 SFM_SCALE, SFM_EULER_DEG, SFM_SHIFT = 3.7, (40.0, -70.0, 15.0), (1.0, 2.0, -0.5)
@@ -253,7 +254,7 @@ def run_main(args, argv) -> int:
             "error; by height the origin is the object's footprint, not the board's centre: not compared). Focal error: "
             "the SfM camera's focal length against the true lens's (with the board, the board measures it). Issue #29's targets: scale 0.5 % (1 % by height), plane 0.5 deg and 1 mm, origin 2 mm, Chamfer 1.5 mm, "
             "run 15 min.\n\n" + markdown_table(RUN_HEADER, rows))
-    write_section(args.section, "Phone captures: the whole run", body,
+    write_result(args.section, "Phone captures: the whole run", body,
                   command_line(argv))
     return 0
 
@@ -316,7 +317,7 @@ def true_masks_main(args, argv) -> int:
             "again by `reconstruct`'s defaults with the true silhouettes (the true mesh ray cast into the same "
             "cameras) in place of the parallax masks: the run's Chamfer against the one its masks allow.\n\n"
             + markdown_table(TRUE_MASKS_HEADER, rows))
-    write_section(args.section, "Phone captures: the run's masks against the true ones", body,
+    write_result(args.section, "Phone captures: the run's masks against the true ones", body,
                   command_line(argv))
     return 0
 
@@ -359,7 +360,7 @@ def remask_main(args, argv) -> int:
             "same cameras), % of the true silhouettes' pixels over all views; Chamfer against the true object, "
             "the run's own (its masks of the defaults of its day) beside it.\n\n"
             + markdown_table(REMASK_HEADER, rows))
-    write_section(args.section, "Phone captures: kept runs masked again", body,
+    write_result(args.section, "Phone captures: kept runs masked again", body,
                   command_line(argv))
     return 0
 
@@ -373,12 +374,13 @@ TRUE_MASKS_HEADER = ["run", "run Chamfer (mm)", "true masks Chamfer (mm)", "true
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--run", action="store_true", help="the whole `real2sim run` (docs/benchmarks/phone_run.md)")
+    ap.add_argument("--run", action="store_true", help="the whole `real2sim run` (benchmarks/results/phone_run.md)")
     ap.add_argument("--variants", default="board,video,height", help="--run: board, video, height")
     ap.add_argument("--backend", default="field", help="--run: reconstruction backend")
     ap.add_argument("--collision", default="boxes:20", help="--run: collision SPEC")
     ap.add_argument("--frames", type=int, default=80, help="--run video: frames kept")
-    ap.add_argument("--section", default="phone_run", help="--run: docs/benchmarks/SECTION.md")
+    ap.add_argument("--section", default=None,
+                    help="benchmarks/results/SECTION.md (default: phone_run, phone_true_masks or phone_remask, by mode)")
     ap.add_argument("--video-frames", type=int, default=600, help="--run video: frames in the clip (20 s at 30 fps)")
     ap.add_argument("--objects", default="bottle,mug")
     ap.add_argument("--views", type=int, default=60)
@@ -400,6 +402,8 @@ def main(argv: list[str] | None = None) -> int:
         args.seeds = [int(x) for x in args.seeds.split(",")]
     except ValueError:
         ap.error(f"--seeds: comma-separated integers, got {args.seeds!r}")
+    if args.section is None:
+        args.section = "phone_true_masks" if args.true_masks else "phone_remask" if args.remask else "phone_run"
     if args.true_masks:
         return true_masks_main(args, argv)
     if args.remask:
@@ -424,7 +428,7 @@ def main(argv: list[str] | None = None) -> int:
             + markdown_table(HEADER, rows)
             + "\n\nRendering (wall seconds, 2x supersampled colour, masks and depth for ground_truth/):\n\n"
             + markdown_table(["object", "views", "size", "capture (s)"], renders))
-    write_section("phone", "Phone captures: the board and the world frame", body,
+    write_result("phone", "Phone captures: the board and the world frame", body,
                   command_line(argv))
     return 0
 

@@ -19,7 +19,7 @@ carving the true surface as well.
     python benchmarks/bench_photo_consistency.py             # mug and can
     python benchmarks/bench_photo_consistency.py --objects mug
 
-Writes docs/benchmarks/photo_consistency.md (machine and date included).
+Writes benchmarks/results/photo_consistency.md (machine and date included).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 GROUPS = (("on the true surface (< 1 voxel)", 0.0, 1.0), ("1-4 voxels off", 1.0, 4.0),
           ("false surface (> 4 voxels off)", 4.0, np.inf))
@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         "the object does not have, and no threshold on colour can carve it without carving true surface too.\n"
     )
     command = "python benchmarks/bench_photo_consistency.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    print(write_section("photo_consistency", "What colour can tell (benchmarks/bench_photo_consistency.py)", body,
+    print(write_result("photo_consistency", "What colour can tell (benchmarks/bench_photo_consistency.py)", body,
                         command.strip()))
     return 0
 

@@ -11,7 +11,7 @@ object is a property of the representation, not of the object's material. This m
 
 Each setting copies the assets of W (their representation folders rewritten with that material) into
 W/point_contact/<setting>, and reuses W/results/reference_cache when it is there (the reference is the
-same). Writes docs/benchmarks/point_contact[_TAG].md.
+same). Writes benchmarks/results/point_contact[_TAG].md.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 DEFAULT_SETTINGS = ("1e4:1", "1e4:20", "3e3:20", "3e4:20", "1e3:20")
 SHARED_FILES = ("asset_config.json", "canonical_transform.json", "physical_properties.json")
@@ -126,7 +126,7 @@ def main() -> int:
         + markdown_table(["setting", "representation", "OCAE m", "ATE m", "CPD m/s", "cpd_paper m/sample", "ST s"],
                          rows) + "\n")
     command = "python benchmarks/bench_point_contact.py " + " ".join(sys.argv[1:])
-    path = write_section("point_contact" + (f"_{args.tag}" if args.tag else ""),
+    path = write_result("point_contact" + (f"_{args.tag}" if args.tag else ""),
                          "Point-contact material per representation", body, command.strip())
     print(f"wrote {path}")
     return 0

@@ -5,7 +5,7 @@ the hydroelastic reference.
 
     python benchmarks/bench_point_stiffness.py [--object bottle] [--spec spheres:64] [--runs 2]
 
-Writes docs/benchmarks/point_stiffness.md.
+Writes benchmarks/results/point_stiffness.md.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 STIFFNESSES = (None, 3.0e3, 1.0e4, 3.0e4, 1.0e5)
 DISSIPATIONS_S_PER_M = (1.0, 5.0, 20.0)
@@ -97,7 +97,7 @@ def main() -> int:
         + markdown_table(["point stiffness N/m", "dissipation s/m", "push OCAE m", "push contact", "push CPD m/s",
                           "ramp OCAE m", "ramp contact", "ramp CPD m/s"], rows)
     )
-    path = write_section("point_stiffness", "Point-contact stiffness", body,
+    path = write_result("point_stiffness", "Point-contact stiffness", body,
                          "python benchmarks/bench_point_stiffness.py " + " ".join(sys.argv[1:]))
     print(f"wrote {path}")
     return 0

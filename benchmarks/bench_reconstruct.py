@@ -16,7 +16,7 @@ and of the textured mesh, wall and CPU seconds, and peak memory.
         # capture + refine-poses); only reconstruction runs, so a machine without Drake or COLMAP
         # (a GPU box) can measure it
 
-Writes docs/benchmarks/reconstruct.md via benchmarks/common.py.
+Writes benchmarks/results/reconstruct.md via benchmarks/common.py.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 # as the real2sim program does: torch's OpenMP spin-wait stalls small ops on 2 busy cores
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 
 def _cpu_s() -> float:
@@ -152,7 +152,7 @@ def _write(args, argv, rows: list, pose_rows: list, stage_rows: list | None = No
     command = "python benchmarks/bench_reconstruct.py " + " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
     name = "reconstruct" + (f"_{args.tag}" if args.tag else "")
     title = "Reconstruction from images (benchmarks/bench_reconstruct.py" + (f", {args.tag})" if args.tag else ")")
-    print(write_section(name, title, body, command.strip()))
+    print(write_result(name, title, body, command.strip()))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--tag", default="", help="write docs/benchmarks/reconstruct_TAG.md instead (a partial run)")
+    ap.add_argument("--tag", default="", help="write benchmarks/results/reconstruct_TAG.md instead (a partial run)")
     ap.add_argument("--variants", default="field,hull",
                     help="among field (the defaults), field-poses and field-no-poses (the field with its per-view pose "
                          "correction on or off), field-gpu-batches (the batches a GPU trains in, on this device), hull")

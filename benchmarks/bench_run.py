@@ -17,7 +17,7 @@ true object). Reported, from ASSETDIR/.run/run.json and ASSETDIR/truth.json:
     python benchmarks/bench_run.py --round-can --tag round_can   # the can round, not 72 flats
     python benchmarks/bench_run.py --objects can --cylinder-flat-depth-m 1e-5 --tag can_flat10um
 
-Writes docs/benchmarks/run.md (machine and date included), after each object.
+Writes benchmarks/results/run.md (machine and date included), after each object.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 TARGET_OCAE_RATIO = 1.5
 TARGET_INERTIA_REL = 0.05
@@ -92,7 +92,7 @@ def main() -> int:
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
     parser.add_argument("--runs", type=int, default=None,
                         help="seeded runs per task and contact model (default: the demo's); more runs, less noise")
-    parser.add_argument("--tag", default="", help="write docs/benchmarks/run_TAG.md instead of run.md")
+    parser.add_argument("--tag", default="", help="write benchmarks/results/run_TAG.md instead of run.md")
     parser.add_argument("--cylinder-flat-depth", type=float, default=None, metavar="M",
                         help="`run --cylinder-flat-depth-m M`: compliant cylinders meshed with flats at most M deep")
     parser.add_argument("--round-can", action="store_true",
@@ -145,7 +145,7 @@ def main() -> int:
                     + "\n\nEvery representation, OCAE (m) against the reconstruction and against the truth:\n\n"
                     + markdown_table(["object", "representation", "contact", "OCAE vs reconstruction",
                                       "OCAE vs truth", "ATE vs truth"], dynamics_rows))
-            print(write_section("run" + (f"_{args.tag}" if args.tag else ""),
+            print(write_result("run" + (f"_{args.tag}" if args.tag else ""),
                                 "`real2sim run` against the truth (bench_run.py" + (f", {args.tag})" if args.tag else ")"),
                                 body,
                                 "python benchmarks/bench_run.py " + " ".join(sys.argv[1:])))

@@ -13,7 +13,7 @@ pieces, IoU and Chamfer distance against the **true closed capsule** (not the sc
 frame, and the seconds of the fit; and whether CoACD / V-HACD got the mesh remeshed closed.
 
     python benchmarks/bench_scans.py
-Writes docs/benchmarks/scans.md (machine, date, command) via benchmarks/common.py.
+Writes benchmarks/results/scans.md (machine, date, command) via benchmarks/common.py.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 SPECS = ("cylinders:4", "coacd", "vhacd")
 
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         + "\n"
     )
     command = "python benchmarks/bench_scans.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    print(write_section("scans", "Meshes with the defects of real scans (benchmarks/bench_scans.py)", body,
+    print(write_result("scans", "Meshes with the defects of real scans (benchmarks/bench_scans.py)", body,
                         command.strip()))
     return 0
 

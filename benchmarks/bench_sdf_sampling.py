@@ -16,7 +16,7 @@ Usage:
   python benchmarks/bench_sdf_sampling.py            # fast + cache-load, 600k samples, ~95k-face bottle
   python benchmarks/bench_sdf_sampling.py --full     # + exact, random-order, and an 82k-face icosphere
   python benchmarks/bench_sdf_sampling.py --quick    # 100k samples
-Writes docs/benchmarks/sdf_sampling.md (machine, date, command) via benchmarks/common.py.
+Writes benchmarks/results/sdf_sampling.md (machine, date, command) via benchmarks/common.py.
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="100k samples instead of 600k")
     parser.add_argument("--full", action="store_true", help="also the exact and random-order methods, and an icosphere")
-    parser.add_argument("--no-write", action="store_true", help="print only; do not update docs/benchmarks/sdf_sampling.md")
+    parser.add_argument("--no-write", action="store_true", help="print only; do not update benchmarks/results/sdf_sampling.md")
     parser.add_argument("--one", nargs=3, metavar=("METHOD", "MESH", "N"), help=argparse.SUPPRESS)
     parser.add_argument("--cache-dir", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -181,10 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     print(body)
     if not args.no_write:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from common import write_section
+        from common import write_result
 
         flags = " ".join(f for f, on in (("--quick", args.quick), ("--full", args.full)) if on)
-        path = write_section("sdf_sampling", "Signed-distance sampling", body, f"python benchmarks/bench_sdf_sampling.py {flags}".strip())
+        path = write_result("sdf_sampling", "Signed-distance sampling", body, f"python benchmarks/bench_sdf_sampling.py {flags}".strip())
         print(f"wrote {path.relative_to(REPO)}")
     return 0
 

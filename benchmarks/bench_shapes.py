@@ -23,10 +23,10 @@ asset's +z and the table's normal, and the reconstruct stage's wall time.
 
     python benchmarks/bench_shapes.py                   # every shape, full settings
     python benchmarks/bench_shapes.py --shapes box,rod
-    python benchmarks/bench_shapes.py --shapes bin --tag bin  # docs/benchmarks/shapes_bin.md
+    python benchmarks/bench_shapes.py --shapes bin --tag bin  # benchmarks/results/shapes_TAG.md, TAG bin
     python benchmarks/bench_shapes.py --quick           # 60 noise-free views at 160x120, visual hull
 
-Writes docs/benchmarks/shapes.md (machine and date included), after each shape.
+Writes benchmarks/results/shapes.md (machine and date included), after each shape.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 SHAPES = ("box", "bowl", "bin", "torus", "rod", "box_unrefined")
 SPECS = ("cylinders:10", "ellipsoids:16", "coacd")
@@ -124,7 +124,7 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--full", action="store_true", help="(run_all.py) the default setting")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
-    parser.add_argument("--tag", default="", help="write docs/benchmarks/shapes_TAG.md instead of shapes.md")
+    parser.add_argument("--tag", default="", help="write benchmarks/results/shapes_TAG.md instead of shapes.md")
     parser.add_argument("--keep", type=Path, default=None,
                         help="write the captures and assets here (kept) instead of a temporary folder")
     args = parser.parse_args()
@@ -150,7 +150,7 @@ def main() -> int:
                                       "concave", "photo-carved voxels", "restored voxels", "CoM error mm",
                                       "inertia error %", "up error deg", "reconstruct wall s", "run wall s"], rows))
             section = "shapes" + (f"_{args.tag}" if args.tag else "")
-            print(write_section(section, "Shapes that are not the bundled objects (bench_shapes.py)", body,
+            print(write_result(section, "Shapes that are not the bundled objects (bench_shapes.py)", body,
                                 "python benchmarks/bench_shapes.py " + " ".join(sys.argv[1:])))
     return 0
 

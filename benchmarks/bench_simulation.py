@@ -11,16 +11,14 @@ overhead of the instrumented run, and the ATE against the reference.
     python benchmarks/bench_simulation.py            # push + ramp, default scene durations
     python benchmarks/bench_simulation.py --quick    # 0.5 s scenes
 
-Writes docs/benchmarks/simulation.md (machine and date included).
+Writes benchmarks/results/simulation.md and .json (machine, date, command) via benchmarks/common.py.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -107,7 +105,6 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="0.5 s scenes instead of the defaults")
     ap.add_argument("--tasks", default="push,ramp")
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "benchmarks" / "simulation.md"))
     args = ap.parse_args(argv)
     cfg = SceneConfig()
     if args.quick:
@@ -142,13 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     table = header + "\n" + "\n".join(lines)
     print(table)
     load = os.getloadavg()
-    text = f"""# Simulation speed (benchmarks/bench_simulation.py)
-
-Date: {datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}.
-Machine: {platform.node()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs,
-Python {platform.python_version()}, load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}
-(the machine is shared with other jobs: wall times are inflated and noisy).
-Command: `python benchmarks/bench_simulation.py {' '.join(argv if argv is not None else sys.argv[1:])}`
+    text = f"""Load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (on a shared machine wall times are
+inflated and noisy).
 
 Object: the bundled squeeze bottle (0.6 kg, canonical frame), reference = its mesh
 ({n_faces} faces) as a rigid hydroelastic body. Stand-in representations of the paper's sizes
@@ -169,10 +161,11 @@ are compared by `real2sim evaluate`.
 
 {table}
 """
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text)
-    print(f"wrote {out}")
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from common import write_result
+
+    command = "python benchmarks/bench_simulation.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    print(f"wrote {write_result('simulation', 'Simulation speed (benchmarks/bench_simulation.py)', text, command.strip())}")
     return 0
 
 

@@ -12,7 +12,7 @@ its side (its handle sticks out sideways, its rim is an edge to tip over). The p
 for orientation: its Table I is of other objects.
 
 Work is kept in benchmarks/out/table1 (assets and results); re-running resumes the
-evaluation sweep (rows already in runs.csv are skipped). Writes docs/benchmarks/table1.md.
+evaluation sweep (rows already in runs.csv are skipped). Writes benchmarks/results/table1.md.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import ROOT, markdown_table, write_section  # noqa: E402
+from common import ROOT, markdown_table, write_result  # noqa: E402
 
 FULL_SPECS = ("boxes:1", "boxes:10", "boxes:50", "boxes:150", "boxes:400", "cylinders:10", "spheres:128",
               "ellipsoids:64", "rotated_boxes:50", "coacd")
@@ -319,7 +319,7 @@ def main() -> int:
                         help="ContactProperties.cylinder_flat_depth_m of the candidates (default: off)")
     parser.add_argument("--resolution-hint", type=float, default=None, metavar="M",
                         help="ContactProperties.resolution_hint_m of the candidates (default: its default): the edge "
-                        "length Drake meshes compliant spheres, cylinders and ellipsoids at (docs/benchmarks/"
+                        "length Drake meshes compliant spheres, cylinders and ellipsoids at (benchmarks/results/"
                         "contact_cost.md: the hydroelastic rows' time goes with it)")
     parser.add_argument("--extra-hint", type=float, nargs="*", default=[], metavar="M",
                         help="each representation with compliant spheres, cylinders or ellipsoids also as "
@@ -344,7 +344,7 @@ def main() -> int:
                         "bound_mesh (the reference mesh 0.1 %% larger, rigid), and bound_round on a solid of revolution (its profile "
                         "revolved in 720 sectors, rigid): what a perfect fit could reach")
     parser.add_argument("--tag", default=None,
-                        help="results in <work>/results_<tag>, section docs/benchmarks/table1_<tag>.md")
+                        help="results in <work>/results_<tag>, section benchmarks/results/table1_<tag>.md")
     args = parser.parse_args()
 
     from real2sim.evaluate.sweep import EvaluationConfig, evaluate
@@ -501,7 +501,7 @@ def main() -> int:
     )
     command = "python benchmarks/bench_table1.py " + " ".join(sys.argv[1:])
     title = "Table I protocol: ours vs the paper" + (f" ({args.tag})" if args.tag else "")
-    path = write_section(f"table1_{args.tag}" if args.tag else "table1", title, body, command.strip())
+    path = write_result(f"table1_{args.tag}" if args.tag else "table1", title, body, command.strip())
     with open(results_dir / "summary.csv") as f:
         print(f.read())
     print(f"wrote {path}")

@@ -8,7 +8,7 @@ mesh's), faces and wall seconds. Issue #28's target: every side within 2 mm.
     python benchmarks/bench_temple.py                   # hull and field, default settings
     python benchmarks/bench_temple.py --backends hull   # the fast one alone
 
-Writes docs/benchmarks/temple.md via benchmarks/common.py.
+Writes benchmarks/results/temple.md via benchmarks/common.py.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from common import ROOT, markdown_table, write_section  # noqa: E402
+from common import ROOT, markdown_table, write_result  # noqa: E402
 
 TEMPLE = ROOT.parent / "shared" / "data" / "real" / "temple_ring"
 SIDES = ("x min", "y min", "z min", "x max", "y max", "z max")
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
             "held-out PSNR (views 5 and 15 of 19), 2-core wall seconds.\n\n"
             + markdown_table(["backend", *[f"{s} (mm)" for s in SIDES], "worst (mm)", "field PSNR (dB)",
                               "mesh PSNR (dB)", "faces", "seconds"], rows))
-    write_section("temple", "Real photographs: the Middlebury temple ring", body,
+    write_result("temple", "Real photographs: the Middlebury temple ring", body,
                   "python benchmarks/bench_temple.py " + " ".join(argv if argv is not None else sys.argv[1:]))
     return 0
 

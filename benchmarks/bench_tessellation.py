@@ -13,7 +13,7 @@ round body differ by this much.
     python benchmarks/bench_tessellation.py                       # the can, 4 runs per task
     python benchmarks/bench_tessellation.py --objects bottle --sagittas-um none --reference-sagitta-um 2.5 --tag bottle
 
-Writes docs/benchmarks/tessellation.md, or tessellation_TAG.md (machine, date and command included).
+Writes benchmarks/results/tessellation.md, or tessellation_TAG.md (machine, date and command included).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 
 def _variants(name: str, sagittas_m: list[float]) -> dict:
@@ -71,7 +71,7 @@ def main() -> int:
                         help="candidate sagittas besides the bundled object's, um, or none (the bundled can's "
                              "72 sections leave flats 32.4 um deep)")
     parser.add_argument("--reference-sagitta-um", type=float, default=0.16)
-    parser.add_argument("--tag", default="", help="write docs/benchmarks/tessellation_TAG.md instead")
+    parser.add_argument("--tag", default="", help="write benchmarks/results/tessellation_TAG.md instead")
     args = parser.parse_args()
     from real2sim.geometry.objects import make_object
 
@@ -96,7 +96,7 @@ def main() -> int:
                     f"error (resets every 0.1 s), {args.runs} seeded run(s) per task, hydroelastic contact.\n\n"
                     + markdown_table(["object", "description", "faces", "reference faces", "OCAE push m", "OCAE ramp m",
                                       "OCAE mean m", "simulations"], rows))
-            print(write_section("tessellation" + (f"_{args.tag}" if args.tag else ""),
+            print(write_result("tessellation" + (f"_{args.tag}" if args.tag else ""),
                                 "What tessellation does to a rolling object (bench_tessellation.py)",
                                 body, "python benchmarks/bench_tessellation.py " + " ".join(sys.argv[1:])))
     return 0

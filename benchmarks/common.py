@@ -1,20 +1,24 @@
-"""Shared by the benchmarks: machine description and writing results into docs/.
+"""Shared by the benchmarks: machine description and writing stamped results into benchmarks/results/.
 
-Each benchmark writes its own section, docs/benchmarks/<name>.md, and then
-docs/benchmarks.md is rebuilt as the index of all sections, so one benchmark
-can be re-run without losing the others' numbers.
+Each benchmark writes its latest result, benchmarks/results/<name>.md (a title, the stamp: machine, date
+and command, then the figures as tables) and benchmarks/results/<name>.json (the same stamp and every
+table of the body as columns and rows), replacing what an earlier run of the same benchmark wrote; git
+keeps the history. docs/results.md curates the headline figures from these files. A run given a
+``--tag`` writes ``<name>_<tag>``: a named configuration, kept only while a page cites it
+(tests/test_benchmark_results.py checks that every file here is cited and stamped).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import json
 import os
 import platform
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SECTIONS = ROOT / "docs" / "benchmarks"
-INDEX = ROOT / "docs" / "benchmarks.md"
+RESULTS = ROOT / "benchmarks" / "results"
 
 
 def machine_description() -> str:
@@ -85,23 +89,45 @@ def markdown_table(header: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
-def write_section(name: str, title: str, body: str, command: str) -> Path:
-    """Write docs/benchmarks/<name>.md (with machine, date and the command) and rebuild the index."""
-    SECTIONS.mkdir(parents=True, exist_ok=True)
-    path = SECTIONS / f"{name}.md"
-    path.write_text(
-        f"## {title}\n\n_Machine: {machine_description()}. Date: {today()}. Command: `{command}`._\n\n{body.strip()}\n"
-    )
-    rebuild_index()
+STAMP = re.compile(r"^_Machine: (?P<machine>.+?)\. Date: (?P<date>.+?)\. Commands?: (?P<command>.+)\._$", re.M)
+"""The stamp line of a results file: machine, date and command (tests/test_benchmark_results.py reads it)."""
+
+
+def _cell(value: str):
+    value = value.strip()
+    for kind in (int, float):
+        try:
+            return kind(value)
+        except ValueError:
+            pass
+    return value
+
+
+def markdown_tables(body: str) -> list[dict]:
+    """Every markdown table of ``body`` as ``{"columns": [...], "rows": [[...]]}`` (numbers parsed)."""
+    tables, lines = [], body.splitlines()
+    for i in range(len(lines) - 1):
+        starts = lines[i].startswith("|") and (i == 0 or not lines[i - 1].startswith("|"))
+        if starts and re.match(r"^\|[\s:|-]+\|?$", lines[i + 1]):
+            rows = []
+            for line in lines[i + 2:]:
+                if not line.startswith("|"):
+                    break
+                rows.append([_cell(c) for c in line.strip().strip("|").split("|")])
+            tables.append({"columns": [c.strip() for c in lines[i].strip().strip("|").split("|")], "rows": rows})
+    return tables
+
+
+def write_result(name: str, title: str, body: str, command: str) -> Path:
+    """Write benchmarks/results/<name>.md and .json (machine, date, command; the figures as tables and
+    as JSON), replacing an earlier run's; returns the .md path."""
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    machine, date = machine_description(), today()
+    path = RESULTS / f"{name}.md"
+    path.write_text(f"# {title}\n\n_Machine: {machine}. Date: {date}. Command: `{command}`._\n\n{body.strip()}\n")
+    record = {"benchmark": name, "title": title,
+              "runs": [{"machine": machine, "date": date, "command": command, "tables": markdown_tables(body)}]}
+    path.with_suffix(".json").write_text(json.dumps(record, indent=1) + "\n")
     return path
 
 
-def rebuild_index() -> None:
-    parts = [
-        "# Benchmarks\n",
-        "Every number here is written by a script in `benchmarks/` (run `make bench`, or one script alone). "
-        "Each section names its machine, date and command. Tests never assert timings.\n",
-    ]
-    for section in sorted(SECTIONS.glob("*.md")):
-        parts.append(section.read_text().strip() + "\n")
-    INDEX.write_text("\n".join(parts))

@@ -11,6 +11,8 @@ otherwise "internal error" (exit 1 or a traceback), "several lines", "accepted" 
 by a person, some values are legitimately accepted) or "still running" at the limit.
 
     python benchmarks/reliability_pass.py [--jobs 2] [--limit-s 60]
+
+Writes benchmarks/results/reliability_pass.md and .json (machine, date, command) via benchmarks/common.py.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import markdown_table, write_section  # noqa: E402
+from common import markdown_table, write_result  # noqa: E402
 
 from real2sim.cli import build_parser, options  # noqa: E402
 
@@ -251,7 +253,7 @@ def main() -> int:
             "\n\nEvery case not refused, to be read by a person (an accepted value can be legitimate: an "
             "option that takes any text, a path the verb creates):\n\n" +
             markdown_table(["verb", "option", "class", "verdict", "first line on stderr"], notable))
-    write_section("reliability_pass", "Reliability pass: bad inputs over every verb and option", body,
+    write_result("reliability_pass", "Reliability pass: bad inputs over every verb and option", body,
                   "python benchmarks/reliability_pass.py " + " ".join(sys.argv[1:]))
     print(json.dumps(verdicts))
     return 0

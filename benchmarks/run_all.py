@@ -1,4 +1,4 @@
-"""Run every benchmark in this folder (each writes its section of docs/benchmarks.md).
+"""Run every benchmark in this folder (each writes its latest result to benchmarks/results/).
 
 Usage: python benchmarks/run_all.py [--full]   (default: each benchmark's quick setting)
 """
@@ -21,10 +21,6 @@ def main() -> int:
         args = extra if '"--full"' in script.read_text() else []
         if subprocess.run([sys.executable, str(script), *args]).returncode != 0:
             failed.append(script.name)
-    sys.path.insert(0, str(HERE))
-    from common import rebuild_index
-
-    rebuild_index()
     if failed:
         print("failed: " + ", ".join(failed))
     return 1 if failed else 0

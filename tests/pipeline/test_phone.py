@@ -321,7 +321,7 @@ def test_run_video_with_the_board(tmp_path, capsys):
 def test_a_phone_capture_masked_by_parallax_gets_the_objects_second_opinion():
     """The table plate's chance matches on a printed object, taken back by the object's second opinion; for
     photos step 6 then lets fewer views carve (the mug's photos 1.26 / 1.71 / 1.27 -> 0.93 / 1.25 / 1.16 mm,
-    docs/benchmarks/phone_remask_object_of004_*.md), a clip keeps the usual share (the bottle's video 1.07
+    benchmarks/results/phone_remask.md), a clip keeps the usual share (the bottle's video 1.07
     mm, 2.11 with it): `run` sets both for a phone capture, and leaves a ParallaxConfig the caller gave, and
     robot captures, as they are."""
     from real2sim.asset.build import AssetConfig

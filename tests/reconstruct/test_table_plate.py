@@ -5,7 +5,8 @@ On a small simulated phone capture of the mug standing on the printed board (its
 explains the table seen through the mug's handle, which the parallax test leaves in the masks, and little of
 the mug; and the parallax masks with the plate round cover less of the handle's hole than without it, at the
 price of some more of the mug missed. The figures these tests hold are in each docstring; the 60-photo
-640x480 mug through the whole `run` is in docs/benchmarks/phone_run_mug_plate_seed*.md.
+640x480 mug through the whole `run` is in benchmarks/results/phone_run.md (the plate's first runs: CHANGELOG.md,
+"Measurement history", phone_run).
 """
 
 from __future__ import annotations

@@ -182,7 +182,7 @@ def test_recommend_skips_the_reference_itself():
 def test_recommendation_per_contact_model_picks_the_best_point_row():
     """A point-contact user (MuJoCo, Isaac Sim, PyBullet) gets the pick among point rows: overall the
     hydroelastic rows win, and a hydroelastic pick is no use in a simulator without that model."""
-    data = [  # (collision, contact model, OCAE m, ATE m, CPD m/s, s): Table I's shape (docs/benchmarks/table1.md)
+    data = [  # (collision, contact model, OCAE m, ATE m, CPD m/s, s): Table I's shape (benchmarks/results/table1.md)
         ("ellipsoids_64", "hydroelastic", 0.0089, 0.0005, 0.24, 5.9),
         ("coacd", "hydroelastic", 0.0119, 0.0009, 0.39, 0.78),
         ("cylinders_10", "hydroelastic", 0.0168, 0.0007, 0.62, 1.2),
