@@ -47,6 +47,8 @@ def _field_cell(flags: list[str], classes: dict[str, str]) -> str:
     """What one option sets: a link to its field, or the reason it sets none."""
     from real2sim.cli.fields import FIELD_OF_FLAG, NOT_A_FIELD
 
+    # a --no-X switch of its own sets the field of --X, off
+    flags = flags + [f"--{f[5:]}" for f in flags if f.startswith("--no-")]
     for flag in flags:
         if flag in FIELD_OF_FLAG:
             entry = FIELD_OF_FLAG[flag]
