@@ -175,6 +175,27 @@ def _add_handheld_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--video-rotation-deg", choices=["0", "90", "180", "270"], default="0",
                    help="with --video: store the frames turned, with rotation metadata that turns them back by this "
                    "much counter-clockwise, as phones do (270: held upright); --width-px x --height-px is the upright picture")
+    g.add_argument("--close-fraction", type=FRACTION, default=None, metavar="P",
+                   help="with --handheld: share of the photos, 0-1, taken close enough that the image border cuts the "
+                   "object: at --close-factor times the distance at which its bounding sphere fills 70%% of the "
+                   "view's height, then nearer by 15%% steps until the border cuts it (default 0.12, without the "
+                   "steps; 0.7 is how people photograph an object)")
+    g.add_argument("--close-factor", type=CLOSE_FACTOR, default=None, metavar="K",
+                   help="with --handheld: the close photos' distance factor, 0.2-1 (default 0.55)")
+    g.add_argument("--room", action="store_true",
+                   help="with --handheld: a room behind the table (walls, floor, shelves with boxes, things on the "
+                   "table 0.55-1.05 m away), textured, laid out from the texture seed; default a plain backdrop")
+    g.add_argument("--auto-exposure", action="store_true",
+                   help="with --handheld: each photo's exposure follows its brightness as a phone's does (centre-"
+                   "weighted mean brought to middle grey, within 2 stops), on top of the usual 0.1-stop jitter")
+    g.add_argument("--markers", type=integer(0, 16), default=0, metavar="N",
+                   help="with --handheld: N printed square fiducials (0-16) flat on the table around the object; "
+                   "their true corners in ground_truth/markers.json (for `run --marker-mm`; default 0)")
+    g.add_argument("--marker-mm", type=MARKER_MM, default=None, metavar="MM",
+                   help="with --markers: side of each marker's black square, mm (default 40)")
+    g.add_argument("--marker-dictionary", default=None, metavar="NAME",
+                   help="with --markers: the OpenCV aruco dictionary printed (default DICT_4X4_50; e.g. "
+                   "DICT_APRILTAG_36h11)")
 
 
 #: --fps of a handheld video; --distortion-k1 of its lens.
@@ -182,6 +203,12 @@ FPS = number(1.0, 240.0)
 #: --video without --fps.
 DEFAULT_FPS = 30.0
 DISTORTION = number(-0.5, 0.5)
+#: --close-factor (distance factor of the close photos); --marker-mm (printed marker side).
+CLOSE_FACTOR = number(0.2, 1.0)
+MARKER_MM = number(5.0, 300.0)
+#: Handheld flags (dest -> the value that means "not given").
+_HANDHELD_ONLY = {"close_fraction": None, "close_factor": None, "room": False, "auto_exposure": False, "markers": 0,
+                  "marker_mm": None, "marker_dictionary": None}
 
 
 def _resolve_mesh(text: str):
@@ -227,6 +254,9 @@ def run_capture(args: argparse.Namespace) -> int:
         return _run_handheld(args)
     for flag in ("with_board", "video"):
         if getattr(args, flag):
+            raise UserInputError(f"--{flag.replace('_', '-')} needs --handheld")
+    for flag, unset in _HANDHELD_ONLY.items():
+        if getattr(args, flag) != unset:
             raise UserInputError(f"--{flag.replace('_', '-')} needs --handheld")
     if args.video_rotation_deg != "0":
         raise UserInputError("--video-rotation-deg needs --handheld --video")
@@ -311,6 +341,8 @@ _NOT_HANDHELD = {"pose_noise_mm": 5.0, "pose_noise_deg": 1.0, "with_background":
 
 
 def _run_handheld(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     from real2sim.capture.phone.board import DEFAULT_BOARD
     from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld
     from real2sim.cli.progress import progress_display
@@ -324,7 +356,18 @@ def _run_handheld(args: argparse.Namespace) -> int:
                          board=DEFAULT_BOARD if args.with_board else None, video=args.video,
                          fps=DEFAULT_FPS if args.fps is None else args.fps,
                          video_rotation_deg=int(args.video_rotation_deg), distortion_k1=args.distortion_k1,
-                         jpeg_quality=args.jpeg_quality or DEFAULT_JPEG_QUALITY)
+                         jpeg_quality=args.jpeg_quality or DEFAULT_JPEG_QUALITY, room=args.room,
+                         auto_exposure=args.auto_exposure, markers=args.markers)
+    if args.close_fraction is not None:  # asked for: close photos that do cut the object
+        cfg = replace(cfg, close_fraction=args.close_fraction, close_cut=True)
+    if args.close_factor is not None:
+        cfg = replace(cfg, close_factor=args.close_factor)
+    if (args.marker_mm is not None or args.marker_dictionary is not None) and not args.markers:
+        raise UserInputError("--marker-mm and --marker-dictionary are for --markers N (how many to print)")
+    if args.marker_mm is not None:
+        cfg = replace(cfg, marker_mm=args.marker_mm)
+    if args.marker_dictionary is not None:
+        cfg = replace(cfg, marker_dictionary=args.marker_dictionary)
     cfg.validate()
     mesh = _checked_input(args)
     with progress_display() as progress:

@@ -91,6 +91,13 @@ FIELD_OF_FLAG: dict[str, str | tuple[str, str]] = {
     "--fps": "HandheldConfig.fps",
     "--distortion-k1": "HandheldConfig.distortion_k1",
     "--video-rotation-deg": "HandheldConfig.video_rotation_deg",
+    "--close-fraction": "HandheldConfig.close_fraction",
+    "--close-factor": "HandheldConfig.close_factor",
+    "--room": "HandheldConfig.room",
+    "--auto-exposure": "HandheldConfig.auto_exposure",
+    "--markers": "HandheldConfig.markers",
+    "--marker-mm": "HandheldConfig.marker_mm",
+    "--marker-dictionary": "HandheldConfig.marker_dictionary",
     # refine-poses
     "--neighbors": ("RefineConfig.k_neighbors", "COLMAP's word for the pairs each image is matched with"),
     "--features": ("RefineConfig.feature_region", "where features are taken; the field says it is a region"),

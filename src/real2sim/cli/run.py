@@ -63,6 +63,13 @@ def register(sub) -> None:
                    "scale (the table plane is found in the sparse points)")
     p.add_argument("--scale", type=positive(1e6), default=None, metavar="M_PER_UNIT",
                    help="COLMAP or ns-process-data dataset: metres per model unit, instead of --object-height-m")
+    p.add_argument("--marker-mm", type=positive(1000.0), default=None, metavar="MM",
+                   help="photos, a video, a COLMAP or ns-process-data dataset: the side of printed square markers "
+                   "(ArUco, AprilTag) lying flat on the table, mm, seen in at least 3 photos; sets the scale and the "
+                   "table plane, instead of --object-height-m")
+    p.add_argument("--marker-dictionary", default=None, metavar="NAME",
+                   help="with --marker-mm: the markers' OpenCV aruco dictionary (e.g. DICT_4X4_50, "
+                   "DICT_APRILTAG_36h11; default: the common ones are tried)")
     p.add_argument("--out", type=Path, required=True, metavar="ASSETDIR",
                    help="asset folder: new, a previous run of the same dataset (resumed), or --overwrite")
     p.add_argument("--overwrite", action="store_true",
@@ -127,11 +134,16 @@ def config_from_args(args: argparse.Namespace):
 
     if args.seed < 0 or args.seed >= 2**63:
         raise UserInputError(f"--seed must be in 0..2^63-1 (got {args.seed})")
-    scale_given = args.object_height_m is not None or args.scale is not None
-    if scale_given:
+    scale_given = args.object_height_m is not None or args.scale is not None or args.marker_mm is not None
+    if scale_given or args.marker_dictionary is not None:
         from real2sim.capture.phone.normalise import NormaliseConfig
 
-        NormaliseConfig(object_height_m=args.object_height_m, scale=args.scale).validate()
+        NormaliseConfig(object_height_m=args.object_height_m, scale=args.scale, marker_mm=args.marker_mm,
+                        marker_dictionary=args.marker_dictionary).validate()
+        if args.marker_dictionary is not None:
+            from real2sim.capture.phone.markers import aruco_dictionary
+
+            aruco_dictionary(args.marker_dictionary)
     phone = phone_config(args)
     if phone is None:  # every image and mask, and the frame options against the dataset's kind, before any display
         check_dataset(args.dataset, masks_needed=args.mask is None, scale_given=scale_given)
@@ -183,7 +195,8 @@ def config_from_args(args: argparse.Namespace):
         evaluation = evaluation_config(args)
     return RunConfig(asset=asset, reconstruct=recon, mask_method=args.mask, mask=mask, refine=refine,
                      evaluation=evaluation, device=args.device, seed=args.seed,
-                     object_height_m=args.object_height_m, scale=args.scale, phone=phone)
+                     object_height_m=args.object_height_m, scale=args.scale, marker_mm=args.marker_mm,
+                     marker_dictionary=args.marker_dictionary, phone=phone)
 
 
 def phone_config(args: argparse.Namespace):

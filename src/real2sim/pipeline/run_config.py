@@ -51,14 +51,20 @@ class RunConfig:
     a transforms.json dataset (metric, table at z = 0) neither."""
     scale: float | None = None
     """A COLMAP dataset's metres per model unit; > 0 (see ``object_height_m``)."""
+    marker_mm: float | None = None
+    """A COLMAP dataset's printed square markers' side, mm; > 0: scale and table plane from them, instead of
+    ``object_height_m`` (see there)."""
+    marker_dictionary: str | None = None
+    """The markers' OpenCV aruco dictionary; None: the common ones tried (with ``marker_mm`` only)."""
     phone: "PhoneConfig | None" = None
     """A phone capture's settings (video frames, the board's square, structure from motion); None: defaults."""
 
     def robot_frame(self) -> NormaliseConfig | None:
-        """The robot_frame stage's settings; None when neither object_height_m nor scale is given."""
-        if self.object_height_m is None and self.scale is None:
+        """The robot_frame stage's settings; None when none of object_height_m, scale and marker_mm is given."""
+        if self.object_height_m is None and self.scale is None and self.marker_mm is None:
             return None
-        return NormaliseConfig(object_height_m=self.object_height_m, scale=self.scale)
+        return NormaliseConfig(object_height_m=self.object_height_m, scale=self.scale, marker_mm=self.marker_mm,
+                               marker_dictionary=self.marker_dictionary)
 
 
 @dataclass

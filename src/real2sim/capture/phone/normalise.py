@@ -36,7 +36,9 @@ Steps (all lengths before the last one in model units):
    above them under ``cap_fill`` of a prism on its cross-section there (a cone's is 1/3).
    Otherwise the hull's height, with a WARNING when the two disagree by more than ``top_gap``
    (:func:`object_top`);
-4. scale: ``scale`` (metres per model unit) as given, or ``object_height_m`` / measured height.
+4. scale: ``scale`` (metres per model unit) as given, or ``object_height_m`` / measured height, or with
+   ``marker_mm`` the printed markers' side over their triangulated side; the markers' corners then give
+   the table plane of step 2 too (:mod:`real2sim.capture.phone.markers`).
 
 Ground truth: a simulated capture moved into a COLMAP frame (tests, benchmarks) keeps
 ``ground_truth/`` in its original robot frame and records the move as
@@ -79,6 +81,7 @@ from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import publish_dir, write_json_atomic
 from real2sim.plumbing.progress import ProgressFn
 from real2sim.capture.phone import robot_frame as rf
+from real2sim.capture.phone.markers import markers_frame
 from real2sim.capture.phone.normalise_config import NormaliseConfig
 from real2sim.capture.phone.object_height import measure_object, object_top
 
@@ -88,16 +91,16 @@ RECORD_NAME = "robot_frame.json"
 
 def check_frame_options(ds: Dataset, scale_given: bool) -> None:
     """UserInputError (one line) unless a model-frame dataset (:func:`is_model_frame`: a COLMAP model,
-    a nerfstudio-processed capture) comes with --object-height-m or --scale (``scale_given``), and a
-    metric transforms.json dataset (table at z = 0) with neither."""
+    a nerfstudio-processed capture) comes with --object-height-m, --scale or --marker-mm (``scale_given``),
+    and a metric transforms.json dataset (table at z = 0) with none."""
     if is_model_frame(ds) and not scale_given:
         raise UserInputError(f"{ds.root} is {describe_model_frame(ds)}: its poses have no metric scale and no "
-                             "table frame; pass --object-height-m H (the object's height above the table, m) "
-                             "or --scale S (metres per model unit)")
+                             "table frame; pass --object-height-m H (the object's height above the table, m), "
+                             "--scale S (metres per model unit) or --marker-mm S (printed square markers' side)")
     if scale_given and not is_model_frame(ds):
-        raise UserInputError(f"{ds.root} has a transforms.json in metres with the table at z = 0: --object-height-m "
-                             "and --scale are for a COLMAP model dataset (images + sparse/0) or an ns-process-data "
-                             "folder (transforms.json with applied_transform)")
+        raise UserInputError(f"{ds.root} has a transforms.json in metres with the table at z = 0: --object-height-m, "
+                             "--scale and --marker-mm are for a COLMAP model dataset (images + sparse/0) or an "
+                             "ns-process-data folder (transforms.json with applied_transform)")
 
 
 def write_model_transforms(root: Path) -> None:
@@ -210,22 +213,31 @@ def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config:
     c2w_cv = ds.poses_c2w_cv()
     look_at, distance, near = points_near_object(c2w_cv, points, config)
     on_object = rf.object_point_mask(near, ds.intrinsics, c2w_cv, masks, config.object_vote_fraction)
-    plane = table_plane(near[~on_object], c2w_cv, distance, config, seed)
+    markers = None
+    if config.marker_mm is not None:  # scale and plane from the printed markers
+        markers = markers_frame([ds.root / f.file_path for f in ds.frames], ds.intrinsics, c2w_cv, config.marker_mm,
+                                config.marker_dictionary)
+        plane = markers.plane
+    else:
+        plane = table_plane(near[~on_object], c2w_cv, distance, config, seed)
     table = rf.table_similarity(plane, centre=look_at)
     hull = measure_object(ds, masks, table, config)
     if not hull.top > 0:
         raise UserInputError("the masks' visual hull has no height above the fitted table plane")
-    if config.scale is None:
+    if config.object_height_m is not None:
         height, top_record = object_top(hull, table.apply(near[on_object])[:, 2], config)
     else:  # the height sets nothing
-        height, top_record = hull.top, {"hull_top_units": hull.top, "from": "the visual hull (--scale given)"}
+        given = "--scale" if config.scale is not None else "--marker-mm"
+        height, top_record = hull.top, {"hull_top_units": hull.top, "from": f"the visual hull ({given} given)"}
     centre_xy = hull.centre_xy
-    scale = config.scale if config.scale is not None else config.object_height_m / height
+    scale = (config.scale if config.scale is not None else markers.scale if markers is not None
+             else config.object_height_m / height)
     centre = table.inverse().apply(np.array([centre_xy[0], centre_xy[1], 0.0]))
     robot_from_model = rf.table_similarity(plane, centre=centre, scale=scale)
     record = {
         "robot_from_model": robot_from_model.to_json(),
-        "scale_from": "scale" if config.scale is not None else "object_height_m",
+        "scale_from": ("scale" if config.scale is not None else "marker_mm" if markers is not None
+                       else "object_height_m"),
         "object_height_m_given": config.object_height_m,
         "scale_given": config.scale,
         "hull_height_units": hull.top,
@@ -240,6 +252,7 @@ def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config:
         "inlier_threshold_mm": 1000.0 * plane.threshold * scale,
         "median_camera_distance_m": distance * scale,
         "seed": seed,
+        **({"markers": markers.to_json()} if markers is not None else {}),
         "height_from": f"{top_record['from']}; the visual hull of the masks in the table frame, {config.hull_voxels} "
                        "voxels on its longest side",
     }

@@ -12,7 +12,8 @@ from real2sim.plumbing.errors import UserInputError
 
 @dataclass(frozen=True)
 class NormaliseConfig:
-    """How to find the robot frame: the metric scale (exactly one of ``object_height_m`` and ``scale``), the
+    """How to find the robot frame: the metric scale (exactly one of ``object_height_m``, ``scale`` and
+    ``marker_mm``), the
     table plane and the object's height. Distances are fractions of the median camera distance from the
     look-at point, so they do not depend on the model's unknown scale."""
 
@@ -20,6 +21,13 @@ class NormaliseConfig:
     """The object's height above the table, metres (> 0); the scale is this over the measured height."""
     scale: float | None = None
     """Metres per model unit (> 0), instead of ``object_height_m``."""
+    marker_mm: float | None = None
+    """Side of the printed square markers on the table, mm (> 0), instead of ``object_height_m``: the scale is
+    this over their mean triangulated side, and the table plane the plane of their corners
+    (:mod:`real2sim.capture.phone.markers`)."""
+    marker_dictionary: str | None = None
+    """The markers' OpenCV aruco dictionary (e.g. DICT_4X4_50, DICT_APRILTAG_36h11); None: the common ones
+    are tried and the one with the most detections is used."""
     near_radius: float = 1.0
     """Sparse points within this many median camera distances of the cameras' look-at point are the table
     and the object around it (step 1; > 0)."""
@@ -48,9 +56,12 @@ class NormaliseConfig:
     there (a cone's: 1/3). (why: docs/design-notes/capture.md#normalise-object-top)"""
 
     def validate(self) -> None:
-        given = [v for v in (self.object_height_m, self.scale) if v is not None]
+        given = [v for v in (self.object_height_m, self.scale, self.marker_mm) if v is not None]
         if len(given) != 1:
             raise UserInputError("a COLMAP model has no metric scale: give exactly one of --object-height-m H "
-                                 "(the object's height above the table, m) or --scale S (metres per model unit)")
+                                 "(the object's height above the table, m), --scale S (metres per model unit) or "
+                                 "--marker-mm S (the side of printed square markers on the table, mm)")
         if not (np.isfinite(given[0]) and given[0] > 0):
-            raise UserInputError(f"--object-height-m / --scale must be a finite number > 0 (got {given[0]})")
+            raise UserInputError(f"--object-height-m / --scale / --marker-mm must be a finite number > 0 (got {given[0]})")
+        if self.marker_dictionary is not None and self.marker_mm is None:
+            raise UserInputError("--marker-dictionary is for --marker-mm (the markers' side)")

@@ -3,6 +3,9 @@
 An orbit at varying height and distance (:func:`handheld_poses`), the camera rolled a few degrees,
 aimed a little off the object, some views so close that the image border cuts it; a phone lens
 (about 65 degrees horizontal field of view), motion blur, a little auto-exposure drift and JPEG.
+Asked for: a room behind the table (:mod:`real2sim.capture.sim.room`), auto-exposure that follows each
+view's brightness (:func:`auto_exposure_gain`), printed square markers around the object
+(:mod:`real2sim.capture.sim.printed_markers`).
 With a board (:mod:`real2sim.capture.phone.board`), the printed board lies flat on the table under the object and its
 frame is the world frame: the board's centre is the origin, the table top (the paper) is z = 0,
 x along the board's long side -- the same world as every other simulated capture, so
@@ -21,6 +24,7 @@ Output: a folder as a phone gives it, images only, plus the truth for tests and 
         depth/IMG_0001.png      16-bit depth, mm along the optical axis (photos only)
         mesh.obj (+ .mtl, .png), object_pose.json, capture_config.json
         board.json              the board's BoardSpec and world_from_board (identity), with ``board``
+        markers.json            with ``markers``: the dictionary, the side and each marker's true corners
 """
 
 from __future__ import annotations
@@ -42,10 +46,12 @@ from real2sim.capture.sim.handheld_config import HandheldConfig
 from real2sim.capture.sim.handheld_scene import HandheldRenderer, build_handheld_scene
 from real2sim.capture.sim.hard_rigs import apply_colour_gains, colour_gains
 from real2sim.capture.sim.look_at import look_at_c2w_gl
+from real2sim.capture.sim.printed_markers import MarkerLayout, marker_layout
 from real2sim.capture.sim.render_scene import OBJECT_LABEL
 from real2sim.capture.sim.textures import export_textured_obj
 from real2sim.capture.sim.wrist_camera import object_frame, render_ready
-from real2sim.formats.dataset import CameraIntrinsics, Dataset, Frame, write_transforms
+from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics, Dataset, Frame, write_transforms
+from real2sim.multiview.srgb import srgb_to_linear
 from real2sim.plumbing.outputs import atomic_output_dir
 from real2sim.plumbing.progress import ProgressFn, null_progress
 
@@ -74,12 +80,33 @@ def _rolled(c2w_gl: np.ndarray, roll_rad: np.ndarray) -> np.ndarray:
     return out
 
 
-def handheld_poses(config: HandheldConfig, target_m: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+#: A close view steps nearer by this factor until the image border cuts the object ...
+CLOSE_STEP = 0.85
+#: ... but no nearer than this many bounding radii from the object's middle.
+CLOSE_MIN_RADII = 1.3
+
+
+def cuts_object(cam: CameraIntrinsics, c2w_gl: np.ndarray, points_m: np.ndarray) -> bool:
+    """Whether the image border of the camera ``c2w_gl`` (OpenGL axes) cuts the object ``points_m`` (P, 3):
+    some of its points project outside the image, or lie behind the camera."""
+    w2c = np.linalg.inv(c2w_gl @ CV_FROM_GL)
+    p = points_m @ w2c[:3, :3].T + w2c[:3, 3]
+    if np.any(p[:, 2] <= 1e-6):
+        return True
+    u, v = cam.fl_x * p[:, 0] / p[:, 2] + cam.cx, cam.fl_y * p[:, 1] / p[:, 2] + cam.cy
+    return bool(np.any((u < 0) | (u > cam.width) | (v < 0) | (v > cam.height)))
+
+
+def handheld_poses(config: HandheldConfig, target_m: np.ndarray, radius_m: float,
+                   object_points_m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """((views, 4, 4) camera-to-world poses, OpenGL axes; indices of the close views).
 
     One loop around the object (a little more for a video, whose ends overlap), the height
     swinging twice between ``elevation_deg``, the distance varying smoothly; photos add per-shot
-    jitter (a person stops, frames and shoots), a video stays smooth."""
+    jitter (a person stops, frames and shoots), a video stays smooth. A close view stands at
+    ``close_factor`` x the base distance; with ``close_cut`` and the object's points ``object_points_m``
+    (P, 3), it then steps nearer by CLOSE_STEP until the image border cuts the object (a tall object seen from above
+    fills less of the view than its bounding sphere), no nearer than CLOSE_MIN_RADII bounding radii."""
     rng = np.random.default_rng((config.seed, 29))
     n = int(config.views)
     t = np.arange(n) / n
@@ -104,10 +131,19 @@ def handheld_poses(config: HandheldConfig, target_m: np.ndarray, radius_m: float
         if count:
             close = np.unique(np.floor((np.arange(count) + 0.3) * n / count).astype(int))
             dist[close] = base_m * config.close_factor
-    pos = target_m + np.c_[dist * np.cos(elev) * np.cos(az), dist * np.cos(elev) * np.sin(az), dist * np.sin(elev)]
     look = target_m + aim
-    c2w = np.stack([look_at_c2w_gl(p[None], q)[0] for p, q in zip(pos, look)])
-    return _rolled(c2w, roll), close
+
+    def poses(d: np.ndarray) -> np.ndarray:
+        pos = target_m + np.c_[d * np.cos(elev) * np.cos(az), d * np.cos(elev) * np.sin(az), d * np.sin(elev)]
+        return _rolled(np.stack([look_at_c2w_gl(p[None], q)[0] for p, q in zip(pos, look)]), roll)
+
+    c2w = poses(dist)
+    if object_points_m is not None and config.close_cut:
+        for i in close:
+            while not cuts_object(cam, c2w[i], object_points_m) and dist[i] * CLOSE_STEP >= CLOSE_MIN_RADII * radius_m:
+                dist[i] *= CLOSE_STEP
+                c2w[i] = poses(dist)[i]
+    return c2w, close
 
 
 def _blur_streaks(config: HandheldConfig) -> np.ndarray:
@@ -132,12 +168,34 @@ def _exposure_gains(config: HandheldConfig) -> np.ndarray:
     return colour_gains(config.views, config.exposure_jitter_stops, 0.0, config.seed)
 
 
+#: Auto-exposure brings the metered luminance (linear light) to this middle grey ...
+AUTO_EXPOSURE_GREY = 0.18
+#: ... within this many stops either way (a phone's exposure range for one scene).
+AUTO_EXPOSURE_LIMIT_STOPS = 2.0
+
+
+def auto_exposure_gain(rgb: np.ndarray) -> float:
+    """The gain (linear light) a phone's auto-exposure gives the photo ``rgb`` (H, W, 3) uint8: its
+    centre-weighted mean luminance (a Gaussian of 0.3 image sides) brought to middle grey, within
+    +-AUTO_EXPOSURE_LIMIT_STOPS."""
+    small = srgb_to_linear(np.asarray(rgb[::4, ::4], float) / 255.0)
+    luminance = small @ np.array([0.2126, 0.7152, 0.0722])
+    h, w = luminance.shape
+    y, x = (np.arange(h) + 0.5) / h - 0.5, (np.arange(w) + 0.5) / w - 0.5
+    weight = np.exp(-0.5 * (y[:, None] ** 2 + x[None, :] ** 2) / 0.3 ** 2)
+    metered = float((weight * luminance).sum() / weight.sum())
+    limit = 2.0 ** AUTO_EXPOSURE_LIMIT_STOPS
+    return float(np.clip(AUTO_EXPOSURE_GREY / max(metered, 1e-6), 1.0 / limit, limit))
+
+
 def _write_truth_files(gt: Path, config: HandheldConfig, cam: CameraIntrinsics, world_from_mesh: np.ndarray,
-                       frames: list[Frame], close: np.ndarray) -> None:
+                       frames: list[Frame], close: np.ndarray, markers: MarkerLayout | None) -> None:
     block = {"source": "simulated handheld phone capture (Drake VTK)", "world_frame":
              "the board's frame: its centre the origin, the paper (table top) z = 0, z up, x along its long side, metres"
              if config.board is not None else "table top z=0, the object's footprint centre the origin, z up, metres",
-             "paths_relative_to": "..", "close_views": [int(i) for i in close]}
+             "paths_relative_to": "..", "close_views": [int(i) for i in close],
+             "close_factor": config.close_factor, "room": config.room, "auto_exposure": config.auto_exposure,
+             "markers": int(config.markers)}
     if config.video:
         block["video"] = {"file": VIDEO_NAME, "fps": config.fps, "frames": int(config.views),
                           "display_rotation_deg": config.video_rotation_deg}
@@ -152,6 +210,8 @@ def _write_truth_files(gt: Path, config: HandheldConfig, cam: CameraIntrinsics, 
         (gt / "board.json").write_text(json.dumps({
             "board": config.board.to_json(), "world_from_board": np.eye(4).tolist(),
             "note": "the board lies flat on the table, its frame is the world frame (see capture/phone/board.py)"}, indent=2))
+    if markers is not None:
+        (gt / "markers.json").write_text(json.dumps(markers.to_json(), indent=2))
 
 
 def capture_handheld(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, config: HandheldConfig = HandheldConfig(),
@@ -166,7 +226,13 @@ def capture_handheld(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, co
     world_from_mesh, target, radius = object_frame(mesh)
     if config.board is not None:  # a person frames the board too, most of it
         radius = max(radius, 0.6 * 0.5 * float(np.hypot(*config.board.size_m)))
-    poses, close = handheld_poses(config, target, radius)
+    placed = trimesh.transform_points(mesh.vertices, world_from_mesh)
+    poses, close = handheld_poses(config, target, radius, placed[:: max(1, len(placed) // 4000)])
+    markers = None
+    if config.markers:
+        extent = np.ptp(placed, axis=0)
+        markers = marker_layout(int(config.markers), config.marker_mm, config.marker_dictionary,
+                                0.5 * float(np.hypot(*extent[:2])), config.seed)
     far_m = max(10.0, 2.0 * float(np.linalg.norm(poses[:, :3, 3], axis=1).max()))
     streaks, gains = _blur_streaks(config), _exposure_gains(config)
     progress = progress or null_progress
@@ -180,7 +246,7 @@ def capture_handheld(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, co
         work = Path(tempfile.mkdtemp(prefix="render-", dir=tmp))
         export_textured_obj(trimesh.graph.smooth_shade(mesh, angle=np.radians(30)), work / "object.obj")
         renderer = HandheldRenderer(build_handheld_scene(config, work / "object.obj", world_from_mesh, work, cam,
-                                                         far_m), cam, config.supersample, far_m)
+                                                         far_m, markers), cam, config.supersample, far_m)
         video = VideoWriter(tmp / VIDEO_NAME, config.width, config.height, config.fps, config.jpeg_quality,
                             config.video_rotation_deg) if config.video else None
         exif = None if config.video else phone_exif(config.fov_deg)
@@ -188,7 +254,8 @@ def capture_handheld(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, co
         t_render = time.perf_counter()
         for i, c2w in enumerate(poses):
             rgb, depth_m, label = renderer.render(c2w, streaks[i], truth=not config.video)
-            rgb = apply_colour_gains(rgb, gains[i])
+            exposure = auto_exposure_gain(rgb) if config.auto_exposure else 1.0
+            rgb = apply_colour_gains(rgb, exposure * gains[i])
             if video is not None:
                 video.write(rgb)
                 frames.append(Frame(file_path=f"{VIDEO_NAME}#frame={i:05d}", transform_matrix=c2w,
@@ -203,13 +270,14 @@ def capture_handheld(mesh: trimesh.Trimesh | Path | str, out_dir: Path | str, co
                 depth_mm = np.where(np.isfinite(depth_m), np.round(depth_m * 1000.0), 0)
                 save_png(gt / "depth" / stem, np.clip(depth_mm, 0, 65535).astype(np.uint16))
                 frames.append(Frame(file_path=name, transform_matrix=c2w, mask_path=f"ground_truth/masks/{stem}",
-                                    extra={"real2sim_close": bool(np.isin(i, close))}))
+                                    extra={"real2sim_close": bool(np.isin(i, close)),
+                                           "real2sim_exposure_gain": float(exposure * gains[i][1])}))
             progress("rendering", i + 1, len(poses))
         if video is not None:
             video.close()
         render_s = time.perf_counter() - t_render
         del renderer
         shutil.rmtree(work)
-        _write_truth_files(gt, config, cam, world_from_mesh, frames, close)
+        _write_truth_files(gt, config, cam, world_from_mesh, frames, close, markers)
     return CaptureResult(out_dir=Path(out_dir).resolve(), num_views=len(poses), render_seconds=render_s,
                          total_seconds=time.perf_counter() - t_start)

@@ -44,9 +44,18 @@ class HandheldConfig:
     fill_fraction: float = 0.7
     """Share (0-1) of the view's height the object fills at distance factor 1."""
     close_fraction: float = 0.12
-    """Share (0-1) of the photos taken close, at ``close_factor`` (photos only)."""
+    """Share (0-1) of the photos taken close, at ``close_factor`` (photos only), spread evenly along the walk;
+    0.7 is how people photograph an object they care about (issue #68)."""
     close_factor: float = 0.55
-    """Distance factor of the close photos: close enough for the image border to cut the object."""
+    """Distance factor of the close photos (0.2-1): the camera stands at this multiple of the distance at
+    which the object's bounding sphere fills ``fill_fraction`` of the view's height, so at 0.55 that sphere
+    spans 1.3 view heights and the image border cuts the object, unless it is much smaller than its sphere
+    from where the view stands (a tall object seen from above): see ``close_cut``."""
+    close_cut: bool = False
+    """Each close view then steps nearer by 15 % at a time until the image border cuts the object's true
+    mesh, no nearer than 1.3 bounding radii from its middle; False keeps the fixed ``close_factor`` distance
+    of the captures recorded before (golden outputs, the phone figures), where 1-2 of 7 close views of 60
+    leave the object whole."""
     roll_deg: float = 4.0
     """RMS roll of the camera about its optical axis, degrees."""
     aim_jitter: float = 0.12
@@ -72,6 +81,22 @@ class HandheldConfig:
     """Side of the square textured table, metres."""
     texture_seed: int = 7
     """Seed of the table's procedural texture (and, plus 1, of the object's when it has none)."""
+    room: bool = False
+    """A room behind the table: walls, a floor, shelves with boxes and things on the table 0.55-1.05 m from
+    the object, textured, laid out from ``texture_seed`` (:mod:`real2sim.capture.sim.room`); False: a plain
+    grey backdrop."""
+    auto_exposure: bool = False
+    """Each photo's exposure follows the scene's brightness as a phone's does: the centre-weighted mean
+    luminance (linear light) is brought to middle grey (0.18), within +-2 stops; ``exposure_jitter_stops``
+    comes on top."""
+    markers: int = 0
+    """Printed square fiducials lying flat on the table on a ring around the object (0-16), each on white
+    paper with a one-cell quiet zone; their true corners go to ``ground_truth/markers.json``."""
+    marker_mm: float = 40.0
+    """Side of each printed marker's black square, mm (5-300)."""
+    marker_dictionary: str = "DICT_4X4_50"
+    """The markers' dictionary, an OpenCV aruco name (DICT_4X4_50, DICT_5X5_100, DICT_APRILTAG_36h11, ...);
+    the markers are its ids 0..markers-1."""
 
     def camera(self) -> CameraIntrinsics:
         fl = 0.5 * self.width / np.tan(np.radians(self.fov_deg) / 2)
@@ -99,5 +124,24 @@ class HandheldConfig:
             raise UserInputError("--video-rotation-deg needs --video")
         if not 1 <= int(self.jpeg_quality) <= 100:
             raise UserInputError(f"--jpeg-quality must be in 1..100 (got {self.jpeg_quality})")
+        if not (np.isfinite(self.close_fraction) and 0.0 <= self.close_fraction <= 1.0):
+            raise UserInputError(f"--close-fraction must be in 0..1 (got {self.close_fraction})")
+        if not (np.isfinite(self.close_factor) and 0.2 <= self.close_factor <= 1.0):
+            raise UserInputError(f"--close-factor must be in 0.2..1 (got {self.close_factor})")
+        if not 0 <= int(self.markers) <= 16:
+            raise UserInputError(f"--markers must be in 0..16 (got {self.markers})")
+        if not (np.isfinite(self.marker_mm) and 5.0 <= self.marker_mm <= 300.0):
+            raise UserInputError(f"--marker-mm must be in 5..300 (got {self.marker_mm})")
+        if self.markers:
+            from real2sim.capture.phone.markers import aruco_dictionary
+
+            if self.video:
+                raise UserInputError("--markers is for photos (a video's frames have no truth files to hold them)")
+            if self.board is not None:
+                raise UserInputError("--markers and --with-board do not go together: the markers are the scale "
+                                     "for captures without our board")
+            count = aruco_dictionary(self.marker_dictionary).bytesList.shape[0]
+            if self.markers > count:
+                raise UserInputError(f"--markers {self.markers}: {self.marker_dictionary} has only {count} ids")
         if self.board is not None:
             self.board.validate()

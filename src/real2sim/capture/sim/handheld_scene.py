@@ -1,5 +1,6 @@
 """The scene and the camera of a simulated handheld phone capture (:mod:`real2sim.capture.sim.handheld`): the
-object on a textured table with the printed board under it, rendered through a phone's lens.
+object on a textured table with the printed board or square markers under it, a room behind it when asked,
+rendered through a phone's lens.
 
 World frame: the board's (its centre the origin, the paper z = 0, z up, metres); without a board the table
 top is z = 0.
@@ -15,8 +16,10 @@ from real2sim.capture.phone.board import board_centre_on_page_dots, page_image
 from real2sim.capture.phone.media import LensWarp, motion_blur
 from real2sim.capture.sim.capture_output import save_png
 from real2sim.capture.sim.handheld_config import HandheldConfig
-from real2sim.capture.sim.render_scene import TABLE_LABEL, RenderScene
-from real2sim.capture.sim.textures import procedural_texture
+from real2sim.capture.sim.printed_markers import MarkerLayout, marker_page
+from real2sim.capture.sim.render_scene import ROOM_LABEL, TABLE_LABEL, RenderScene
+from real2sim.capture.sim.room import ATLAS, clutter_mesh, room_parts, room_textures
+from real2sim.capture.sim.textures import export_textured_obj, procedural_texture
 from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics
 
 #: The table top lies this far under the paper (z = 0), metres: a sheet's thickness, enough for the
@@ -40,9 +43,11 @@ def _textured_quad_obj(path: Path, size_m: tuple[float, float], z_m: float, text
     return path
 
 
-def _add_anchored(scene: RenderScene, shape, pose_m: np.ndarray, name: str, label: int, diffuse_map: Path | None) -> None:
-    """Add a visible (perception) shape fixed in the world to an already built scene."""
-    from pydrake.geometry import GeometryInstance, PerceptionProperties, RenderLabel
+def _add_anchored(scene: RenderScene, shape, pose_m: np.ndarray, name: str, label: int, diffuse_map: Path | None,
+                  colour: tuple[float, float, float] | None = None) -> None:
+    """Add a visible (perception) shape fixed in the world to an already built scene, textured by
+    ``diffuse_map`` or plain ``colour`` (RGB 0-1)."""
+    from pydrake.geometry import GeometryInstance, PerceptionProperties, RenderLabel, Rgba
     from pydrake.math import RigidTransform
 
     geom = GeometryInstance(RigidTransform(pose_m), shape, name)
@@ -50,20 +55,53 @@ def _add_anchored(scene: RenderScene, shape, pose_m: np.ndarray, name: str, labe
     props.AddProperty("label", "id", RenderLabel(label))
     if diffuse_map is not None:
         props.AddProperty("phong", "diffuse_map", str(diffuse_map))
+    elif colour is not None:
+        props.AddProperty("phong", "diffuse", Rgba(*colour, 1.0))
     geom.set_perception_properties(props)
     scene.sg.RegisterGeometry(scene.sg_context, scene.source, scene.sg.world_frame_id(), geom)
 
 
+def _add_room(scene: RenderScene, config: HandheldConfig, work: Path) -> None:
+    """The walls and floor of :func:`real2sim.capture.sim.room.room_parts`, and its shelves and things as one
+    textured mesh (:func:`real2sim.capture.sim.room.clutter_mesh`)."""
+    import trimesh
+    from PIL import Image
+    from pydrake.geometry import Box, Mesh
+
+    textures = room_textures(work, config.texture_seed)
+    parts = room_parts(config.table_size_m, config.texture_seed)
+    big = [p for p in parts if p.texture is not None and p.texture < ATLAS]
+    for part in big:
+        _add_anchored(scene, Box(*part.size_m), part.pose_m, part.name, ROOM_LABEL, textures[part.texture])
+    mesh, uv = clutter_mesh([p for p in parts if p not in big], config.texture_seed)
+    with Image.open(textures[ATLAS]) as atlas:
+        mesh.visual = trimesh.visual.TextureVisuals(uv=uv, image=atlas.convert("RGB"))
+    obj = export_textured_obj(mesh, work / "room" / "clutter.obj")
+    _add_anchored(scene, Mesh(str(obj)), np.eye(4), "room_clutter", ROOM_LABEL, None)
+
+
+def _add_markers(scene: RenderScene, layout: MarkerLayout, work: Path) -> None:
+    """Each marker's printed sheet lying on the table (z = 0)."""
+    from pydrake.geometry import Mesh
+
+    for marker_id, pose in zip(layout.ids, layout.sheet_poses):
+        png = work / f"marker{int(marker_id)}.png"
+        save_png(png, marker_page(layout.dictionary, int(marker_id), PAPER_WHITE, INK_BLACK))
+        quad = _textured_quad_obj(work / f"marker{int(marker_id)}.obj", (layout.sheet_side_m,) * 2, 0.0, png)
+        _add_anchored(scene, Mesh(str(quad)), pose, f"marker{int(marker_id)}", TABLE_LABEL, None)
+
+
 def build_handheld_scene(config: HandheldConfig, mesh_obj: Path, world_from_mesh: np.ndarray, work: Path,
-                         cam: CameraIntrinsics, far_m: float) -> RenderScene:
-    """The object on a textured table, with the printed board under it when ``config.board``."""
+                         cam: CameraIntrinsics, far_m: float, markers: MarkerLayout | None = None) -> RenderScene:
+    """The object on a textured table, with the printed board under it when ``config.board``, the printed
+    ``markers`` around it, and the room of :mod:`real2sim.capture.sim.room` when ``config.room``."""
     from pydrake.geometry import Box, Mesh
 
     # No table from RenderScene: ours sits a sheet's thickness lower, so that the paper is z = 0.
     scene = RenderScene(mesh_obj, world_from_mesh, None, config.table_size_m, cam, stand_m=None, far_m=far_m)
     table_png = work / "table_texture.png"
     save_png(table_png, procedural_texture(2048, config.texture_seed))
-    top_m = -PAPER_THICKNESS_M if config.board is not None else 0.0
+    top_m = -PAPER_THICKNESS_M if config.board is not None or markers is not None else 0.0
     thickness = 0.04
     pose = np.eye(4)
     pose[2, 3] = top_m - thickness / 2
@@ -82,6 +120,10 @@ def build_handheld_scene(config: HandheldConfig, mesh_obj: Path, world_from_mesh
         pose = np.eye(4)
         pose[:2, 3] = -offset  # the chequered area's centre at the origin
         _add_anchored(scene, Mesh(str(quad)), pose, "board", TABLE_LABEL, None)
+    if markers is not None:
+        _add_markers(scene, markers, work)
+    if config.room:
+        _add_room(scene, config, work)
     return scene
 
 

@@ -13,6 +13,8 @@ from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics
 OBJECT_LABEL = 1
 TABLE_LABEL = 2
 STAND_LABEL = 3
+#: The room behind a handheld capture's table (capture/sim/room.py): walls, shelves, clutter.
+ROOM_LABEL = 4
 
 #: Background of a capture without a table: near black, like the dark drapes of real turntable rigs.
 DARK_BACKGROUND = (0.04, 0.04, 0.045)
