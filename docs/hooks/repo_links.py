@@ -51,7 +51,7 @@ def _rewrite(match: re.Match, page_dir: Path, docs_dir: Path, repo: Path, config
         return match[0]
     if not resolved.exists():
         log.warning(f"Doc file '{page}' contains a link to '{target}', but the repository has no '{rel_repo}'")
-        return match[0]
+        return match["text"]  # said once, here, not again by mkdocs' own check
     if match["bang"]:
         log.warning(f"Doc file '{page}' shows the image '{target}' from outside the site: move it into docs/")
         return match[0]
