@@ -25,7 +25,7 @@ def test_cpd_paper_round_trips(tmp_path):
 
 
 def test_a_runs_csv_from_before_cpd_paper_verifies_and_reads_it_as_nan(tmp_path):
-    old_columns = [c for c in RUN_COLUMNS if c != "cpd_paper"]
+    old_columns = [c for c in RUN_COLUMNS if c not in ("cpd_paper", "simulator")]  # both came later
     fields = [repr(v) if isinstance(v, float) else str(v) for v in (_row()[c] for c in old_columns)]
     path = tmp_path / "runs.csv"
     with open(path, "w", newline="") as fh:
@@ -39,3 +39,25 @@ def test_a_runs_csv_from_before_cpd_paper_verifies_and_reads_it_as_nan(tmp_path)
     text = path.read_text().replace("0.02,", "0.03,", 1)
     path.write_text(text)
     assert load_runs_csv(path).torn_lines == (2,)
+
+
+def test_a_runs_csv_from_before_the_simulator_column_verifies_and_reads_as_drake(tmp_path):
+    from real2sim.formats.results import row_key, summarize
+
+    old_columns = [c for c in RUN_COLUMNS if c != "simulator"]
+    fields = [repr(v) if isinstance(v, float) else str(v) for v in (_row()[c] for c in old_columns)]
+    path = tmp_path / "runs.csv"
+    with open(path, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow([*old_columns, CHECK_COLUMN])
+        writer.writerow([*fields, row_checksum(fields)])
+    table = load_runs_csv(path)
+    assert table.verified and table.torn_lines == ()
+    assert table.rows[0]["simulator"] == "drake"
+    assert row_key(table.rows[0]) == ("can", "spheres_8", "point", "drake", "push", 0)
+    assert summarize(table.rows)[0]["representation"] == "spheres_8_point"  # Drake's label, as before
+    # rewritten, it carries the column, and a MuJoCo row beside it is a row of its own
+    write_runs_csv(path, [*table.rows, dict(table.rows[0], simulator="mujoco")])
+    rows = load_runs_csv(path).rows
+    assert [r["simulator"] for r in rows] == ["drake", "mujoco"]
+    assert [s["representation"] for s in summarize(rows)] == ["spheres_8_point", "spheres_8_point_mujoco"]

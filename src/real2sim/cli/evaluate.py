@@ -11,10 +11,28 @@ from pathlib import Path
 from real2sim.cli.options import declare_paths, finish, integer, jobs, positive, seed
 from real2sim.evaluate.scene.tasks import TASKS
 from real2sim.formats.contact import CONTACT_MODELS
+from real2sim.formats.results import SIMULATORS
 
 
 def _csv_list(text: str) -> tuple[str, ...]:
     return tuple(t.strip() for t in text.split(",") if t.strip())
+
+
+SIMULATOR_HELP = (f"simulator of the candidates: {', '.join(SIMULATORS)} (default drake); repeatable or a comma "
+                  "list, both at once allowed. The reference is Drake's hydroelastic simulation of the closed mesh "
+                  "either way; MuJoCo simulates each representation's model.xml (asset --format mjcf) with point "
+                  "contacts only (docs/evaluation.md)")
+
+
+def add_simulator_argument(parser) -> None:
+    """``--simulator`` (EvaluationConfig.simulators), one flag for evaluate and run --evaluate."""
+    parser.add_argument("--simulator", action="append", default=None, metavar="LIST", help=SIMULATOR_HELP)
+
+
+def simulators_from_args(args: argparse.Namespace) -> tuple[str, ...]:
+    """The --simulator values, flattened and in order, repeats dropped; ("drake",) when none given."""
+    given = [s for text in (getattr(args, "simulator", None) or ()) for s in _csv_list(text)]
+    return tuple(dict.fromkeys(given)) if given else ("drake",)
 
 
 def register(sub) -> None:
@@ -46,6 +64,7 @@ def register(sub) -> None:
                    help=f"comma-separated tasks: {', '.join(TASKS)} (default all)")
     p.add_argument("--contact", default=contacts, metavar="LIST",
                    help=f"comma-separated contact models: {', '.join(CONTACT_MODELS)} (default all)")
+    add_simulator_argument(p)
     p.add_argument("--runs", type=integer(1, 1000), default=10, metavar="N", help="runs per object and task (default 10, as the paper)")
     p.add_argument("--seed", type=seed(), default=0, help="seed of the runs' initial conditions (default 0)")
     p.add_argument("--jobs", type=jobs, default=None, metavar="N", help="simulations in parallel (default: CPU count); simulation times are measured under this load, "
@@ -112,7 +131,8 @@ def config_from_args(args: argparse.Namespace):
         scene = dataclasses.replace(scene, push_duration_s=scene.push_duration_s * k,
                                     total_duration_s=scene.total_duration_s * k)
     return EvaluationConfig(
-        tasks=_csv_list(args.tasks), contact_models=_csv_list(args.contact), runs=args.runs, seed=args.seed,
+        tasks=_csv_list(args.tasks), contact_models=_csv_list(args.contact), simulators=simulators_from_args(args),
+        runs=args.runs, seed=args.seed,
         jobs=args.jobs or _default_jobs(), executor=args.executor, ray_address=args.ray_address,
         simulation_error=args.simulation_error, scene=scene,
         # `real2sim run --evaluate` shares this function but not these flags: the defaults then.
@@ -124,7 +144,8 @@ def _print_summary(summary, recommend_pref: str | None) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from real2sim.report.pareto import PREFERENCES, RECOMMENDATION_RULES, recommend, recommend_per_contact_model
+    from real2sim.report.pareto import PREFERENCES, RECOMMENDATION_RULES, recommend
+    from real2sim.report.recommend import describe_trade_off, recommend_per_group
 
     console = Console()
     table = Table(title="summary (means over objects, tasks and runs)")
@@ -138,10 +159,14 @@ def _print_summary(summary, recommend_pref: str | None) -> None:
         row = recommend(summary, pref)
         name = row["representation"] if row else "(none: no complete rows)"
         console.print(f"recommended for {pref}: [bold]{name}[/bold]  ({RECOMMENDATION_RULES[pref]})")
-    by_model = recommend_per_contact_model(summary, [recommend_pref] if recommend_pref else ("accuracy", "speed"))
-    for model, by_pref in by_model.items():
-        for pref, row in by_pref.items():
-            console.print(f"recommended for {pref}, {model} contact only: [bold]{row['representation']}[/bold]")
+    preferences = [recommend_pref] if recommend_pref else ["accuracy", "speed"]
+    by_group = recommend_per_group(summary, [p for p in preferences if p != "smoothness"] or preferences)
+    if len(by_group) > 1:  # one pick per simulator and contact model, each on its own measured front
+        for (sim, model), by_pref in by_group.items():
+            for pref, row in by_pref.items():
+                gives_up = describe_trade_off(row, summary)
+                console.print(f"recommended for {pref}, {sim} {model} contact: [bold]{row['representation']}[/bold]"
+                              + (f"  (gives up: {gives_up})" if gives_up else ""), highlight=False)
 
 
 @contextlib.contextmanager

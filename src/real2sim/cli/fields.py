@@ -106,6 +106,7 @@ FIELD_OF_FLAG: dict[str, str | tuple[str, str]] = {
     # evaluate
     "--tasks": "EvaluationConfig.tasks",
     "--contact": ("EvaluationConfig.contact_models", "comma-separated models in one flag"),
+    "--simulator": ("EvaluationConfig.simulators", "one simulator or a comma list per flag, repeatable; the field is the tuple"),
     "--runs": "EvaluationConfig.runs",
     "--jobs": "EvaluationConfig.jobs",
     "--executor": "EvaluationConfig.executor",

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from real2sim.cli import options
 from real2sim.cli.asset import add_asset_arguments
+from real2sim.cli.evaluate import add_simulator_argument, simulators_from_args
 from real2sim.cli.options import COLMAP_SEED_MAX, existing_file, integer, jobs, nonnegative, positive
 from real2sim.cli.reconstruct import (IMAGE_PX, STEPS, TABLE_Z_HELP, TABLE_Z_M, TEXTURE_PX, VOXELS,
                                       add_field_arguments, reconstruct_config)
@@ -23,8 +24,9 @@ _FORCED_ASSET_FLAGS = ("flat_bottom", "support_height_m")
 
 #: run's evaluation options (dest by flag): refused without --evaluate rather than silently unused.
 EVALUATION_FLAGS = {"--tasks": "tasks", "--contact": "contact", "--runs": "runs", "--jobs": "jobs",
-                    "--duration-scale": "duration_scale"}
-EVALUATION_DEFAULTS = {"tasks": "push,ramp", "contact": "point,hydroelastic", "runs": 10, "jobs": None, "duration_scale": 1.0}
+                    "--duration-scale": "duration_scale", "--simulator": "simulator"}
+EVALUATION_DEFAULTS = {"tasks": "push,ramp", "contact": "point,hydroelastic", "runs": 10, "jobs": None, "duration_scale": 1.0,
+                       "simulator": None}
 
 
 def register(sub) -> None:
@@ -113,6 +115,7 @@ def register(sub) -> None:
     e.add_argument("--tasks", default=EVALUATION_DEFAULTS["tasks"], metavar="LIST", help="comma-separated tasks (default push,ramp)")
     e.add_argument("--contact", default=EVALUATION_DEFAULTS["contact"], metavar="LIST",
                    help="comma-separated contact models (default point,hydroelastic)")
+    add_simulator_argument(e)
     e.add_argument("--runs", type=RUNS, default=EVALUATION_DEFAULTS["runs"], metavar="N", help="runs per task (default 10)")
     e.add_argument("--jobs", type=jobs, default=None, metavar="N", help="simulations in parallel (default CPU count)")
     e.add_argument("--duration-scale", type=DURATION_SCALE, default=EVALUATION_DEFAULTS["duration_scale"], metavar="K",
@@ -170,6 +173,8 @@ def config_from_args(args: argparse.Namespace):
             if getattr(args, dest) != EVALUATION_DEFAULTS[dest]:
                 raise UserInputError(f"{flag} is for --evaluate (the evaluation of the asset); add --evaluate "
                                      f"or drop {flag}")
+    if args.evaluate and "mujoco" in simulators_from_args(args) and "mjcf" not in (args.formats or ()):
+        raise UserInputError("--simulator mujoco evaluates each representation's model.xml: add --format mjcf")
     mask = None
     if args.mask is not None:
         from real2sim.capture.masks.methods import MaskConfig

@@ -144,7 +144,7 @@ def write_animations(results_dir: Path | str, summary: list[Mapping], preference
 
     results_dir = Path(results_dir)
     config = json.loads((results_dir / "config.json").read_text())
-    chosen = recommend(summary, preference)
+    chosen = recommend(summary, preference, simulator="drake")  # the animation is Drake's Meshcat
     assets = config.get("assets") or {}
     if chosen is None or not assets:
         return {}

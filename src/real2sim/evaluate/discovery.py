@@ -13,6 +13,8 @@ from real2sim.formats.asset_config import read_asset_contact
 from real2sim.formats.contact import POINT_URDF_NAME, ContactProperties
 from real2sim.plumbing.errors import UserInputError
 
+MJCF_NAME = "model.xml"  # real2sim.asset.export.mjcf.MJCF_NAME (the asset stage is above evaluate)
+
 
 @dataclass(frozen=True)
 class Asset:
@@ -41,6 +43,11 @@ class Representation:
         """The representation held in ``rep_dir`` (its point-contact model if it has one)."""
         point = rep_dir / POINT_URDF_NAME
         return cls(object_name, rep_dir.name, rep_dir / "model.urdf", point if point.is_file() else None)
+
+    @property
+    def mjcf_path(self) -> Path:
+        """Its MuJoCo model, ``model.xml`` beside ``model.urdf`` (``asset --format mjcf`` writes it)."""
+        return self.urdf_path.parent / MJCF_NAME
 
     def urdf_for(self, contact_model: str) -> Path:
         """The model to simulate with ``contact_model``."""

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from real2sim.evaluate.discovery import Asset
+from real2sim.evaluate.mujoco.config import MujocoConfig
 from real2sim.evaluate.scene.placement import StablePoseCache
 from real2sim.evaluate.scene.scene_config import SceneConfig
 from real2sim.evaluate.scene.tasks import RunSpec
@@ -52,10 +53,13 @@ class CandidateJob:
     simulation_error: bool
     reference: Any  # Trajectory
     sim_timeout_s: float | None = None  # wall-clock limit of the simulation (None: none)
+    simulator: str = "drake"  # "drake": urdf_path in Drake; "mujoco": model_xml_path in MuJoCo
+    model_xml_path: Path | None = None  # the representation's MuJoCo model (simulator "mujoco")
+    mujoco: MujocoConfig | None = None  # MuJoCo's settings (simulator "mujoco"; None: the defaults)
 
     @property
     def key(self) -> tuple:
-        return (self.object, self.representation, self.contact_model, self.task, self.run)
+        return (self.object, self.representation, self.contact_model, self.simulator, self.task, self.run)
 
 
 def one_line(exc: BaseException) -> str:
@@ -97,17 +101,24 @@ def runs_row(job_key: tuple, **values) -> dict:
 
 
 def run_candidate_job(job: CandidateJob) -> dict:
-    """Simulate one (representation, contact model, task, run) and score it: a runs.csv row.
+    """Simulate one (representation, contact model, simulator, task, run) and score it: a runs.csv row.
 
     Never raises: a failure becomes the row's ``error`` text (one line).
     """
     try:
-        from real2sim.evaluate.simulate import simulate_candidate
-
         # The candidate always starts from the reference's initial state; simulation error is
         # the same call with resets switched off (``job.scene`` has reset_interval_s None then).
-        traj = simulate_candidate(job.urdf_path, job.contact_model, job.run_spec, job.scene, job.reference,
-                                  timeout_s=job.sim_timeout_s)
+        if job.simulator == "mujoco":
+            from real2sim.evaluate.mujoco.simulate import simulate_candidate_mujoco
+
+            traj = simulate_candidate_mujoco(job.model_xml_path, job.run_spec, job.scene, job.reference,
+                                             job.mujoco or MujocoConfig(), timeout_s=job.sim_timeout_s,
+                                             representation=job.representation)
+        else:
+            from real2sim.evaluate.simulate import simulate_candidate
+
+            traj = simulate_candidate(job.urdf_path, job.contact_model, job.run_spec, job.scene, job.reference,
+                                      timeout_s=job.sim_timeout_s)
         values = score(job.reference, traj)
         return runs_row(job.key, **values)
     except Exception as exc:

@@ -18,8 +18,10 @@ from typing import Any, Sequence
 from real2sim.evaluate.discovery import Asset
 from real2sim.plumbing.errors import UserInputError
 
-# Settings that change the meaning of a row: a resumed sweep must use the same ones.
-PINNED_SETTINGS = ("seed", "scene", "simulation_error", "reference", "reference_contact", "reference_properties")
+# Settings that change the meaning of a row: a resumed sweep must use the same ones. The simulator is
+# in each row's key (runs.csv's ``simulator``), so simulators may be added; MuJoCo's settings may not change.
+PINNED_SETTINGS = ("seed", "scene", "simulation_error", "reference", "reference_contact", "reference_properties",
+                   "mujoco")
 
 
 def _sha1_file(path: Path) -> str:
@@ -49,6 +51,12 @@ def config_record(config, assets: Sequence[Asset], reference_meshes: dict[str, P
         drake_version = getattr(pydrake, "__version__", "unknown")
     except Exception:  # pragma: no cover
         drake_version = "unknown"
+    try:
+        import mujoco
+
+        mujoco_version = getattr(mujoco, "__version__", "unknown")
+    except Exception:  # pragma: no cover - MuJoCo is an extra
+        mujoco_version = "not installed"
     scene = dataclasses.asdict(config.scene) if dataclasses.is_dataclass(config.scene) else repr(config.scene)
     return {
         "seed": config.seed,
@@ -63,6 +71,10 @@ def config_record(config, assets: Sequence[Asset], reference_meshes: dict[str, P
                                  if reference_properties else "asset"),
         "tasks": list(config.tasks),
         "contact_models": list(config.contact_models),
+        "simulators": list(config.simulators),
+        # MuJoCo's contact settings (evaluate.mujoco.config.MujocoConfig), chosen by measurement:
+        # docs/design-notes/evaluate.md#mujoco-contact-settings. The same for every MuJoCo row.
+        "mujoco": json.loads(json.dumps(dataclasses.asdict(config.mujoco))),
         "runs": config.runs,
         "jobs": config.jobs,
         "executor": config.executor,
@@ -87,9 +99,11 @@ def config_record(config, assets: Sequence[Asset], reference_meshes: dict[str, P
             "cpd_paper": "the paper's code's CPD: mean |numpy.gradient| per 1 ms sample of the mean distance of the "
             "contact points (missing ones padded with the world origin) from the object origin, whole run "
             "(docs/evaluation.md)",
-            "sim_time_s": "wall-clock seconds per candidate simulation (measured under the sweep's parallel load)",
+            "sim_time_s": "wall-clock seconds per candidate simulation (measured under the sweep's parallel load); "
+            "Drake: its bare AdvanceTo between resets, MuJoCo: its mj_step loop between resets, set points included",
         },
-        "software": {"python": platform.python_version(), "drake": drake_version, "machine": platform.machine(),
+        "software": {"python": platform.python_version(), "drake": drake_version, "mujoco": mujoco_version,
+                     "machine": platform.machine(),
                      "cpus": os.cpu_count()},
     }
 

@@ -57,7 +57,8 @@ def _stable_poses(mesh_path: Path, properties: Path) -> StablePoseCache:
 
 def run_simulations(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows, runs_path,
                     progress: ProgressFn, target: Path, reference_properties: Path | None = None) -> int:
-    """Simulate every reference of ``todo`` (the sweep's plan: candidates by (object, task, run)), then
+    """Simulate every reference of ``todo`` (the sweep's plan: (representation, contact model, simulator)
+    candidates by (object, task, run)), then
     its candidates, as ``executor`` finishes them; each finished row goes into ``rows`` and, at least
     once a second, into ``runs_path``. Returns how many candidate rows were written.
 
@@ -94,15 +95,16 @@ def run_simulations(executor, todo, spec_by, asset_by_name, reference_meshes, co
                 done += 1
                 if kind == "ref":
                     status, payload = result
-                    for rep, cm in todo[key]:
-                        ckey = (rep.object, rep.name, cm, key[1], key[2])
+                    for rep, cm, sim in todo[key]:
+                        ckey = (rep.object, rep.name, cm, sim, key[1], key[2])
                         if status != "ok":
                             rows[ckey] = _private(runs_row(ckey, error=_reference_failed(payload)), target)
                             done += 1
                             simulated += 1
                             continue
                         cjob = CandidateJob(rep.object, rep.name, cm, key[1], key[2], rep.urdf_for(cm), job.run_spec,
-                                            config.scene, config.simulation_error, payload, config.sim_timeout_s)
+                                            config.scene, config.simulation_error, payload, config.sim_timeout_s,
+                                            simulator=sim, model_xml_path=rep.mjcf_path, mujoco=config.mujoco)
                         pending[executor.submit(run_candidate_job, cjob)] = ("cand", ckey, cjob)
                 else:
                     rows[key] = _private(result, target)

@@ -1,11 +1,14 @@
 """The evaluation sweep (paper V-C): every representation of every asset against its reference.
 
 For each asset folder, task and run, the *reference* (the asset's own closed mesh,
-or ``--reference MESH``, simulated with hydroelastic contact) is simulated once;
-then every ``(representation, contact model)`` is simulated on the same
+or ``--reference MESH``, simulated with hydroelastic contact in Drake) is simulated once;
+then every ``(representation, contact model, simulator)`` is simulated on the same
 :class:`~real2sim.evaluate.scene.tasks.RunSpec` and scored against it with
 :mod:`real2sim.evaluate.metrics` (equation error: the candidate is reset to the reference
-state every 0.1 s, unless ``simulation_error`` asks for free roll-outs).
+state every 0.1 s, unless ``simulation_error`` asks for free roll-outs). The simulators
+(``simulators``): Drake with each contact model, and MuJoCo (point contacts only) on the same
+tasks rebuilt around each representation's ``model.xml`` (:mod:`real2sim.evaluate.mujoco`), both
+judged against the one Drake reference.
 
 Independent simulations run in parallel on a local process pool (default) or on
 Ray; the rows are the same either way (only the measured wall times differ).
@@ -14,7 +17,7 @@ Results folder (written by :func:`evaluate`)::
 
     RESULTS/
       runs.csv        one row per simulation (RUN_COLUMNS)
-      summary.csv     one row per <representation>_<contactmodel> (SUMMARY_COLUMNS; Table I layout first)
+      summary.csv     one row per <representation>_<contactmodel>[_<simulator>] (SUMMARY_COLUMNS; Table I layout first)
       config.json     protocol, scene parameters, reference meshes, software versions
       pareto_*.png    trade-off plots (paper Figs. 9, 11-13)
       report.html     everything above on one page
@@ -27,11 +30,11 @@ Crash safety and resuming: the sweep works in a hidden sibling folder
 simulation; ``RESULTS`` itself is replaced (rename) only when the sweep is complete,
 so it is always whole. Running again with the same ``--out`` resumes: rows already
 in runs.csv without an ``error`` are kept and not simulated again (key: object,
-representation, contact_model, task, run); rows that failed are retried. The
+representation, contact_model, simulator, task, run); rows that failed are retried. The
 settings that change what a row means (seed, scene, simulation/equation error,
-reference meshes) must match those stored in ``config.json``, otherwise the sweep
+reference meshes, MuJoCo's settings) must match those stored in ``config.json``, otherwise the sweep
 refuses to mix them (use ``overwrite=True`` / ``--overwrite``). Tasks, contact
-models, runs and assets may change between calls (that is how a sweep is extended);
+models, simulators, runs and assets may change between calls (that is how a sweep is extended);
 summary.csv, the plots and the report always cover every row in runs.csv. A row that
 was torn (cut mid-number by a crash or a full disk: its checksum does not match, see
 :mod:`real2sim.formats.results`) counts as not done and is simulated again.
@@ -59,6 +62,7 @@ from real2sim.evaluate.discovery import (Asset, Representation, discover_assets,
                                          place_reference_mesh, read_canonical_transform)
 from real2sim.evaluate.executors import EXECUTORS, default_jobs, make_executor
 from real2sim.evaluate.inputs import check_inputs
+from real2sim.evaluate.mujoco.config import MujocoConfig
 from real2sim.evaluate.record import check_resume_settings, config_record
 from real2sim.evaluate.schedule import run_simulations
 from real2sim.evaluate.scene.scene_config import SceneConfig
@@ -69,7 +73,8 @@ from real2sim.formats.contact import CONTACT_MODELS
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import output_lock, publish_dir, write_json_atomic
 from real2sim.plumbing.progress import ProgressFn, null_progress
-from real2sim.formats.results import describe_torn, load_runs_csv, row_key, write_runs_csv
+from real2sim.formats.results import (SIMULATOR_CONTACT_MODELS, SIMULATORS, describe_torn, load_runs_csv, row_key,
+                                      write_runs_csv)
 
 
 @dataclass(frozen=True)
@@ -81,6 +86,12 @@ class EvaluationConfig:
     """The tasks to simulate: a non-empty subset of ("push", "ramp"), no repeats."""
     contact_models: tuple[str, ...] = CONTACT_MODELS
     """The candidates' contact models: a non-empty subset of ("point", "hydroelastic"), no repeats."""
+    simulators: tuple[str, ...] = ("drake",)
+    """The simulators the candidates run in: a non-empty subset of ("drake", "mujoco"), no repeats. Each
+    simulates the contact models of ``contact_models`` it has (MuJoCo: point only); the reference is
+    Drake's in every case, so all rows are judged against one truth."""
+    mujoco: MujocoConfig = field(default_factory=MujocoConfig)
+    """MuJoCo's contact and integration settings (read when "mujoco" is in ``simulators``)."""
     runs: int = 10
     """Seeded runs per (object, task); a whole number >= 1 (the paper uses 10)."""
     seed: int = 0
@@ -112,6 +123,15 @@ class EvaluationConfig:
             )
         if len(set(self.tasks)) != len(self.tasks) or len(set(self.contact_models)) != len(self.contact_models):
             raise UserInputError("tasks and contact models must not repeat")
+        if not self.simulators or any(s not in SIMULATORS for s in self.simulators):
+            raise UserInputError(f"unknown simulator in {','.join(self.simulators) or '(none)'}; "
+                                 f"choose from {','.join(SIMULATORS)}")
+        if len(set(self.simulators)) != len(self.simulators):
+            raise UserInputError("simulators must not repeat")
+        for sim in self.simulators:
+            if not self.contact_models_of(sim):
+                raise UserInputError(f"{sim} has no contact model of --contact {','.join(self.contact_models)} "
+                                     f"(it has {','.join(SIMULATOR_CONTACT_MODELS[sim])})")
         if not isinstance(self.runs, int) or self.runs < 1:
             raise UserInputError(f"--runs must be a whole number >= 1, got {self.runs}")
         if not isinstance(self.jobs, int) or self.jobs < 1:
@@ -122,6 +142,10 @@ class EvaluationConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise UserInputError(f"--{name.replace('_', '-')} must be a finite number of seconds > 0, got {value}")
+
+    def contact_models_of(self, simulator: str) -> tuple[str, ...]:
+        """The contact models of ``contact_models`` that ``simulator`` simulates, in their order."""
+        return tuple(c for c in self.contact_models if c in SIMULATOR_CONTACT_MODELS[simulator])
 
 
 @dataclass(frozen=True)
@@ -217,8 +241,14 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
     rows: dict[tuple, dict] = {row_key(r): r for r in table.rows} if table is not None else {}
     if table is not None and table.torn_lines:
         say(f"warning: {describe_torn(table, 'runs.csv')}: simulated again", 0, 0)
+    _check_simulator_inputs(reps, config)
     todo, spec_by, skipped = _plan(reps, config, rows)
     n_candidates = sum(len(v) for v in todo.values())
+    for sim in config.simulators:
+        left_out = [c for c in config.contact_models if c not in config.contact_models_of(sim)]
+        if left_out:  # the simulator's nature, not a fallback: said once, never silent
+            say(f"{sim}: {', '.join(left_out)} contact is not a {sim} contact model; {sim} rows are "
+                f"{', '.join(config.contact_models_of(sim))} only", 0, 0)
     say(f"{len(reps)} representations of {len(assets)} assets: {n_candidates} simulations to run, {skipped} already done",
         0, 0)
 
@@ -272,23 +302,34 @@ def _evaluate_locked(reps, assets, target: Path, inputs, config: EvaluationConfi
     )
 
 
+def _check_simulator_inputs(reps, config: EvaluationConfig) -> None:
+    """Every representation has the model file each simulator reads (before anything is written)."""
+    if "mujoco" in config.simulators:
+        missing = [r for r in reps if not r.mjcf_path.is_file()]
+        if missing:
+            more = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
+            raise UserInputError(f"{missing[0].mjcf_path} is missing{more}: --simulator mujoco reads each "
+                                 "representation's model.xml (build the asset with --format mjcf)")
+
+
 def _plan(reps, config: EvaluationConfig, rows: dict[tuple, dict]
-          ) -> tuple[dict[tuple[str, str, int], list[tuple[Representation, str]]], dict, int]:
-    """The simulations still to run, grouped by reference (object, task, run); each run's spec;
-    and how many rows are done already (failed rows are run again)."""
+          ) -> tuple[dict[tuple[str, str, int], list[tuple[Representation, str, str]]], dict, int]:
+    """The simulations still to run, (representation, contact model, simulator) grouped by reference
+    (object, task, run); each run's spec; and how many rows are done already (failed rows are run again)."""
     done = {k for k, r in rows.items() if not r["error"]}
     specs = {task: make_run_specs(task, config.runs, config.seed) for task in config.tasks}
-    todo: dict[tuple[str, str, int], list[tuple[Representation, str]]] = {}
+    todo: dict[tuple[str, str, int], list[tuple[Representation, str, str]]] = {}
     skipped = 0
     for rep in reps:
         for task in config.tasks:
             for spec in specs[task]:
-                for cm in config.contact_models:
-                    key = (rep.object, rep.name, cm, task, int(spec.run))
-                    if key in done:
-                        skipped += 1
-                        continue
-                    todo.setdefault((rep.object, task, int(spec.run)), []).append((rep, cm))
+                for sim in config.simulators:
+                    for cm in config.contact_models_of(sim):
+                        key = (rep.object, rep.name, cm, sim, task, int(spec.run))
+                        if key in done:
+                            skipped += 1
+                            continue
+                        todo.setdefault((rep.object, task, int(spec.run)), []).append((rep, cm, sim))
     spec_by = {(task, int(s.run)): s for task in config.tasks for s in specs[task]}
     return todo, spec_by, skipped
 

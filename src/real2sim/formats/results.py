@@ -1,5 +1,5 @@
 """The results folder's CSV files: runs.csv (one row per simulation) and summary.csv (one
-row per ``<representation>_<contactmodel>``, the layout of the paper's Table I).
+row per ``<representation>_<contactmodel>`` and simulator, the layout of the paper's Table I).
 
 Written by the evaluation, read by the report; neither imports the other.
 
@@ -10,6 +10,10 @@ checksum is missing or wrong, whose field count is wrong or whose numbers do not
 and reports their line numbers; the sweep simulates them again and the report leaves them
 out. A runs.csv written before the column existed still reads (its rows are unverified,
 but rows with the wrong field count or unparsable numbers are still set aside).
+
+The simulator: every row says which simulator made it (:data:`SIMULATORS`), and it is part of the
+row's key. A runs.csv or summary.csv written before the column existed reads as Drake's (the only
+simulator then); its checksums still verify, being over the columns the file has.
 """
 
 from __future__ import annotations
@@ -29,21 +33,30 @@ from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import write_text_atomic
 
 
+#: The simulators a row can come from; Drake first, the default and the only one before the column existed.
+SIMULATORS = ("drake", "mujoco")
+
+#: The contact models each simulator has (MuJoCo's soft contacts are point contacts: no pressure fields).
+SIMULATOR_CONTACT_MODELS = {"drake": ("point", "hydroelastic"), "mujoco": ("point",)}
+
+#: What a row without a ``simulator`` field (written before the column existed) was simulated in.
+LEGACY_SIMULATOR = "drake"
+
 RUN_COLUMNS = (
-    "object", "representation", "contact_model", "task", "run", "ate_m", "ocae_m", "cpd_m_per_s",
+    "object", "representation", "contact_model", "simulator", "task", "run", "ate_m", "ocae_m", "cpd_m_per_s",
     "cpd_force_weighted_m_per_s", "cpd_paper", "sim_time_s", "sim_duration_s", "real_time_factor", "error",
 )
 
 
 # Added after the first release: a runs.csv without them still reads (as NaN).
-_OPTIONAL_RUN_COLUMNS = ("cpd_force_weighted_m_per_s", "cpd_paper")
+_OPTIONAL_RUN_COLUMNS = ("cpd_force_weighted_m_per_s", "cpd_paper", "simulator")
 
 
 #: Last column of runs.csv: CRC-32 (8 hex digits) of the row's RUN_COLUMNS fields as written.
 CHECK_COLUMN = "row_crc32"
 
 
-KEY_COLUMNS = ("object", "representation", "contact_model", "task", "run")
+KEY_COLUMNS = ("object", "representation", "contact_model", "simulator", "task", "run")
 
 
 FLOAT_COLUMNS = ("ate_m", "ocae_m", "cpd_m_per_s", "cpd_force_weighted_m_per_s", "cpd_paper", "sim_time_s",
@@ -52,7 +65,7 @@ FLOAT_COLUMNS = ("ate_m", "ocae_m", "cpd_m_per_s", "cpd_force_weighted_m_per_s",
 
 SUMMARY_COLUMNS = (
     "representation", "ocae_m", "ate_m", "cpd_m_per_s", "sim_time_s",  # the layout of the paper's Table I
-    "cpd_force_weighted_m_per_s", "cpd_paper", "collision", "contact_model", "sim_duration_s",
+    "cpd_force_weighted_m_per_s", "cpd_paper", "collision", "contact_model", "simulator", "sim_duration_s",
     "real_time_factor", "runs_ok", "runs_failed",
 )
 
@@ -108,6 +121,7 @@ class RunsTable:
 def _parse_row(raw: dict[str, str]) -> dict[str, Any]:
     """One row from its text fields; ValueError when a key is empty or a number does not parse."""
     row: dict[str, Any] = {c: raw.get(c, "") for c in RUN_COLUMNS}
+    row["simulator"] = row["simulator"] or LEGACY_SIMULATOR  # written before the column existed
     if any(not row[c] for c in KEY_COLUMNS):
         raise ValueError("empty key field")
     row["run"] = int(raw["run"])
@@ -190,22 +204,36 @@ def relative_paths_in_text(text: str, base: Path | str) -> str:
 
 
 def row_key(row: dict) -> tuple:
-    return tuple(row[c] for c in KEY_COLUMNS)
+    """The row's KEY_COLUMNS values; a row made before the simulator column is Drake's."""
+    return tuple((row.get(c) or LEGACY_SIMULATOR) if c == "simulator" else row[c] for c in KEY_COLUMNS)
+
+
+def summary_label(collision: str, contact_model: str, simulator: str = LEGACY_SIMULATOR) -> str:
+    """summary.csv's ``representation`` label: ``<collision>_<contactmodel>`` for Drake (as the paper's
+    Table I and every results folder before the simulator column), ``<collision>_<contactmodel>_<simulator>``
+    for any other simulator (``coacd_point_mujoco``)."""
+    return f"{collision}_{contact_model}" if simulator == LEGACY_SIMULATOR else f"{collision}_{contact_model}_{simulator}"
+
+
+def _simulator_rank(simulator: str) -> int:
+    return SIMULATORS.index(simulator) if simulator in SIMULATORS else len(SIMULATORS)
 
 
 def summarize(rows: Sequence[dict]) -> list[dict]:
-    """One row per ``<representation>_<contactmodel>``: means over objects, tasks and runs.
+    """One row per ``<representation>_<contactmodel>`` and simulator (:func:`summary_label`): means over
+    objects, tasks and runs; Drake's rows first, then each other simulator's.
 
     Only rows without an error enter the means (``runs_failed`` counts the others).
     ``sim_time_s`` is the mean wall-clock seconds per simulation, as the paper's ST;
     ``real_time_factor`` is total simulated time over total wall time. CPD ignores
     runs where it is undefined (no sustained contact).
     """
-    groups: dict[tuple[str, str], list[dict]] = {}
+    groups: dict[tuple[str, str, str], list[dict]] = {}
     for r in rows:
-        groups.setdefault((r["representation"], r["contact_model"]), []).append(r)
+        groups.setdefault((r["representation"], r["contact_model"], r.get("simulator") or LEGACY_SIMULATOR),
+                          []).append(r)
     out = []
-    for (rep, cm), group in sorted(groups.items()):
+    for (rep, cm, sim), group in sorted(groups.items(), key=lambda kv: (_simulator_rank(kv[0][2]), kv[0])):
         ok = [r for r in group if not r["error"]]
 
         def mean(col: str, src=ok) -> float:
@@ -216,7 +244,7 @@ def summarize(rows: Sequence[dict]) -> list[dict]:
         total_time = float(np.nansum([r["sim_time_s"] for r in ok])) if ok else math.nan
         total_duration = float(np.nansum([r["sim_duration_s"] for r in ok])) if ok else math.nan
         out.append({
-            "representation": f"{rep}_{cm}",
+            "representation": summary_label(rep, cm, sim),
             "ocae_m": mean("ocae_m"),
             "ate_m": mean("ate_m"),
             "cpd_m_per_s": mean("cpd_m_per_s"),
@@ -225,6 +253,7 @@ def summarize(rows: Sequence[dict]) -> list[dict]:
             "cpd_paper": mean("cpd_paper"),
             "collision": rep,
             "contact_model": cm,
+            "simulator": sim,
             "sim_duration_s": mean("sim_duration_s"),
             "real_time_factor": total_duration / total_time if ok and total_time > 0 else math.nan,
             "runs_ok": len(ok),
@@ -238,6 +267,7 @@ def read_summary_csv(path: Path) -> list[dict]:
     with open(path, newline="") as fh:
         for raw in csv.DictReader(fh):
             row: dict[str, Any] = dict(raw)
+            row["simulator"] = row.get("simulator") or LEGACY_SIMULATOR  # written before the column existed
             for c in FLOAT_COLUMNS:
                 if c in row:
                     row[c] = float(row[c]) if row[c] not in ("", None) else math.nan

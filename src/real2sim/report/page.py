@@ -120,8 +120,8 @@ def _breakdown_table(rows: Sequence[Mapping]) -> str:
 
 
 def _recommendations(summary: Sequence[Mapping]) -> str:
-    from real2sim.report.pareto import (PREFERENCES, RECOMMENDATION_RULES, is_reference_itself, recommend,
-                                        recommend_per_contact_model)
+    from real2sim.report.pareto import PREFERENCES, RECOMMENDATION_RULES, is_reference_itself, recommend, simulator_of
+    from real2sim.report.recommend import describe_trade_off, recommend_per_group
 
     items = []
     for pref in PREFERENCES:
@@ -134,14 +134,23 @@ def _recommendations(summary: Sequence[Mapping]) -> str:
             f"(OCAE {_f(row['ocae_m'])} m, ATE {_f(row['ate_m'])} m, CPD {_f(row['cpd_m_per_s'])} m/s, "
             f"{_f(row['sim_time_s'], 3)} s per run) &mdash; rule: {html.escape(RECOMMENDATION_RULES[pref])}.</li>"
         )
-    # A simulator with one contact model needs the best of that model's rows, which the overall pick
-    # (often a hydroelastic row) does not give: point contact is what MuJoCo, Isaac Sim and PyBullet have.
-    for model, by_pref in recommend_per_contact_model(summary).items():
-        picks = [f"{pref}: <code>{html.escape(str(row['representation']))}</code> "
-                 f"(OCAE {_f(row['ocae_m'])} m, {_f(row['sim_time_s'], 3)} s per run)" for pref, row in by_pref.items()]
-        if picks:
-            who = " (MuJoCo, Isaac Sim, PyBullet)" if model == "point" else ""
-            items.append(f"<li><b>{html.escape(model)} contact only</b>{who}: " + "; ".join(picks) + ".</li>")
+    # A user simulates in one simulator with one contact model: the best of that group's rows, on its own
+    # measured front, which the overall pick (often a Drake hydroelastic row) does not give.
+    by_group = recommend_per_group(summary)
+    if len(by_group) > 1 or any(simulator_of(r) != "drake" for r in summary):
+        for (sim, model), by_pref in by_group.items():
+            picks = [f"{pref}: <code>{html.escape(str(row['representation']))}</code> "
+                     f"(OCAE {_f(row['ocae_m'])} m, {_f(row['sim_time_s'], 3)} s per run; gives up: "
+                     f"{html.escape(describe_trade_off(row, summary) or 'nothing measured')})"
+                     for pref, row in by_pref.items()]
+            mujoco_rows = any(simulator_of(r) == "mujoco" for r in summary)
+            who = (f" (Isaac Sim, PyBullet{'' if mujoco_rows else ', MuJoCo'})"
+                   if (sim, model) == ("drake", "point") else "")
+            label = f"{model} contact only" if sim == "drake" else f"{sim}, {model} contact"
+            items.append(f"<li><b>{html.escape(label)}</b>{who}: " + "; ".join(picks) + ".</li>")
+        items.append("<li>Each pick above is made among its simulator and contact model's rows alone and lies on "
+                     "their measured Pareto front (OCAE against simulation time); 'gives up' compares it with the "
+                     "group's most accurate row and, where the rows hold one, its exact-geometry bound.</li>")
     same = [str(r["representation"]) for r in summary if is_reference_itself(r)]
     note = (
         "<p>Not considered: " + ", ".join(f"<code>{html.escape(n)}</code>" for n in same)

@@ -7,7 +7,9 @@ values growing up and to the right -- so **better is down and to the left** (the
 Fig. 9 flips both axes so that better is up and to the right; the front is the same).
 
 Summary rows are dicts as written to ``summary.csv``: ``representation`` (the
-``<collision>_<contactmodel>`` label), ``ocae_m``, ``ate_m``, ``cpd_m_per_s``, ``sim_time_s``.
+``<collision>_<contactmodel>[_<simulator>]`` label), ``ocae_m``, ``ate_m``, ``cpd_m_per_s``, ``sim_time_s``,
+``collision``, ``contact_model`` and ``simulator`` (absent: Drake's). With rows of several simulators
+each plot draws each simulator's own front (its rows alone), since a user simulates in one of them.
 """
 
 from __future__ import annotations
@@ -40,6 +42,21 @@ SPEED_TOLERANCE = 1.25  # accept time within 25 % of the fastest, then take the 
 SMOOTHNESS_OCAE_TOLERANCE = 1.5  # accept OCAE within 50 % of the best, then take the lowest CPD
 PREFERENCES = ("accuracy", "speed", "smoothness")
 REFERENCE_TOLERANCE_M = 1e-9  # below this OCAE and ATE a row reproduces the reference
+BOUND_PREFIX = "bound_"  # benchmarks' exact-geometry rows (bound_mesh, bound_hull, bound_round): bounds, not fits
+#: Marker per (simulator, contact model); any other pair is a square.
+MARKERS = {("drake", "point"): "o", ("drake", "hydroelastic"): "^", ("mujoco", "point"): "D"}
+FRONT_STYLES = {"drake": "-", "mujoco": "--"}
+
+
+def simulator_of(row: Mapping) -> str:
+    """The row's simulator; a row written before the column existed is Drake's."""
+    return str(row.get("simulator") or "drake")
+
+
+def is_bound(row: Mapping) -> bool:
+    """True for an exact-geometry bound row (``bound_mesh``, ``bound_hull``, ``bound_round``): what a
+    perfect fit could reach, never a representation to choose."""
+    return str(row.get("collision", "")).startswith(BOUND_PREFIX)
 
 
 def is_reference_itself(row: Mapping) -> bool:
@@ -123,28 +140,43 @@ def plot_pareto(rows: Sequence[Mapping], x_key: str, y_key: str, path: Path, tit
     families = sorted({_family(str(r["collision"])) for r in rows})
     cmap = plt.get_cmap("tab10")
     colour = {f: cmap(i % 10) for i, f in enumerate(families)}
-    markers = {"point": "o", "hydroelastic": "^", "other": "s"}
+    simulators = sorted({simulator_of(r) for r in rows}, key=lambda s: (s != "drake", s))
+    if len(simulators) > 1:  # each simulator's own front: a user simulates in one of them
+        mask = np.zeros(len(rows), bool)
+        for sim in simulators:
+            mine = np.array([simulator_of(r) == sim for r in rows])
+            sub = pareto_front(np.stack([x_true[mine], y_true[mine]], axis=1)) & ok[mine]
+            mask[np.flatnonzero(mine)[sub]] = True
 
     fig, ax = plt.subplots(figsize=(7.5, 5.5), dpi=110)
     for i, r in enumerate(rows):
         if not ok[i]:
             continue
         ax.scatter(
-            x[i], y[i], s=60 if mask[i] else 30, marker=markers.get(str(r["contact_model"]), "s"),
+            x[i], y[i], s=60 if mask[i] else 30, marker=MARKERS.get((simulator_of(r), str(r["contact_model"])), "s"),
             color=colour[_family(str(r["collision"]))],
             edgecolors="black" if mask[i] else "none", linewidths=1.2, alpha=1.0 if mask[i] else 0.6, zorder=3,
         )
-    idx = np.flatnonzero(mask)
-    idx = idx[np.argsort(x[idx])]
-    if len(idx):
+    for sim in simulators:
+        idx = np.flatnonzero(mask & np.array([simulator_of(r) == sim for r in rows], bool)) if len(rows) else []
+        idx = np.asarray(idx, dtype=int)
+        idx = idx[np.argsort(x[idx])]
+        if not len(idx):
+            continue
         # Staircase: the front's boundary of the dominated region (better = lower-left).
-        ax.step(x[idx], y[idx], where="post", color="black", linewidth=1, alpha=0.6, zorder=2)
+        ax.step(x[idx], y[idx], where="post", color="black", linewidth=1, alpha=0.6, zorder=2,
+                linestyle=FRONT_STYLES.get(sim, ":"))
         for i in idx:
             text = str(rows[i]["representation"]) + (" (= 0)" if zero[i] else "")
             ax.annotate(text, (x[i], y[i]), textcoords="offset points", xytext=(5, 4), fontsize=7, zorder=4)
     handles = [plt.Line2D([], [], marker="o", linestyle="", color=colour[f], label=f) for f in families]
-    handles += [plt.Line2D([], [], marker=markers[c], linestyle="", color="grey", label=c) for c in ("point", "hydroelastic")]
-    handles += [plt.Line2D([], [], marker="o", linestyle="-", color="black", markerfacecolor="white", label="Pareto front")]
+    pairs = sorted({(simulator_of(r), str(r["contact_model"])) for r in rows}) or [("drake", "point"),
+                                                                                    ("drake", "hydroelastic")]
+    handles += [plt.Line2D([], [], marker=MARKERS.get(p, "s"), linestyle="", color="grey",
+                           label=p[1] if len(simulators) < 2 else f"{p[0]} {p[1]}") for p in pairs]
+    handles += [plt.Line2D([], [], marker="o", linestyle=FRONT_STYLES.get(sim, ":"), color="black",
+                           markerfacecolor="white", label="Pareto front" if len(simulators) < 2 else f"{sim} front")
+                for sim in simulators]
     ax.legend(handles=handles, fontsize=7, loc="best")
     if np.any(ok):
         from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
@@ -197,12 +229,15 @@ def recommend(
     smoothness_tolerance: float = SMOOTHNESS_OCAE_TOLERANCE,
     exclude_reference: bool = True,
     contact_model: str | None = None,
+    simulator: str | None = None,
 ) -> Mapping | None:
     """The summary row to use for a preference; None when no row has the needed metrics.
 
     ``contact_model`` ("point" or "hydroelastic"): choose among that contact model's rows only,
     for a user whose simulator has only that model (MuJoCo, Isaac Sim and PyBullet use point
-    contact); None chooses among all rows.
+    contact); None chooses among all rows. ``simulator`` ("drake", "mujoco"): among that
+    simulator's rows only (:mod:`real2sim.report.recommend` makes one pick per simulator and contact
+    model). Exact-geometry bound rows (:func:`is_bound`) are never chosen.
 
     Rules (each picks a point on the relevant Pareto front, because it is the best
     of a set that is closed under domination, with ties broken by the other metric):
@@ -221,8 +256,11 @@ def recommend(
     both below ``REFERENCE_TOLERANCE_M``, 1 nm) are left out: they are the reference itself
     (e.g. the ``mesh`` baseline with hydroelastic contact), not a simplification to choose.
     """
+    rows = [r for r in rows if not is_bound(r)]
     if exclude_reference:
         rows = [r for r in rows if not is_reference_itself(r)]
+    if simulator is not None:
+        rows = [r for r in rows if simulator_of(r) == simulator]
     if contact_model is not None:
         rows = [r for r in rows if r.get("contact_model") == contact_model]
     if preference == "accuracy":
