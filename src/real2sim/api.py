@@ -19,6 +19,7 @@ from typing import Iterable, Sequence
 
 from real2sim.asset.build import AssetConfig
 from real2sim.asset.build import build_asset as _build
+from real2sim.asset.export.writers import SIMULATOR_FILES  # the file each simulator takes (asset folders' README too)
 from real2sim.collision.fit.config import FitConfig, iteration_limits
 from real2sim.evaluate.sweep import EvaluationConfig, EvaluationResult
 from real2sim.evaluate.sweep import evaluate as _evaluate
@@ -29,17 +30,6 @@ from real2sim.pipeline.run import RunConfig, RunResult, run_pipeline
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.progress import ProgressFn
 
-SIMULATOR_FILES: dict[str, tuple[str, str]] = {
-    "drake": ("model.urdf", "urdf"),
-    "drake_point": ("model_point.urdf", "urdf"),
-    "mujoco": ("scene.xml", "mjcf"),
-    "pybullet": ("model_portable.urdf", "urdf"),
-    "isaac": ("model.usda", "usd"),
-    "gazebo": ("model.sdf", "sdf"),
-    "urdf": ("model_portable.urdf", "urdf"),
-}
-"""The file each simulator takes from a representation's folder, and the ``--format`` that writes it:
-simulator -> (file name, format)."""
 FORMATS = ("urdf", "sdf", "mjcf", "usd")
 
 

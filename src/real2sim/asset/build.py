@@ -10,6 +10,9 @@ is the contract of DESIGN.md ("Files on disk"):
       canonical_transform.json   4x4 from the input mesh frame to the asset frame
       visual/model.obj           textured visual mesh with normals (asset frame)
       <representation>/          model.urdf, [model.sdf], [model.xml for MuJoCo], collision.json, fit_report.json
+      preview.png                the visual mesh beside each representation's collision geometry
+      README.md                  what made the folder, from what, its mass properties, the file per simulator,
+                                 the fit of each representation (real2sim.asset.readme)
 """
 
 from __future__ import annotations
@@ -132,6 +135,7 @@ def build_asset(
     overwrite: bool = False,
     progress: ProgressFn | None = None,
     reuse_from: Path | str | None = None,
+    command: str | None = None,
 ) -> AssetResult:
     """Build the asset folder ``out_dir`` from the mesh at ``mesh_path`` (metres).
 
@@ -140,7 +144,9 @@ def build_asset(
     folder; a representation of the same SPEC whose geometry settings are unchanged there (the
     same mesh bytes and every setting but mass, contact, formats and the list of SPECs, see
     :func:`reusable_representations`) is copied instead of refitted, its model files rewritten
-    with this build's mass properties, contact and formats.
+    with this build's mass properties, contact and formats. ``command``: the command line or call
+    that asked for the build, for the folder's README.md (default: this process's ``real2sim`` command
+    line, or "a call from Python").
     """
     say = progress or null_progress
     out_dir = Path(out_dir)
@@ -201,8 +207,20 @@ def build_asset(
             extra = {"source": config.given_properties_source, "uniform_density": uniform.to_json()}
         write_physical_properties(props, tmp / "physical_properties.json", extra)
         results = _write_representations(solid, props, tmp, out_dir, config, say, reusable)
+        _write_readme_and_preview(tmp, [r.name for r in results], str(mesh_path), command, say)
 
     return AssetResult(Path(out_dir), props, transform, tuple(results))
+
+
+def _write_readme_and_preview(tmp: Path, names: list[str], mesh: str, command: str | None, say: ProgressFn) -> None:
+    """preview.png and README.md into the staged folder ``tmp``, after everything they describe."""
+    from real2sim.asset.readme import PREVIEW_NAME, PREVIEW_PANEL_PX, invocation, write_asset_readme
+    from real2sim.report.preview import write_asset_preview
+
+    say("drawing preview.png, writing README.md", 0, 0)
+    if not write_asset_preview(tmp, tmp / PREVIEW_NAME, names, panel_px=PREVIEW_PANEL_PX):
+        say("warning: no preview.png: the visual mesh could not be read back", 0, 0)
+    write_asset_readme(tmp, mesh=mesh, command=command or invocation())
 
 
 def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tmp: Path, out_dir: Path,

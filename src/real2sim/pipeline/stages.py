@@ -130,7 +130,8 @@ def check_reaches_table(mesh: Path, table_z_m: float) -> None:
 
 
 #: What the asset stage writes into ASSETDIR besides one folder per SPEC (real2sim.asset.build).
-ASSET_FILES = ("asset_config.json", "physical_properties.json", "canonical_transform.json", "visual")
+ASSET_FILES = ("asset_config.json", "physical_properties.json", "canonical_transform.json", "visual", "README.md",
+               "preview.png")
 
 
 def refuse_foreign(asset_dir: Path, manifest: mf.Manifest, names) -> None:

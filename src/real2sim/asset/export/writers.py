@@ -91,6 +91,18 @@ SDF_VERSION = "1.9"
 #: model.sdf, model.xml + scene.xml (MuJoCo), model.usda (USD for Isaac).
 ASSET_FORMATS = ("urdf", "sdf", "mjcf", "usd")
 
+SIMULATOR_FILES: dict[str, tuple[str, str]] = {
+    "drake": ("model.urdf", "urdf"),
+    "drake_point": ("model_point.urdf", "urdf"),
+    "mujoco": ("scene.xml", "mjcf"),
+    "pybullet": ("model_portable.urdf", "urdf"),
+    "isaac": ("model.usda", "usd"),
+    "gazebo": ("model.sdf", "sdf"),
+    "urdf": ("model_portable.urdf", "urdf"),
+}
+"""The file each simulator takes from a representation's folder, and the ``--format`` that writes it:
+simulator -> (file name, format)."""
+
 ET.register_namespace("drake", DRAKE_NS)
 
 
