@@ -14,7 +14,8 @@ from disk, which made one worker's time vary from 70 to 103 s on the same idle m
 
 Reported: objects per hour, speed-up against one worker of the same executor, overhead of the
 one-worker local batch against one by one, Ray against the local pool with the same workers, and the
-mean stage times (from timings.csv), which docs/scaling.md turns into the cost of a 100-object batch.
+mean stage times (from timings.csv), which docs/design-notes/pipeline.md#what-a-batch-costs turns into the
+cost of a 100-object batch.
 
     python benchmarks/bench_batch.py                       # 6 captures, 1 2 4 workers, local and ray
     python benchmarks/bench_batch.py --workers 1 2 --executors local   # what a loaded machine allows

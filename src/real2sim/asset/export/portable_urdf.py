@@ -3,8 +3,8 @@
 ``model.urdf`` is written for Drake: its ellipsoids and capsules are ``drake:ellipsoid`` and
 ``drake:capsule`` elements, which PyBullet, Isaac's URDF importer, Gazebo and ROS parsers
 (urdfdom, yourdfpy) do not know (PyBullet refuses the whole file). ``model.urdf`` keeps
-them because Drake simulates a true ellipsoid or capsule faster and more exactly than any
-polytope of it (docs/formats.md has the measurement). This second file, written for every
+them because Drake then simulates the smooth shape that was fitted, which a polytope of it is not
+(why: docs/design-notes/asset.md#native-and-portable-shapes-in-drake). This second file, written for every
 representation beside ``model.urdf``, holds only standard URDF:
 
 * box, sphere and cylinder as themselves;
