@@ -13,11 +13,13 @@ def register(sub) -> None:
         "objects",
         help="list the bundled objects, or export one as a textured mesh",
         description="Bundled objects are made by code (no downloads): a mustard-like squeeze bottle, "
-        "a soup can and a mug. `real2sim objects` lists them with their suggested mass; "
+        "a soup can, and the shape set (a mug upright and on its side, a bowl, an L-bracket, a hammer, "
+        "a torus, a banana, a gear, a stool). `real2sim objects` lists them with their suggested mass and "
+        "the chord error of their round parts; "
         "`real2sim objects export NAME PATH.obj` writes one (OBJ + MTL + PNG, metres, standing on z = 0).",
     )
     p.add_argument("action", nargs="?", choices=["list", "export"], default="list")
-    p.add_argument("name", nargs="?", help="object to export (bottle, can, mug)")
+    p.add_argument("name", nargs="?", help="object to export (see `real2sim objects`)")
     p.add_argument("path", nargs="?", type=Path, help="output .obj path")
     p.add_argument("--overwrite", action="store_true", help="replace an existing file")
     p.set_defaults(func=run)
@@ -26,11 +28,10 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from real2sim.plumbing.errors import UserInputError
-    from real2sim.geometry.objects import OBJECTS
+    from real2sim.geometry.objects import OBJECTS, listing
 
     if args.action == "list":
-        for obj in OBJECTS.values():
-            print(f"{obj.name:8s} mass {obj.mass_kg:.2f} kg  {obj.description}")
+        print("\n".join(listing()))
         return 0
     if not args.name or not args.path:
         raise UserInputError("usage: real2sim objects export NAME PATH.obj")
