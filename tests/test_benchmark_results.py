@@ -50,9 +50,18 @@ def _is_file_name(cited: str) -> bool:
     return name.endswith((".md", ".json")) and not re.search(r"[*\[\]]|TAG|SECTION|<", name) and name[:-3] != ""
 
 
+def _declares_output(path: Path, number: int) -> bool:
+    """A benchmark's own "Writes benchmarks/results/<name>.md" (its output, which a benchmark not yet run
+    lacks): the line or the one before says write/writes/writing."""
+    if path.parent != ROOT / "benchmarks":
+        return False
+    lines = path.read_text(errors="replace").splitlines()[max(0, number - 2):number]
+    return bool(re.search(r"\b[Ww]rit(e|es|ing)\b", " ".join(lines)))
+
+
 def test_every_cited_result_exists():
     missing = [f"{p.relative_to(ROOT)}:{n}: {c}" for p, n, c in _citations()
-               if _is_file_name(c) and not (ROOT / c.rstrip(".,;:)`")).is_file()]
+               if _is_file_name(c) and not (ROOT / c.rstrip(".,;:)`")).is_file() and not _declares_output(p, n)]
     assert not missing, "cited results that do not exist:\n" + "\n".join(missing)
 
 
