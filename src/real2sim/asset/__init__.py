@@ -9,7 +9,7 @@ _EXPORTS = {
     "AssetResult": "build",
     "RepresentationResult": "build",
     "build_asset": "build",
-    "build_collision": "build",
+    "build_collision": "fits",
     "write_representation": "export.writers",
     "build_urdf": "export.writers",
     "build_sdf": "export.writers",

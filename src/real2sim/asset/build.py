@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import time
 from dataclasses import dataclass
 from pathlib import Path
 import numpy as np
@@ -27,16 +26,15 @@ import trimesh
 
 from real2sim.asset.checks import check_given_com, check_mesh_for_config
 from real2sim.asset.config import AssetConfig, config_record
+from real2sim.asset.fits import fit_all
 from real2sim.asset.reuse import reuse_collision, reusable_representations
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
-from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.contact import ContactProperties
 from real2sim.geometry.mesh_io import export_textured_mesh, load_mesh, validate_mesh
 from real2sim.plumbing.digests import file_sha256
 from real2sim.plumbing.outputs import atomic_output_dir
 from real2sim.formats.physical import MESH_FRAME, PhysicalProperties, write_physical_properties
-from real2sim.plumbing.progress import ProgressFn, null_progress, prefixed
-from real2sim.formats.spec import CollisionSpec
+from real2sim.plumbing.progress import ProgressFn, null_progress
 
 VISUAL_RELPATH = "visual/model.obj"
 
@@ -72,59 +70,6 @@ def geometry_only(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     solid = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=True)
     solid.remove_unreferenced_vertices()
     return solid
-
-
-def build_collision(
-    mesh_canonical: trimesh.Trimesh, spec: CollisionSpec, rep_dir: Path, config: AssetConfig,
-    sdf_cache_dir: Path | str | None = None, progress: ProgressFn | None = None,
-) -> tuple[CollisionGeometry, dict]:
-    """One collision representation of the canonical mesh, with its fitting report.
-
-    Baselines and superquadric fits write their convex pieces under ``rep_dir/pieces``;
-    a primitive fit reports its SDF sampling and iterations to ``progress``. CoACD and V-HACD
-    decompose the closed solid the mesh bounds (:func:`real2sim.asset.bottom.closed_solid`: an open
-    scan is remeshed closed first, and ``input_closed_by`` in the report says so); primitive fits
-    read the mesh's winding number, which holes do not upset.
-    """
-    start = time.perf_counter()
-    if spec.baseline is not None:
-        from real2sim.collision.decomposition import decompose
-
-        closed_by = None
-        if spec.baseline in ("coacd", "vhacd"):
-            from real2sim.asset.bottom import closed_solid
-
-            mesh_canonical = closed_solid(mesh_canonical)
-            closed_by = mesh_canonical.metadata["closed_by"]
-            if closed_by != "as is" and progress is not None:
-                progress(f"the mesh is not closed: {spec.baseline} decomposes it remeshed closed", 0, 0)
-        kwargs = {}
-        if spec.baseline == "coacd" and config.coacd_config is not None:
-            kwargs["coacd_config"] = config.coacd_config
-        if spec.baseline == "vhacd" and config.vhacd_config is not None:
-            kwargs["vhacd_config"] = config.vhacd_config
-        geometry = decompose(mesh_canonical, spec.baseline, rep_dir, seed=config.seed, **kwargs)
-        report = {"method": spec.baseline, "final_loss": None, "device": "cpu"}
-        if closed_by is not None:
-            report["input_closed_by"] = closed_by
-    else:
-        from real2sim.collision.fit.config import FitConfig
-        from real2sim.collision.fit.stage import fit_collision
-
-        geometry, report = fit_collision(
-            mesh_canonical,
-            spec,
-            fit_config=config.fit_config or FitConfig(),
-            cache_dir=sdf_cache_dir,
-            rep_dir=rep_dir,
-            device=config.device,
-            seed=config.seed,
-            progress=progress,
-        )
-        report = dict(report)
-        report.setdefault("method", "primitive fit (paper IV-C3)")
-    report["fit_seconds"] = round(time.perf_counter() - start, 3)
-    return geometry, report
 
 
 def build_asset(
@@ -229,7 +174,6 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
     """Each SPEC's folder in ``tmp``: collision.json, the model files, fit_report.json; a SPEC in
     ``reusable`` is copied from there (:func:`reusable_representations`) instead of fitted."""
     from real2sim.asset.export.writers import write_representation
-    from real2sim.geometry.fidelity import measure_fidelity
 
     results = []
     build_cache = tmp / ".sdf_cache"
@@ -244,31 +188,26 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
                   "filled_volume_m3": float(fitted_solid.volume - solid.volume)}
         say(f"filled {1e6 * filled['filled_volume_m3']:.1f} cm^3 ({100 * filled['filled_volume_m3'] / solid.volume:.0f} % "
             "of the solid)", 0, 0)
+    to_fit = [spec for spec in config.specs if spec.text not in (reusable or {})]
+    for spec in config.specs:
+        (tmp / spec.name).mkdir()
+    fitted = fit_all(solid, fitted_solid, to_fit, tmp, config, sdf_cache, progress=say)
     for spec in config.specs:
         rep_dir = tmp / spec.name
-        rep_dir.mkdir()
         if spec.text in (reusable or {}):
             say(f"collision {spec.text}: unchanged, reused", 0, 0)
             geometry, report = reuse_collision(reusable[spec.text], rep_dir)
         else:
-            say(f"collision {spec.text}: fitting", 0, 0)
-            geometry, report = build_collision(fitted_solid, spec, rep_dir, config, sdf_cache,
-                                               progress=prefixed(say, f"collision {spec.text}"))
-            report = {**report, **(filled or {})}
-            write_collision_json(geometry, rep_dir / "collision.json")
+            geometry, report = fitted[spec.text].geometry, {**fitted[spec.text].report, **(filled or {})}
         write_representation(
             rep_dir, geometry, props, config.contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}",
             formats=config.formats, model_name=spec.name,
         )
         if "reused" not in report:
-            fidelity = measure_fidelity(solid, geometry, rep_dir, seed=config.seed)
-            if filled is not None:  # how well it fits what it was fitted to, beside the true solid
-                to_filled = measure_fidelity(fitted_solid, geometry, rep_dir, seed=config.seed)
-                fidelity["filled_solid"] = {"iou": to_filled["iou"], "chamfer_mm": to_filled["chamfer_mm"]}
             report = {
                 "spec": spec.text,
                 "num_primitives": len(geometry.shapes),
-                **fidelity,
+                **fitted[spec.text].fidelity,
                 **report,
             }
         if "mjcf" in config.formats:

@@ -83,6 +83,10 @@ class AssetConfig:
     given_properties_source: str = ""
     """Path of the file :attr:`given_properties` were read from: named in messages and in
     asset_config.json, and declared as an input the output may not touch. "": none (given in code)."""
+    fit_workers: int | None = None
+    """Processes that fit the collision SPECs side by side, >= 1; None: one per thread this process may
+    use, at most one per SPEC (:func:`real2sim.asset.fits.fit_processes`). It changes results only by the
+    rounding of sums split over other threads, so asset_config.json does not record it (why: docs/design-notes/asset.md#fits-side-by-side)."""
     fill_cavities_m: float | None = None
     """None, or the radius (m, > 0) of a ball the collision fits see the solid closed with
     (:func:`real2sim.geometry.envelope.filled_envelope`): a cup's cavity or a handle's hole narrower
@@ -105,6 +109,8 @@ class AssetConfig:
                 f"{100 * MASS_AGREEMENT_RTOL:g} % of it); give one of them")
         if self.fill_cavities_m is not None and not (np.isfinite(self.fill_cavities_m) and self.fill_cavities_m > 0):
             raise UserInputError(f"--fill-cavities-m must be a radius > 0 m, got {self.fill_cavities_m}")
+        if self.fit_workers is not None and not (isinstance(self.fit_workers, int) and self.fit_workers >= 1):
+            raise UserInputError(f"--fit-workers must be a whole number >= 1, got {self.fit_workers}")
         names = [s.name for s in self.specs]
         if len(set(names)) != len(names):
             raise UserInputError(f"a collision SPEC is given twice: {names}")

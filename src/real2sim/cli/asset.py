@@ -86,6 +86,9 @@ def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX)
     p.add_argument("--device", type=device, default="cpu", help="torch device for primitive fitting: cpu, cuda, cuda:N (default cpu)")
     g = p.add_argument_group("primitive fitting (paper IV-C3)")
     g.add_argument("--iterations", type=integer(1, 100_000), default=None, metavar="N", help="maximum fitting iterations (default 1000)")
+    g.add_argument("--fit-workers", type=integer(1, 1024), default=None, metavar="N",
+                   help="processes fitting the SPECs side by side (default: one per thread this command may use, "
+                   "see --threads; at most one per SPEC)")
     g.add_argument("--fit-parameterization", choices=["direct", "network"], default=None,
                    help="optimise the primitive parameters directly (default, measured better) or through the "
                    "paper's over-parameterized network g_theta()")
@@ -213,6 +216,7 @@ def config_from_args(args: argparse.Namespace):
         device=args.device,
         contact=contact,
         fit_config=fit_config,
+        fit_workers=args.fit_workers,
         coacd_config=coacd_config,
         vhacd_config=vhacd_config,
         sdf_cache_dir=args.sdf_cache,

@@ -22,6 +22,7 @@ FIELD_OF_FLAG: dict[str, str | tuple[str, str]] = {
     "--sdf-cache": ("AssetConfig.sdf_cache_dir", "a path flag names the folder, not its type"),
     "--properties": ("AssetConfig.given_properties", "the flag names the file; the field holds what it says"),
     "--iterations": ("FitConfig.max_iterations", "the fit's one budget a user sets; the early-stop floor follows it"),
+    "--fit-workers": "AssetConfig.fit_workers",
     "--fit-parameterization": ("FitConfig.parameterization", "fit- says which stage's parameterization"),
     "--fit-paper-loss": ("FitConfig.inside_loss", "a switch to the paper's loss, not the loss's name"),
     "--contact-weight": "FitConfig.contact_weight",

@@ -6,9 +6,9 @@ stage of its own). They stand in for the paper's YCB mustard bottle and tomato
 soup can, plus the shape set (:mod:`real2sim.geometry.shape_set`: a mug upright and
 on its side, a bowl, an L-bracket, a hammer, a torus, a banana, a gear, a stool),
 convex to very non-convex. Round parts are cut into flats at most
-:data:`REFERENCE_SAGITTA_M` deep per curved direction, so each object's chord error
-(:attr:`BundledObject.chord_m`) is 0 (boxes, prisms), 2.5 um (cylinders: the can, the
-stool, the hammer) or 5 um (curved both ways: the bottle, mug, bowl, torus, banana).
+:data:`REFERENCE_SAGITTA_M` deep around their axis and ten times that along a curved profile, so
+each object's chord error (:attr:`BundledObject.chord_m`) is 0 (boxes, prisms), 2.5 um (cylinders:
+the can, the stool, the hammer) or 27.5 um (curved both ways: the bottle, mug, bowl, torus, banana).
 
 * :func:`make_object` -- the watertight geometry (vertices merged), for
   geometry stages and tests.
@@ -31,7 +31,7 @@ from PIL import Image
 from real2sim.plumbing.errors import UserInputError
 from real2sim.geometry import shape_set
 from real2sim.geometry.mesh_io import export_textured_mesh
-from real2sim.geometry.round_surfaces import DENSE_PER_M, Revolved, arc, dense_curve, revolve, ring_sections, simplify_profile
+from real2sim.geometry.round_surfaces import DENSE_PER_M, PROFILE_SAGITTA_FACTOR, Revolved, arc, dense_curve, revolve, ring_sections, simplify_profile
 
 _TEXTURE_PX = 512
 # Cylindrical UVs wrap once around; faces crossing the seam get u + 1, so the
@@ -40,12 +40,10 @@ _U_SPAN = 1.25
 
 REFERENCE_SAGITTA_M = 2.5e-6
 """How far, at most, a flat of a bundled object's mesh lies from the true round surface it stands
-for, per curved direction (around an axis of revolution; along a curved profile), m. A rolling body
-rolls on its flats and the ramp sees them: against a can round to 0.16 um, flats 32 / 8.1 / 2.5 um
-deep score 10.8 / 3.5 / 1.1 mm OCAE on the ramp (benchmarks/results/tessellation.md), so the bundled
-can's 72 sections (32 um) cost more than the gap between the best rows of Table I, while 2.5 um is
-10x below them; finer costs faces (the bottle, curved both ways: ~48k at 2.5 um) and Drake's
-hydroelastic reference time grows with them (why: docs/design-notes/asset.md#bundled-objects-tessellation)."""
+for around an axis of revolution, m (along a curved profile
+:data:`~real2sim.geometry.round_surfaces.PROFILE_SAGITTA_FACTOR` times this). A rolling body rolls
+across these flats and the ramp sees them: 2.5 um is 10x below the gaps between the best rows of
+Table I (why: docs/design-notes/asset.md#bundled-objects-tessellation)."""
 
 # Flats of a can or bottle body round enough for a body that rolls on its side, for the
 # benchmarks that compare tessellations (bench_tessellation, bench_run --round-can).
@@ -83,8 +81,11 @@ class BundledObject:
 
     @property
     def chord_m(self) -> float:
-        """Stated chord error of its mesh as bundled: the farthest a flat lies from the true surface, m."""
-        return self.curved_directions * REFERENCE_SAGITTA_M
+        """Stated chord error of its mesh as bundled: the farthest a flat lies from the true surface, m
+        (around the axis :data:`REFERENCE_SAGITTA_M`, along a curved profile
+        :data:`~real2sim.geometry.round_surfaces.PROFILE_SAGITTA_FACTOR` times it)."""
+        around = REFERENCE_SAGITTA_M if self.curved_directions >= 1 else 0.0
+        return around + (PROFILE_SAGITTA_FACTOR * REFERENCE_SAGITTA_M if self.curved_directions >= 2 else 0.0)
 
 
 def _rings(radius_m: float, sagitta_m: float) -> int:
@@ -112,14 +113,14 @@ def _bottle(sagitta_m: float) -> Built:
         body[1:],
         dense_curve(np.array([body[-1], [0.016, 0.163], [0.0, 0.163]]))[1:],
     ])
-    shell = revolve(simplify_profile(profile, sagitta_m), _rings(float(profile[:, 0].max()), sagitta_m))
+    shell = revolve(simplify_profile(profile, PROFILE_SAGITTA_FACTOR * sagitta_m), _rings(float(profile[:, 0].max()), sagitta_m))
     stretch = (1.0, 0.64, 1.0)
     shell.apply_scale(stretch)
     cap = dense_curve(np.array([[0.0, 0.160], [0.0135, 0.160], [0.0135, 0.182], [0.0, 0.182]]))
     nozzle = dense_curve(np.array([[0.0, 0.182], [0.007, 0.182], [0.0, 0.190]]))
     parts = [shell]
     for p in (cap, nozzle):
-        part = revolve(simplify_profile(p, sagitta_m), _rings(float(p[:, 0].max()), sagitta_m))
+        part = revolve(simplify_profile(p, PROFILE_SAGITTA_FACTOR * sagitta_m), _rings(float(p[:, 0].max()), sagitta_m))
         part.apply_translation([0.008, 0.0, 0.0])
         parts.append(part)
     surfaces = (Revolved((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), profile, stretch),
@@ -141,7 +142,7 @@ def _mug(sagitta_m: float) -> Built:
     cup = trimesh.boolean.difference([revolve(outer, _rings(0.040, sagitta_m)), revolve(cavity, _rings(0.037, sagitta_m))],
                                      engine="manifold")
     tube = arc((0.026, 0.0), 0.006, 0.0, 2 * np.pi)
-    handle = revolve(simplify_profile(tube, sagitta_m), _rings(0.032, sagitta_m))  
+    handle = revolve(simplify_profile(tube, PROFILE_SAGITTA_FACTOR * sagitta_m), _rings(0.032, sagitta_m))  
     handle.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
     handle.apply_translation([0.048, 0.0, 0.050])
     # Cut the part of the ring that would poke into the cavity.

@@ -82,6 +82,14 @@ def _corners(dense: np.ndarray) -> np.ndarray:
     return np.unique(np.concatenate([[0], 1 + np.flatnonzero(turn > 0.05), [len(dense) - 1]]))
 
 
+PROFILE_SAGITTA_FACTOR = 10.0
+"""How much deeper a flat along a profile may lie than one around the axis of revolution: a body
+rolling on its side rolls across the flats around its axis, which the ramp's orientation error
+feels, while the flats along its profile lie along the contact line; 10x keeps the bottle's
+reference mesh near 12k faces rather than 48k, whose Drake reference simulation took 20x longer
+(why: docs/design-notes/asset.md#bundled-objects-tessellation)."""
+
+
 def simplify_profile(dense: np.ndarray, chord_m: float) -> np.ndarray:
     """A greedy subset of a dense profile ``dense`` (N, 2) whose chords stay within ``chord_m`` of
     every dense point they skip; its ends and corners are kept, so flat faces stay flat."""

@@ -13,7 +13,7 @@ import numpy as np
 import trimesh
 from trimesh.transformations import rotation_matrix
 
-from real2sim.geometry.round_surfaces import Revolved, arc, dense_curve, revolve, ring_sections, simplify_profile
+from real2sim.geometry.round_surfaces import PROFILE_SAGITTA_FACTOR, Revolved, arc, dense_curve, revolve, ring_sections, simplify_profile
 
 Z = (0.0, 0.0, 1.0)
 
@@ -24,7 +24,7 @@ def _union(meshes: list[trimesh.Trimesh]) -> trimesh.Trimesh:
 
 def _solid(profile: np.ndarray, sagitta_m: float, curved_profile: bool) -> trimesh.Trimesh:
     """A profile revolved about z, its rings and (when curved) its profile to ``sagitta_m``."""
-    points = simplify_profile(profile, sagitta_m) if curved_profile else profile
+    points = simplify_profile(profile, PROFILE_SAGITTA_FACTOR * sagitta_m) if curved_profile else profile
     return revolve(points, ring_sections(float(np.max(profile[:, 0])), sagitta_m))
 
 

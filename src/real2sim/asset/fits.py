@@ -1,0 +1,219 @@
+"""The collision fits of one asset build, side by side: one process per SPEC, sized to the threads
+this process may use, so that processes times threads never exceeds them.
+
+A primitive fit on a laptop CPU is many small tensor operations, which a second thread speeds up
+less than a second fit does (why: docs/design-notes/asset.md#fits-side-by-side). Every fit is seeded
+on its own, so which process fits a SPEC, and in which order they finish, changes no result.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import queue
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+import trimesh
+
+from real2sim.asset.config import AssetConfig
+from real2sim.formats.collision import CollisionGeometry, write_collision_json
+from real2sim.formats.spec import CollisionSpec
+from real2sim.plumbing.progress import ProgressFn, null_progress, prefixed
+
+#: Seconds between two looks at the workers' progress messages.
+POLL_S = 0.2
+
+
+@dataclass(frozen=True)
+class Fitted:
+    """One SPEC's collision geometry, its fitting report and its fidelity against the solid."""
+
+    geometry: CollisionGeometry
+    report: dict
+    fidelity: dict
+
+
+def build_collision(
+    mesh_canonical: trimesh.Trimesh, spec: CollisionSpec, rep_dir: Path, config: AssetConfig,
+    sdf_cache_dir: Path | str | None = None, progress: ProgressFn | None = None,
+) -> tuple[CollisionGeometry, dict]:
+    """One collision representation of the canonical mesh, with its fitting report.
+
+    Baselines and superquadric fits write their convex pieces under ``rep_dir/pieces``;
+    a primitive fit reports its SDF sampling and iterations to ``progress``. CoACD and V-HACD
+    decompose the closed solid the mesh bounds (:func:`real2sim.asset.bottom.closed_solid`: an open
+    scan is remeshed closed first, and ``input_closed_by`` in the report says so); primitive fits
+    read the mesh's winding number, which holes do not upset.
+    """
+    start = time.perf_counter()
+    if spec.baseline is not None:
+        from real2sim.collision.decomposition import decompose
+
+        closed_by = None
+        if spec.baseline in ("coacd", "vhacd"):
+            from real2sim.asset.bottom import closed_solid
+
+            mesh_canonical = closed_solid(mesh_canonical)
+            closed_by = mesh_canonical.metadata["closed_by"]
+            if closed_by != "as is" and progress is not None:
+                progress(f"the mesh is not closed: {spec.baseline} decomposes it remeshed closed", 0, 0)
+        kwargs = {}
+        if spec.baseline == "coacd" and config.coacd_config is not None:
+            kwargs["coacd_config"] = config.coacd_config
+        if spec.baseline == "vhacd" and config.vhacd_config is not None:
+            kwargs["vhacd_config"] = config.vhacd_config
+        geometry = decompose(mesh_canonical, spec.baseline, rep_dir, seed=config.seed, **kwargs)
+        report = {"method": spec.baseline, "final_loss": None, "device": "cpu"}
+        if closed_by is not None:
+            report["input_closed_by"] = closed_by
+    else:
+        from real2sim.collision.fit.config import FitConfig
+        from real2sim.collision.fit.stage import fit_collision
+
+        geometry, report = fit_collision(
+            mesh_canonical,
+            spec,
+            fit_config=config.fit_config or FitConfig(),
+            cache_dir=sdf_cache_dir,
+            rep_dir=rep_dir,
+            device=config.device,
+            seed=config.seed,
+            progress=progress,
+        )
+        report = dict(report)
+        report.setdefault("method", "primitive fit (paper IV-C3)")
+    report["fit_seconds"] = round(time.perf_counter() - start, 3)
+    return geometry, report
+
+
+def fit_and_measure(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, spec: CollisionSpec, rep_dir: Path,
+                    config: AssetConfig, sdf_cache: Path | str | None, progress: ProgressFn | None = None) -> Fitted:
+    """``spec`` fitted to ``fitted_solid`` into ``rep_dir`` (its collision.json written), and its fidelity
+    against ``solid`` (and against ``fitted_solid`` when that is another, cavity-filled solid)."""
+    from real2sim.geometry.fidelity import measure_fidelity
+
+    geometry, report = build_collision(fitted_solid, spec, rep_dir, config, sdf_cache, progress=progress)
+    write_collision_json(geometry, rep_dir / "collision.json")
+    fidelity = measure_fidelity(solid, geometry, rep_dir, seed=config.seed)
+    if fitted_solid is not solid:  # how well it fits what it was fitted to, beside the true solid
+        to_filled = measure_fidelity(fitted_solid, geometry, rep_dir, seed=config.seed)
+        fidelity["filled_solid"] = {"iou": to_filled["iou"], "chamfer_mm": to_filled["chamfer_mm"]}
+    return Fitted(geometry, report, fidelity)
+
+
+def fit_processes(config: AssetConfig, fits: int) -> int:
+    """How many processes fit side by side: ``config.fit_workers``, else one per thread this process
+    may use (``torch.get_num_threads()``: ``--threads``, a batch worker's share), at most one per fit.
+    A GPU fit stays in this process: CUDA does not survive a fork, and one GPU gains nothing."""
+    if config.device != "cpu":
+        return 1
+    budget = max(1, torch.get_num_threads())
+    wanted = config.fit_workers if config.fit_workers is not None else budget
+    return max(1, min(wanted, fits, budget))
+
+
+def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[CollisionSpec], folder: Path,
+            config: AssetConfig, sdf_cache: Path | str | None, progress: ProgressFn | None = None) -> dict[str, Fitted]:
+    """Every SPEC of ``specs`` fitted into ``folder/<spec.name>`` (which must exist), by SPEC text.
+
+    With more than one process (:func:`fit_processes`) each fit runs in a fresh ``python -m
+    real2sim.asset.fit_worker`` process with its share of the threads (a subprocess rather than a
+    multiprocessing pool, which would re-run a user's unguarded script), its progress coming back to
+    ``progress`` line by line. The signed-distance samples the primitive fits share are made once,
+    here, first.
+    """
+    say = progress or null_progress
+    workers = fit_processes(config, len(specs))
+    for spec in specs:
+        say(f"collision {spec.text}: fitting", 0, 0)
+    if workers == 1:
+        return {spec.text: fit_and_measure(solid, fitted_solid, spec, folder / spec.name, config, sdf_cache,
+                                           progress=prefixed(say, f"collision {spec.text}")) for spec in specs}
+    if sum(spec.baseline is None for spec in specs) > 1 and sdf_cache is not None:
+        from real2sim.collision.sdf_sampling import SdfSamplingConfig, sample_sdf
+
+        say("sampling the signed distance the primitive fits share", 0, 0)
+        sample_sdf(fitted_solid, SdfSamplingConfig(), cache_dir=sdf_cache)
+    threads = max(1, torch.get_num_threads() // workers)
+    say(f"fitting {len(specs)} collision SPECs in {workers} processes of {threads} thread(s) each", 0, 0)
+    jobs = folder / ".fit_jobs"
+    jobs.mkdir(exist_ok=True)
+    waiting, running, done = list(specs), {}, {}
+    lines: queue.Queue = queue.Queue()
+    try:
+        while waiting or running:
+            while waiting and len(running) < workers:
+                spec = waiting.pop(0)
+                job = jobs / f"{spec.name}.pkl"
+                job.write_bytes(pickle.dumps((solid, fitted_solid, spec, folder / spec.name, config, sdf_cache, threads)))
+                proc = subprocess.Popen([sys.executable, "-m", "real2sim.asset.fit_worker", str(job)], stdout=subprocess.PIPE,
+                                        text=True, env={**os.environ, "OMP_NUM_THREADS": str(threads)})
+                threading.Thread(target=_forward, args=(proc.stdout, lines), daemon=True).start()
+                running[spec.text] = (proc, job)
+            _drain(lines, say)
+            for text, (proc, job) in list(running.items()):
+                if proc.poll() is not None:
+                    proc.stdout.close()
+                    done[text] = _result(job, proc.returncode)
+                    del running[text]
+            if running:
+                time.sleep(POLL_S)
+        _drain(lines, say)
+    finally:
+        for proc, _ in running.values():
+            proc.terminate()
+        for proc, _ in running.values():
+            proc.wait()
+        shutil.rmtree(jobs, ignore_errors=True)
+    return {spec.text: done[spec.text] for spec in specs}
+
+
+def _forward(stream, lines: queue.Queue) -> None:
+    for line in stream:
+        lines.put(line)
+
+
+def _drain(lines: queue.Queue, say: ProgressFn) -> None:
+    while True:
+        try:
+            message, done, total = json.loads(lines.get_nowait())
+        except queue.Empty:
+            return
+        say(message, done, total)
+
+
+def _result(job: Path, returncode: int) -> Fitted:
+    """A worker's Fitted, or its exception raised here (one that never wrote one: a RuntimeError)."""
+    out = job.with_suffix(".out")
+    if not out.exists():
+        raise RuntimeError(f"the fit worker for {job.stem} ended with exit status {returncode} and no result")
+    result = pickle.loads(out.read_bytes())
+    if isinstance(result, BaseException):
+        raise result
+    return result
+
+
+def work_on(job: Path) -> int:
+    """What a worker process does (:mod:`real2sim.asset.fit_worker`): fit the pickled job, write its
+    Fitted (or its exception) beside it."""
+    solid, fitted_solid, spec, rep_dir, config, sdf_cache, threads = pickle.loads(job.read_bytes())
+    torch.set_num_threads(threads)  # a process of our own: its pool is ours to size
+
+    def report(message: str, done: int, total: int) -> None:
+        print(json.dumps([message, done, total]), flush=True)
+
+    try:
+        result: Fitted | BaseException = fit_and_measure(solid, fitted_solid, spec, rep_dir, config, sdf_cache,
+                                                         progress=prefixed(report, f"collision {spec.text}"))
+    except Exception as exc:  # raised again in the build's process, which reports it
+        result = exc
+    job.with_suffix(".out").write_bytes(pickle.dumps(result))
+    return 0
