@@ -11,9 +11,11 @@ v_W, omega_B) with omega in the body frame; :func:`mujoco_state` and :func:`drak
 
 As in Drake each simulation runs twice on the same model: the timed run (``mj_step`` from reset to
 reset, the actuators' set point written before each scene step, as a controller would; ``sim_time_s``
-is its wall time) and the instrumented run (the state and the object's contacts read after every scene
-step, ``mj_forward`` first so the contacts are those of that sample's state, as Drake's unsampled
-port gives them). MuJoCo is deterministic: both end in the same state (a RuntimeWarning if not).
+is its wall time) and the instrumented run (the state read at every scene step, and the object's
+contacts of that sample's state, as Drake's unsampled port gives them: those ``mj_step`` found when it
+stepped from the sample, at a reset those of the prediction, by one ``mj_forward`` before the reset, and
+at the last sample by one more). MuJoCo is deterministic: both end in the same state (a RuntimeWarning
+if not).
 """
 
 from __future__ import annotations
@@ -188,12 +190,13 @@ def simulate_candidate_mujoco(model_xml: Path, run_spec: RunSpec, scene_config: 
     resets = set(int(r) for r in reset_steps)
 
     def log(i: int) -> None:
-        mujoco.mj_forward(m, d)
         qpos = d.qpos[scene.object_qpos]
         oq[i] = np.concatenate([qpos[3:7], qpos[:3]])
         ov[i] = drake_velocity(qpos, d.qvel[scene.object_dof])
         aq[i] = d.qpos[scene.actuated_qpos]
         av[i] = d.qvel[scene.actuated_dof]
+
+    def log_contacts() -> None:
         pts, forces = _contacts(scene, force6)
         contacts_w.append(pts)
         forces_w.append(forces)
@@ -202,15 +205,25 @@ def simulate_candidate_mujoco(model_xml: Path, run_spec: RunSpec, scene_config: 
     log(0)
     t0 = time.perf_counter()
     for i in range(n):
+        d.ctrl[:] = scene.set_points[i]
+        # One step from the sample: mj_step's contacts are those of the state it stepped from. At a reset
+        # (the prediction's contacts) or with several MuJoCo steps per sample: one mj_forward first.
+        cheap = substeps == 1 and i not in resets
+        if not cheap:
+            mujoco.mj_forward(m, d)
+            log_contacts()
         if i in resets:
             _set_state(scene, reference, i, dt, label)
-        d.ctrl[:] = scene.set_points[i]
         mujoco.mj_step(m, d, substeps)
+        if cheap:
+            log_contacts()
         log(i + 1)
         if (i + 1) % 100 == 0 or i + 1 == n:
             _check(scene, label, (i + 1) * dt)
         if (i + 1) % CHUNK_STEPS == 0:
             deadline.check(label, (i + 1) * dt)
+    mujoco.mj_forward(m, d)
+    log_contacts()  # the last sample's
     instrumented_time_s = time.perf_counter() - t0
     if not np.array_equal(d.qpos, timed_final):
         warnings.warn(f"{label}: timed and instrumented runs ended apart (max |dq| "
