@@ -32,31 +32,24 @@ class Dense:
     true_height_m: float
 
 
-def _dense_capture(root: Path, name: str, views: int, width: int, height: int, side_px: int) -> Dense:
+def _dense_capture(root: Path, name: str, views: int, width: int, height: int, side_px: int,
+                   supersample: int = 2) -> Dense:
     from PIL import Image
 
     from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld
     from real2sim.formats.dataset import read_ground_truth
     from real2sim.geometry.objects import make_textured_object
-    from real2sim.multiview.fusion import FusionConfig, consistent_depth, fused_points
-    from real2sim.multiview.solid import object_solid, solid_masks
-    from real2sim.multiview.stereo import StereoConfig, depth_maps
-    from real2sim.multiview.support import support_and_object
+    from real2sim.multiview.dense import DenseConfig, dense_geometry, geometry_masks
     from real2sim.multiview.views import load_views
 
     mesh = make_textured_object(name)
-    capture_handheld(mesh, root, HandheldConfig(views=views, width=width, height=height, seed=1, close_fraction=0.4))
+    capture_handheld(mesh, root, HandheldConfig(views=views, width=width, height=height, seed=1, close_fraction=0.4,
+                                                supersample=supersample))
     ds = read_ground_truth(root)
     posed = load_views(ds, need_masks=True)
-    stereo = StereoConfig(max_side_px=side_px, levels=2 if side_px <= 240 else 3)
-    maps = depth_maps(posed, stereo)
-    fusion = FusionConfig()
-    trusted = consistent_depth(maps, fusion) >= fusion.min_agreeing
-    dense = fused_points(maps, trusted.astype(int) * fusion.min_agreeing, fusion)
-    k = maps.intrinsics
-    scene = support_and_object(dense, maps.c2w_cv, k.fl_x, min(k.width, k.height))
-    solid = object_solid(maps, trusted, scene, dense)
-    masks = solid_masks(solid, posed.intrinsics, posed.c2w_cv, posed.rgb)
+    geometry = dense_geometry(posed, DenseConfig(probe_side_px=side_px))
+    maps, trusted, dense, scene = geometry.maps, geometry.trusted, geometry.dense, geometry.scene
+    masks = geometry_masks(geometry, posed).astype(np.float32)
     h, w = maps.depth.shape[1:]
     true_depth = []
     for frame in ds.frames:
@@ -71,8 +64,8 @@ def _dense_capture(root: Path, name: str, views: int, width: int, height: int, s
 
 @pytest.fixture(scope="module")
 def mug(tmp_path_factory) -> Dense:
-    """The mug, 12 photos at 240x180, depth found at that size."""
-    return _dense_capture(tmp_path_factory.mktemp("dense") / "mug", "mug", 12, 240, 180, 240)
+    """The mug, 12 photos at 240x180 rendered without supersampling, depth found at that size."""
+    return _dense_capture(tmp_path_factory.mktemp("dense") / "mug", "mug", 12, 240, 180, 240, supersample=1)
 
 
 def _depth_errors(d: Dense) -> tuple[np.ndarray, float]:

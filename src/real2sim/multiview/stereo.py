@@ -7,9 +7,11 @@ between bounds from the sparse points, or from the cameras' common region when t
 cross-correlation of a small window of the reference's grey image with the neighbour's, warped
 through that depth; a pixel's cost is the mean over the better half of its neighbours, so that a
 neighbour that does not see the point (occluded, outside its picture) does not count. The sweep runs
-first on a quarter-size image over the whole range, with as many planes as the widest neighbour's
-disparity swing has pixels there, then twice more at double the size over a few steps around the
-depth found, and ends with a parabola through the best cost and its two neighbours (sub-step depth).
+first on a small image (about :attr:`StereoConfig.coarsest_side_px` long) over the whole range, with as many
+planes as the widest neighbour's disparity swing has pixels there (at most ``max_planes``), then at double the
+size, again and again up to the working size, over a few steps around the depth found, and ends with a
+parabola through the best cost and its two neighbours (sub-step depth). The hypotheses go a few planes at a
+time, and the five window sums a colour correlation needs are running sums (:func:`box_sum`).
 
 Frames: the views' world frame (any unit: a COLMAP model's or metres); depth is along each camera's
 optical axis (OpenCV axes), in world units. Pixel centres at +0.5.
@@ -32,7 +34,8 @@ class StereoConfig:
 
     max_side_px: int = 640
     """Longer side of the images the depth is found on, pixels (>= 64); a 1920x1080 photo becomes 640x360.
-    Finer costs time as its square and, measured, gains little (docs/design-notes/reconstruct.md#dense-stereo)."""
+    Finer costs time as its square and, measured, gains little (docs/design-notes/reconstruct.md#dense-stereo);
+    :func:`real2sim.multiview.dense.dense_geometry` chooses it from the object's size in the photos."""
     neighbours: int = 4
     """Neighbour views each reference view is matched against (>= 1)."""
     min_angle_deg: float = 3.0
@@ -40,12 +43,19 @@ class StereoConfig:
     baseline cannot tell depth."""
     window_px: int = 7
     """Side of the correlation window, pixels at each level's size (odd, >= 3)."""
-    levels: int = 3
-    """Pyramid levels (>= 1): the sweep starts at ``2 ** (levels - 1)`` times smaller than the working size."""
-    max_planes: int = 192
-    """At most this many depth planes on the coarsest level (a wide baseline asks for more)."""
-    refine_steps: int = 4
-    """A finer level tries the depth found above and this many steps of half its spacing on either side."""
+    coarsest_side_px: int = 160
+    """The sweep over the whole depth range runs on images about this long (longer side, pixels, >= 16), each
+    finer level twice as long up to the working size: as many levels as that takes."""
+    max_planes: int = 96
+    """At most this many depth planes on the coarsest level (a wide baseline asks for more): the coarse sweep
+    was two thirds of the time at 192, and 96 kept the trusted depths as accurate (9 % fewer of them)."""
+    refine_steps: int = 2
+    """A finer level tries the depth found above and this many steps of half its spacing on either side: two
+    reach the coarser level's neighbouring planes (4 took a third longer for the same depths)."""
+
+    def levels(self, side_px: int) -> int:
+        """Pyramid levels for a working size whose longer side is ``side_px``."""
+        return 1 + max(0, int(round(np.log2(max(side_px, 1) / self.coarsest_side_px))))
 
 
 @dataclass(frozen=True)
@@ -118,9 +128,10 @@ def image_pyramid(rgb: np.ndarray, size: tuple[int, int], levels: int) -> list[t
     return out
 
 
-def box_mean(x: torch.Tensor, window: int) -> torch.Tensor:
-    """Mean of ``x`` (..., h, w) over a ``window`` square around each pixel (the image's inside only), by
-    running sums: four passes over ``x`` whatever the window, where pooling took twice as long."""
+def box_sum(x: torch.Tensor, window: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Sums of ``x`` (..., h, w) over a ``window`` square around each pixel (the image's inside only), by
+    running sums (four passes over ``x`` whatever the window, where pooling took twice as long), and the
+    pixels each sum holds, (h, w)."""
     r = window // 2
     h, w = x.shape[-2:]
     out = x
@@ -132,20 +143,57 @@ def box_mean(x: torch.Tensor, window: int) -> torch.Tensor:
         out = run.narrow(axis, window, n) - run.narrow(axis, 0, n)
     span = lambda n: (torch.arange(n, device=x.device).clamp(max=r) + 1
                       + torch.arange(n - 1, -1, -1, device=x.device).clamp(max=r)).to(x.dtype)
-    return out / (span(h)[:, None] * span(w)[None, :])
+    return out, span(h)[:, None] * span(w)[None, :]
+
+
+def box_mean(x: torch.Tensor, window: int) -> torch.Tensor:
+    """Mean of ``x`` (..., h, w) over a ``window`` square around each pixel (the image's inside only)."""
+    summed, count = box_sum(x, window)
+    return summed / count
+
+
+def mean_of_smallest(values: torch.Tensor, keep: int) -> torch.Tensor:
+    """Mean over the first axis of the ``keep`` smallest of ``values`` (n, ...), by a partial selection network
+    of minima and maxima: over a first axis of four, ``topk`` took five times as long."""
+    rows = list(values.unbind(0))
+    for i in range(min(keep, len(rows))):
+        for j in range(i + 1, len(rows)):
+            rows[i], rows[j] = torch.minimum(rows[i], rows[j]), torch.maximum(rows[i], rows[j])
+    return torch.stack(rows[:keep]).mean(dim=0) if keep > 1 else rows[0]
 
 
 def _sweep_costs(ref: torch.Tensor, sources: torch.Tensor, rays: torch.Tensor, centre: torch.Tensor,
-                 w2c_src: torch.Tensor, k: CameraIntrinsics, inv_depth: torch.Tensor, window: int) -> torch.Tensor:
+                 w2c_src: torch.Tensor, k: CameraIntrinsics, inv_depth: torch.Tensor, window: int,
+                 chunk_elements: int = 1 << 21) -> torch.Tensor:
     """(D, h, w) cost (1 - correlation, 0..2) of each inverse-depth hypothesis ``inv_depth`` (D, h, w) of the
     reference's pixels. ``ref``: (C, h, w) image; ``sources``: (N, C, h, w); ``rays``: (h*w, 3) world directions
-    with unit camera-z; ``centre``: (3,) the reference camera; ``w2c_src``: (N, 4, 4)."""
+    with unit camera-z; ``centre``: (3,) the reference camera; ``w2c_src``: (N, 4, 4). The hypotheses go a few
+    planes at a time, at most ``chunk_elements`` warped samples per channel: the tensors stay in cache, where
+    the whole sweep at once was bound by memory traffic."""
     d, h, w = inv_depth.shape
-    n = len(sources)
+    n, c = sources.shape[:2]
     rot, shift = w2c_src[:, :3, :3], w2c_src[:, :3, 3] + w2c_src[:, :3, :3] @ centre  # (N, 3, 3), (N, 3)
     along = (rot @ rays.T)[:, :, None, :]  # (N, 3, 1, hw): a ray's camera-frame direction in each source
+    ref = ref.reshape(c, 1, h, w)
+    r_sum, count = box_sum(ref, window)  # (C, 1, h, w), (h, w)
+    r_var = box_sum((ref * ref).sum(dim=0, keepdim=True), window)[0][0] - (r_sum * r_sum).sum(dim=0) / count
+    keep = max(1, (n + 1) // 2)
+    step = max(1, chunk_elements // (n * h * w))
+    out = torch.empty((d, h, w), dtype=ref.dtype, device=ref.device)
+    for s in range(0, d, step):
+        e = min(d, s + step)
+        out[s:e] = _chunk_cost(ref, r_sum / count, r_var, count, sources, along, shift, k, inv_depth[s:e], window,
+                                keep)
+    return out
+
+
+def _chunk_cost(ref, r_mean, r_var, count, sources, along, shift, k, inv_depth, window, keep) -> torch.Tensor:
+    """:func:`_sweep_costs` for one chunk of hypotheses (D, h, w); ``r_mean`` (C, 1, h, w) and ``r_var`` (1, h, w):
+    the reference window's mean and summed variance (times the ``count`` of its pixels)."""
+    d, h, w = inv_depth.shape
+    n, c = sources.shape[:2]
     depth = (1.0 / inv_depth).reshape(1, d, h * w)
-    cam = [along[:, c] * depth + shift[:, c, None, None] for c in range(3)]  # each (N, D, hw)
+    cam = [along[:, i] * depth + shift[:, i, None, None] for i in range(3)]  # each (N, D, hw)
     inv_z = 1.0 / cam[2].clamp_min(1e-9)  # behind a source: far outside its picture
     x, y = cam[0] * inv_z, cam[1] * inv_z
     if not (k.k1 == k.k2 == k.p1 == k.p2 == 0.0):
@@ -154,26 +202,22 @@ def _sweep_costs(ref: torch.Tensor, sources: torch.Tensor, rays: torch.Tensor, c
         x, y = (x * radial + 2 * k.p1 * x * y + k.p2 * (r2 + 2 * x * x),
                 y * radial + k.p1 * (r2 + 2 * y * y) + 2 * k.p2 * x * y)
     # grid_sample's coordinates (-1..1 across the picture) straight from the normalised ones
-    grid = torch.stack([x * (2.0 * k.fl_x / k.width) + (2.0 * k.cx / k.width - 1.0),
-                        y * (2.0 * k.fl_y / k.height) + (2.0 * k.cy / k.height - 1.0)], dim=-1)
-    # a channel of ones comes back below 1 where a window's centre falls outside the source's picture
-    c = sources.shape[1]
-    with_ones = torch.cat([sources, torch.ones_like(sources[:, :1])], dim=1)
-    sampled = torch.nn.functional.grid_sample(with_ones, grid, mode="bilinear", padding_mode="zeros",
-                                              align_corners=False)  # (N, C + 1, D, hw)
-    warped = sampled[:, :c].reshape(n, c, d, h, w)
-    valid = sampled[:, c].reshape(n, d, h, w) > 0.999
-    # the correlation of the window's colours, all channels at once: the table's texture is mostly hue
-    ref = ref.reshape(c, 1, h, w)
-    r_mean = box_mean(ref, window)
-    r_var = (box_mean(ref * ref, window) - r_mean ** 2).sum(dim=0)
-    s_mean = box_mean(warped, window)
-    s_var = (box_mean(warped * warped, window) - s_mean ** 2).sum(dim=1)
-    cross = (box_mean(warped * ref, window) - s_mean * r_mean).sum(dim=1)
-    ncc = cross / torch.sqrt(r_var.clamp_min(0.0) * s_var.clamp_min(0.0) + 1e-6)
-    cost = (1.0 - ncc).masked_fill_(~valid, 2.0)
-    keep = max(1, (n + 1) // 2)
-    return cost.topk(keep, dim=0, largest=False).values.mean(dim=0)
+    gx = x * (2.0 * k.fl_x / k.width) + (2.0 * k.cx / k.width - 1.0)
+    gy = y * (2.0 * k.fl_y / k.height) + (2.0 * k.cy / k.height - 1.0)
+    # every bilinear tap inside the source's picture: pixel centres from -1 + 1/w to 1 - 1/w
+    valid = ((gx.abs() <= 1.0 - 1.0 / k.width) & (gy.abs() <= 1.0 - 1.0 / k.height)).reshape(n, d, h, w)
+    warped = torch.nn.functional.grid_sample(sources, torch.stack([gx, gy], dim=-1), mode="bilinear",
+                                             padding_mode="zeros", align_corners=False).reshape(n, c, d, h, w)
+    # the correlation of the window's colours, all channels at once (the table's texture is mostly hue): sums
+    # of each channel, of the summed squares and of the summed products, five box filters where nine were
+    stats = torch.cat([warped, (warped * warped).sum(dim=1, keepdim=True),
+                       (warped * ref[None]).sum(dim=1, keepdim=True)], dim=1)
+    stats = box_sum(stats, window)[0]
+    s_sum = stats[:, :c]
+    s_var = stats[:, c] - (s_sum * s_sum).sum(dim=1) / count
+    cross = stats[:, c + 1] - (s_sum * r_mean[None]).sum(dim=1)
+    ncc = cross / torch.sqrt(r_var.clamp_min(0.0) * s_var.clamp_min(0.0) + 1e-6 * count * count)
+    return mean_of_smallest((1.0 - ncc).masked_fill_(~valid, 2.0), keep)
 
 
 def _best(cost: torch.Tensor, inv_depth: torch.Tensor, step: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -197,7 +241,7 @@ def depth_maps(views: PosedViews, config: StereoConfig = StereoConfig(), points:
     ``device``: where the sweep runs.
     """
     size = working_size(views.intrinsics, config.max_side_px)
-    pyramid = [g.to(device) for g in image_pyramid(views.rgb, size, config.levels)]
+    pyramid = [g.to(device) for g in image_pyramid(views.rgb, size, config.levels(max(size)))]
     look_at = common_look_at_point(views)
     neighbours = neighbour_views(views.c2w_cv, look_at, config.neighbours, config.min_angle_deg)
     bounds = depth_bounds(views.c2w_cv, look_at, points, views.intrinsics)

@@ -8,8 +8,9 @@ cameras on one side and the look-at point on theirs, refitted by least squares o
 band is a few pixel footprints of the points (their own spread, not a length in metres): the unit of the
 world may be a COLMAP model's. The *object* is the points higher above the plane than a few bands, within
 the radius of the look-at point's foot, linked into clusters by a voxel grid of the points' own spacing:
-the largest cluster, and every other whose footprint on the plane overlaps it (a textureless band splits an
-object into stacked clusters). Its height is a high percentile of its points' heights.
+the largest cluster, and every other whose points stand, half of them at least, inside its footprint on the
+plane (the convex hull of its points there): a textureless band splits an object into stacked clusters, and a
+bottle's neck stands inside the ring of its body's seen surface, not on it. Its height is a high percentile of its points' heights.
 
 Frames: the points' world frame (any unit). The plane is ``normal . x = offset`` with ``normal`` towards
 the cameras.
@@ -153,7 +154,7 @@ def support_and_object(dense: DensePoints, c2w_cv: np.ndarray, fl_px: float, sho
 
 def _object_cluster(dense: DensePoints, candidate: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """Indices of the object's points among ``candidate``: the largest cluster of a voxel grid of the points'
-    spacing (four median footprints) and the clusters whose footprints on the plane overlap it."""
+    spacing (four median footprints) and the clusters standing inside its footprint on the plane."""
     if len(candidate) == 0:
         return candidate
     pts = dense.points[candidate]
@@ -169,15 +170,22 @@ def _object_cluster(dense: DensePoints, candidate: np.ndarray, normal: np.ndarra
     counts = np.bincount(point_label, minlength=len(sizes))
     counts[0] = 0
     main = int(np.argmax(counts))
-    # footprints on the plane: two in-plane axes, cells of the same size
+    # footprints on the plane: two in-plane axes; the main cluster's is the convex hull of its points there (its
+    # points are the surface the cameras saw, a ring around the inside a narrower part above stands on)
+    from scipy.spatial import Delaunay, QhullError
+
     u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
     u /= np.linalg.norm(u)
-    plane_xy = np.floor(np.stack([pts @ u, pts @ np.cross(normal, u)], axis=1) / voxel).astype(np.int64)
-    main_cells = {tuple(c) for c in plane_xy[point_label == main]}
+    plane_xy = np.stack([pts @ u, pts @ np.cross(normal, u)], axis=1)
     keep = np.zeros(len(sizes), bool)
     keep[main] = True
+    try:
+        footprint = Delaunay(plane_xy[point_label == main])
+    except QhullError:  # a main cluster flat in the plane's view: no footprint to stand in
+        return candidate[keep[point_label]]
+    inside = footprint.find_simplex(plane_xy) >= 0
     for label in np.nonzero(counts)[0]:
         if label != main:
-            cells = {tuple(c) for c in plane_xy[point_label == label]}
-            keep[label] = len(cells & main_cells) >= 0.5 * len(cells)
+            mine = point_label == label
+            keep[label] = inside[mine].mean() >= 0.5
     return candidate[keep[point_label]]
