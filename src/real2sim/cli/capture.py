@@ -188,6 +188,9 @@ def _add_handheld_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--auto-exposure", action="store_true",
                    help="with --handheld: each photo's exposure follows its brightness as a phone's does (centre-"
                    "weighted mean brought to middle grey, within 2 stops), on top of the usual 0.1-stop jitter")
+    g.add_argument("--table-texture-px", type=integer(256, 16384), default=2048, metavar="PX",
+                   help="with --handheld: side of the table's texture, px (default 2048; above it the table gains "
+                   "mm-scale grain, which close-ups at phone resolution need: 4096)")
     g.add_argument("--markers", type=integer(0, 16), default=0, metavar="N",
                    help="with --handheld: N printed square fiducials (0-16) flat on the table around the object; "
                    "their true corners in ground_truth/markers.json (for `run --marker-mm`; default 0)")
@@ -208,7 +211,7 @@ CLOSE_FACTOR = number(0.2, 1.0)
 MARKER_MM = number(5.0, 300.0)
 #: Handheld flags (dest -> the value that means "not given").
 _HANDHELD_ONLY = {"close_fraction": None, "close_factor": None, "room": False, "auto_exposure": False, "markers": 0,
-                  "marker_mm": None, "marker_dictionary": None}
+                  "marker_mm": None, "marker_dictionary": None, "table_texture_px": 2048}
 
 
 def _resolve_mesh(text: str):
@@ -357,7 +360,8 @@ def _run_handheld(args: argparse.Namespace) -> int:
                          fps=DEFAULT_FPS if args.fps is None else args.fps,
                          video_rotation_deg=int(args.video_rotation_deg), distortion_k1=args.distortion_k1,
                          jpeg_quality=args.jpeg_quality or DEFAULT_JPEG_QUALITY, room=args.room,
-                         auto_exposure=args.auto_exposure, markers=args.markers)
+                         auto_exposure=args.auto_exposure, markers=args.markers,
+                         table_texture_px=args.table_texture_px)
     if args.close_fraction is not None:  # asked for: close photos that do cut the object
         cfg = replace(cfg, close_fraction=args.close_fraction, close_cut=True)
     if args.close_factor is not None:

@@ -97,6 +97,7 @@ FIELD_OF_FLAG: dict[str, str | tuple[str, str]] = {
     "--room": "HandheldConfig.room",
     "--auto-exposure": "HandheldConfig.auto_exposure",
     "--markers": "HandheldConfig.markers",
+    "--table-texture-px": "HandheldConfig.table_texture_px",
     "--marker-mm": "HandheldConfig.marker_mm",
     "--marker-dictionary": "HandheldConfig.marker_dictionary",
     # refine-poses

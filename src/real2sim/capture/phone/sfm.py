@@ -61,6 +61,15 @@ class SfmConfig:
     """Most SIFT features per image."""
     max_image_size: int = 2000
     """Longer side (px) an image is reduced to for feature extraction."""
+    small_image_px: int = 400
+    """Images up to this many px on their longer side are small: SIFT doubles them first (octave -1) and
+    takes features of lower contrast (peak threshold 0.004), for enough features to match."""
+    first_octave: int | None = None
+    """SIFT's first octave: -1 doubles the image first (finer features, COLMAP's default), 0 starts at its
+    size; None: -1 for small images (``small_image_px``), else 0."""
+    guided_matching: bool = False
+    """Match again under each verified pair's epipolar geometry (COLMAP's guided matching): more matches
+    on close, wide-baseline pairs, at more matching time."""
     min_group_images: int = 3
     """Images a camera group (one size and EXIF camera) needs for its camera to be estimated; smaller groups'
     images are left out."""
@@ -141,8 +150,9 @@ def _features_and_matches(work: Path, image_dir: Path, names: list[str], sequent
     extraction.max_image_size = config.max_image_size
     extraction.sift.max_num_features = config.max_num_features
     # small images: upsample once (octave -1) for enough features, as the pose refinement does
-    extraction.sift.first_octave = -1 if max_side_px <= 400 else 0
-    if max_side_px <= 400:  # and a lower contrast threshold (docs/design-notes/capture.md#sfm-features)
+    small = max_side_px <= config.small_image_px
+    extraction.sift.first_octave = config.first_octave if config.first_octave is not None else -1 if small else 0
+    if small:  # and a lower contrast threshold (docs/design-notes/capture.md#sfm-features)
         extraction.sift.peak_threshold = 0.004
     extraction.use_gpu = False
     progress("structure from motion: features", 0, 3)
@@ -152,6 +162,7 @@ def _features_and_matches(work: Path, image_dir: Path, names: list[str], sequent
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = config.num_threads
     matching.use_gpu = False
+    matching.guided_matching = config.guided_matching
     if not sequential and len(names) <= config.exhaustive_max_images:
         progress(f"structure from motion: matching all {len(names) * (len(names) - 1) // 2} pairs", 1, 3)
         pycolmap.match_exhaustive(db_path, matching_options=matching, device=pycolmap.Device.cpu)

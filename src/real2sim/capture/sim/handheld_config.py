@@ -79,6 +79,11 @@ class HandheldConfig:
     """The lens's radial distortion k2 (OpenCV's; -0.5 to 0.5), as ``distortion_k1``."""
     table_size_m: float = 2.4
     """Side of the square textured table, metres."""
+    table_texture_px: int = 2048
+    """Side of the table's square procedural texture, px (256-16384). At 2048 its finest noise is 2 cm across,
+    a blur to a close-up at phone resolution (a few SIFT features where a wooden table has grain); above
+    2048 the texture gains mm-scale grain (4096: 0.6 mm a texel on the 2.4 m table).
+    (why: docs/design-notes/capture.md#sfm-keeps-what-colmap-finds)"""
     texture_seed: int = 7
     """Seed of the table's procedural texture (and, plus 1, of the object's when it has none)."""
     room: bool = False
@@ -128,6 +133,8 @@ class HandheldConfig:
             raise UserInputError(f"--close-fraction must be in 0..1 (got {self.close_fraction})")
         if not (np.isfinite(self.close_factor) and 0.2 <= self.close_factor <= 1.0):
             raise UserInputError(f"--close-factor must be in 0.2..1 (got {self.close_factor})")
+        if not 256 <= int(self.table_texture_px) <= 16384:
+            raise UserInputError(f"--table-texture-px must be in 256..16384 (got {self.table_texture_px})")
         if not 0 <= int(self.markers) <= 16:
             raise UserInputError(f"--markers must be in 0..16 (got {self.markers})")
         if not (np.isfinite(self.marker_mm) and 5.0 <= self.marker_mm <= 300.0):

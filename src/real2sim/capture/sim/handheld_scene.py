@@ -100,7 +100,9 @@ def build_handheld_scene(config: HandheldConfig, mesh_obj: Path, world_from_mesh
     # No table from RenderScene: ours sits a sheet's thickness lower, so that the paper is z = 0.
     scene = RenderScene(mesh_obj, world_from_mesh, None, config.table_size_m, cam, stand_m=None, far_m=far_m)
     table_png = work / "table_texture.png"
-    save_png(table_png, procedural_texture(2048, config.texture_seed))
+    # beyond the default size, the table gets the grain a close-up needs (mm-scale detail)
+    save_png(table_png, procedural_texture(int(config.table_texture_px), config.texture_seed,
+                                           grain=config.table_texture_px > 2048))
     top_m = -PAPER_THICKNESS_M if config.board is not None or markers is not None else 0.0
     thickness = 0.04
     pose = np.eye(4)
