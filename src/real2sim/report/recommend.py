@@ -107,7 +107,7 @@ def describe_trade_off(row: Mapping, rows: Sequence[Mapping]) -> str:
         parts.append(f"OCAE x{t['ocae_over_best']:.2f} the group's most accurate {best['representation']} "
                      f"at x{t['time_over_best']:.2f} its time")
     elif best is not None:
-        parts.append("the group's most accurate row")
+        parts.append("nothing against the group's most accurate row (it is that row)")
     if t["bound"] is not None:
         parts.append(f"OCAE x{t['ocae_over_bound']:.2f} the exact-geometry bound {t['bound']['representation']} "
                      f"({t['ocae_gap_to_bound_m'] * 1000:+.2f} mm)")

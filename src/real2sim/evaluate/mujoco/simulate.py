@@ -124,8 +124,9 @@ def _timed_run(scene: MujocoScene, reference: Trajectory, spans, dt: float, subs
     return wall, d.qpos.copy()
 
 
-def _contacts(scene: MujocoScene, force6: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The object's contact points (K, 3) and the forces it feels there (K, 3), world frame."""
+def _contacts(scene: MujocoScene, force6: np.ndarray, is_object: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The object's contact points (K, 3) and the forces it feels there (K, 3), world frame
+    (``is_object``: (ngeom,) True for the object's collision geoms)."""
     import mujoco
 
     m, d = scene.model, scene.data
@@ -133,8 +134,8 @@ def _contacts(scene: MujocoScene, force6: np.ndarray) -> tuple[np.ndarray, np.nd
     if n == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
     geoms = d.contact.geom[:n]
-    ours1 = np.isin(geoms[:, 0], scene.object_geoms)
-    ours2 = np.isin(geoms[:, 1], scene.object_geoms)
+    ours1 = is_object[geoms[:, 0]]
+    ours2 = is_object[geoms[:, 1]]
     active = (ours1 | ours2) & (d.contact.efc_address[:n] >= 0)
     pts, forces = [], []
     for k in np.flatnonzero(active):
@@ -185,19 +186,21 @@ def simulate_candidate_mujoco(model_xml: Path, run_spec: RunSpec, scene_config: 
     na = len(scene.actuated_qpos)
     oq, ov = np.empty((n + 1, 7)), np.empty((n + 1, 6))
     aq, av = np.empty((n + 1, na)), np.empty((n + 1, na))
+    mq, mv = np.empty((n + 1, 7)), np.empty((n + 1, 6))  # MuJoCo's free-joint state, converted after the loop
     contacts_w, forces_w = [], []
     force6 = np.zeros(6)
     resets = set(int(r) for r in reset_steps)
+    is_object = np.zeros(m.ngeom, dtype=bool)
+    is_object[scene.object_geoms] = True
 
     def log(i: int) -> None:
-        qpos = d.qpos[scene.object_qpos]
-        oq[i] = np.concatenate([qpos[3:7], qpos[:3]])
-        ov[i] = drake_velocity(qpos, d.qvel[scene.object_dof])
+        mq[i] = d.qpos[scene.object_qpos]
+        mv[i] = d.qvel[scene.object_dof]
         aq[i] = d.qpos[scene.actuated_qpos]
         av[i] = d.qvel[scene.actuated_dof]
 
     def log_contacts() -> None:
-        pts, forces = _contacts(scene, force6)
+        pts, forces = _contacts(scene, force6, is_object)
         contacts_w.append(pts)
         forces_w.append(forces)
 
@@ -229,11 +232,12 @@ def simulate_candidate_mujoco(model_xml: Path, run_spec: RunSpec, scene_config: 
         warnings.warn(f"{label}: timed and instrumented runs ended apart (max |dq| "
                       f"{np.abs(d.qpos - timed_final).max():.3g}); sim_time_s timed a different rollout",
                       RuntimeWarning, stacklevel=2)
-    contacts_o, forces_o = [], []
-    for i, (pw, fw) in enumerate(zip(contacts_w, forces_w)):
-        R = _rotation(oq[i, :4])
-        contacts_o.append((pw - oq[i, 4:]) @ R)
-        forces_o.append(fw @ R)
+    oq[:, :4], oq[:, 4:] = mq[:, 3:7], mq[:, :3]
+    rotations = quaternions_to_matrices(mq[:, 3:7] / np.linalg.norm(mq[:, 3:7], axis=1, keepdims=True))
+    ov[:, :3] = np.einsum("tij,tj->ti", rotations, mv[:, 3:6])  # omega from the body frame into the world's
+    ov[:, 3:] = mv[:, :3]
+    contacts_o = [(pw - oq[i, 4:]) @ rotations[i] for i, pw in enumerate(contacts_w)]
+    forces_o = [fw @ rotations[i] for i, fw in enumerate(forces_w)]
     return Trajectory(times_s=np.arange(n + 1) * dt, object_position_m=oq[:, 4:].copy(),
                       object_quaternion_wxyz=oq[:, :4].copy(), object_spatial_velocity=ov,
                       actuated_positions=aq, actuated_velocities=av, contact_points_object_m=contacts_o,
