@@ -153,6 +153,12 @@ def test_evaluate_in_mujoco_then_both_simulators(mj_asset, tmp_path):
     assert summary["boxes_1_point"]["simulator"] == "drake"
     html = (out / "report.html").read_text()
     assert "mujoco, point contact" in html
+    # MuJoCo's settings are part of what its rows mean: a resume with others is refused, nothing changed
+    before = (out / "runs.csv").read_bytes()
+    softer = dataclasses.replace(config, mujoco=dataclasses.replace(MujocoConfig(), solref_timeconst_s=0.08))
+    with pytest.raises(UserInputError, match="different mujoco"):
+        evaluate([mj_asset], out, softer)
+    assert (out / "runs.csv").read_bytes() == before
 
 
 def test_cli_evaluate_simulator_mujoco(mj_asset, tmp_path, capsys):
