@@ -83,11 +83,16 @@ def register(sub) -> None:
                         "given poses, or pycolmap is missing, the run goes on with them and says so (WARNING)")
     refine.add_argument("--no-refine-poses", dest="refine_poses", action="store_const", const=False,
                         help="use the dataset's poses as they are")
-    p.add_argument("--mask", choices=["provided", "maskrcnn", "background", "parallax"], default=None, metavar="METHOD",
+    p.add_argument("--mask", choices=["provided", "maskrcnn", "background", "parallax", "geometry", "auto"], default=None,
+                   metavar="METHOD",
                    help="make the masks first (on a copy in ASSETDIR/.run/masked): provided (masks/<image stem>.png), "
                    "maskrcnn (needs --mask-weights), background (background/<image name>), parallax (from the "
-                   "images and poses alone: what stands above a textured table; after --refine-poses); default: use "
-                   "the masks the frames name, all frames must have one")
+                   "images and poses alone: what stands above a textured table; after --refine-poses), geometry "
+                   "(the object standing on the table in dense depth from the photos, drawn into each; close-ups "
+                   "that cut it keep what they see), auto (parallax, or geometry where the parallax masks cannot "
+                   "be the object's: no table plane in the sparse points, masks at the border in most views or "
+                   "covering nearly all of an image; the run says which, and why); default: photos and videos "
+                   "auto, a dataset the masks the frames name, all frames must have one")
     p.add_argument("--mask-weights", type=existing_file, default=None, metavar="PATH",
                    help="local Mask R-CNN weights file for --mask maskrcnn")
     p.add_argument("--background-threshold", type=nonnegative(255.0), default=12.0,
@@ -151,7 +156,7 @@ def config_from_args(args: argparse.Namespace):
     if phone is None:  # every image and mask, and the frame options against the dataset's kind, before any display
         check_dataset(args.dataset, masks_needed=args.mask is None, scale_given=scale_given)
     elif args.mask is None:
-        args.mask = "parallax"  # the board's texture is what parallax masks need
+        args.mask = "auto"  # parallax where the board's or the table's texture lets it, else geometry
     if scale_given and args.table_z_m != 0.0:
         raise UserInputError("--table-z-m is for a dataset in metres; a COLMAP capture's table is found in its "
                              "sparse points and put at z = 0")

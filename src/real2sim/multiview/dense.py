@@ -49,9 +49,9 @@ class DenseConfig:
     object_px: int = 200
     """The object should span this many pixels (its longer extent in the median view that sees it) at the
     working size (>= 16): the mug at 320x240 (its extent 150-200 px) gave masks of IoU 0.85."""
-    min_trusted_share: float = 0.03
-    """Doubtful when fewer than this share (0-1) of the pixels have a trusted depth (measured 6-12 % on the
-    bundled objects' hard captures)."""
+    min_trusted_share: float = 0.01
+    """Doubtful when fewer than this share (0-1) of the pixels have a trusted depth (measured 2.5-12 % on the
+    bundled objects' handheld captures, the least with a room behind at 480x270)."""
     min_plane_share: float = 0.3
     """Doubtful when the support plane holds fewer than this share (0-1) of the points near where the cameras
     look (measured 0.3-0.6 with the object in them)."""

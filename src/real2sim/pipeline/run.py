@@ -42,7 +42,7 @@ from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import check_output_dir, make_output_dir, output_lock
 from real2sim.plumbing.progress import ProgressFn
 from real2sim.pipeline import manifest as mf
-from real2sim.capture.masks.stage import PARALLAX
+from real2sim.capture.masks.stage import AUTO, GEOMETRY, PARALLAX
 from real2sim.capture.phone.normalise import MODEL_FROM_WORLD
 from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_DIRNAME,  # noqa: F401 (public here)
                                       EVALUATIONS, check_evaluations, refine_unavailable, rewrite_reports, run_asset,
@@ -84,13 +84,14 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
     else:
         dataset = phone.path
         if config.mask_method is None:
-            raise UserInputError("photos or a video have no masks: pass --mask parallax|background|maskrcnn")
+            raise UserInputError("photos or a video have no masks: pass --mask auto|geometry|parallax|background|maskrcnn")
     if robot_frame is not None:
         robot_frame.validate()
     recon_cfg = config.reconstruct or ReconstructConfig()
-    if recon_cfg.mask_edges == "auto" and config.mask_method == PARALLAX:
+    if recon_cfg.mask_edges == "auto" and config.mask_method in (PARALLAX, GEOMETRY, AUTO):
         # parallax masks come from the images already (warps and colour agreement over a textured table, where
-        # colour models of object and table overlap): their edges stay (why: docs/design-notes/pipeline.md#mask-edges)
+        # colour models of object and table overlap): their edges stay (why: docs/design-notes/pipeline.md#mask-edges);
+        # masks from geometry are snapped to the colour edges already
         recon_cfg = replace(recon_cfg, mask_edges="as-given")
     recon_cfg.validate()
     if (robot_frame is not None or phone is not None) and recon_cfg.table_z_m != 0.0:
@@ -188,17 +189,17 @@ def _prepare_dataset(runner: Runner, dataset: Path, run_dir: Path, config: RunCo
     truth_root, robot_frame = dataset, config.robot_frame()
     # Parallax masks test the table through the poses: on a robot capture they wait for refine_poses
     # (which needs no masks). A COLMAP capture's poses are COLMAP's already, and robot_frame needs masks.
-    masks_last = config.mask_method == PARALLAX and robot_frame is None and config.refine is not None
+    masks_last = config.mask_method in (PARALLAX, AUTO) and robot_frame is None and config.refine is not None
 
     def masks_stage(source: Path, upstream: str | None) -> str:
         from real2sim.capture.masks.methods import MaskConfig
 
         mask_cfg = config.mask or MaskConfig()
         settings = {"method": config.mask_method, "config": mask_cfg}
-        if config.mask_method == PARALLAX:
+        if config.mask_method in (PARALLAX, AUTO):
             from real2sim.capture.masks.parallax_config import ParallaxConfig
 
-            settings = {"method": PARALLAX, "table_z_m": table_z_m, "seed": config.seed}
+            settings = {"method": config.mask_method, "table_z_m": table_z_m, "seed": config.seed}
             if isinstance(mask_cfg, ParallaxConfig):  # only what differs from the defaults: older runs still match
                 default = ParallaxConfig()
                 changed = {k: v for k, v in vars(mask_cfg).items() if k != "table_z_m" and getattr(default, k) != v}

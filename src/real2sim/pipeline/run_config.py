@@ -7,7 +7,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from real2sim.capture.masks.stage import PARALLAX
+from real2sim.capture.masks.stage import AUTO, PARALLAX
 from real2sim.capture.phone.normalise import NormaliseConfig
 
 if TYPE_CHECKING:
@@ -31,8 +31,9 @@ class RunConfig:
     """The reconstruct stage's settings; None: its defaults."""
     mask_method: str | None = None
     """None: the dataset's own masks (every frame must have one); else the method the masks stage makes them
-    with (:func:`real2sim.capture.masks.stage.make_masks`) on a copy; ``parallax`` masks of a robot capture
-    are made after refine_poses, on the refined poses."""
+    with (:func:`real2sim.capture.masks.stage.make_masks`) on a copy; ``parallax`` (and ``auto``) masks of a robot
+    capture are made after refine_poses, on the refined poses. ``auto`` (the command's default for photos and
+    videos): parallax masks, or masks from geometry where the data shows parallax masks cannot be the object's."""
     mask: "MaskConfig | ParallaxConfig | None" = None
     """The mask method's settings (a ParallaxConfig for parallax masks); None: the method's defaults, and for
     a phone capture :func:`phone_mask_config`'s."""
@@ -83,7 +84,8 @@ class RunResult:
 
 
 def phone_mask_config(config: RunConfig, kind: str) -> RunConfig:
-    """``config`` for a phone capture of ``kind`` ("photos" or "video") masked by parallax, unless ``config.mask``
+    """``config`` for a phone capture of ``kind`` ("photos" or "video") masked by parallax (or ``auto``, which tries
+    parallax first), unless ``config.mask``
     is a ParallaxConfig already: the object's second opinion on the table plate
     (``ParallaxConfig.plate_object_threshold``), and for photos step 6's stricter outlier share
     (``plate_outlier_fraction``). A clip's frames come a few degrees apart along one path and repeat the
@@ -93,7 +95,7 @@ def phone_mask_config(config: RunConfig, kind: str) -> RunConfig:
     from real2sim.capture.masks.parallax_config import (PHONE_PHOTOS_PLATE_OUTLIER_FRACTION, PHONE_PLATE_OBJECT_THRESHOLD,
                                                       ParallaxConfig)
 
-    if config.mask_method != PARALLAX or isinstance(config.mask, ParallaxConfig):
+    if config.mask_method not in (PARALLAX, AUTO) or isinstance(config.mask, ParallaxConfig):
         return config
     outliers = PHONE_PHOTOS_PLATE_OUTLIER_FRACTION if kind == "photos" else None
     return replace(config, mask=ParallaxConfig(plate_object_threshold=PHONE_PLATE_OBJECT_THRESHOLD,

@@ -7,6 +7,7 @@ returns what run.json records of it. :mod:`real2sim.pipeline.run` decides which 
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import tempfile
@@ -43,7 +44,7 @@ def _edited_copy(dataset: Path, target: Path, edit: Callable[[Path], dict]) -> d
 def run_masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: ProgressFn, table_z_m: float = 0.0,
               seed: int = 0) -> dict:
     """The masks stage: ``method``'s masks made on a copy of ``dataset`` in ``run_dir/masked``."""
-    from real2sim.capture.masks.stage import make_masks
+    from real2sim.capture.masks.stage import MASK_CHOICE, make_masks
 
     def edit(copy: Path) -> dict:
         if not (copy / "transforms.json").exists():  # a COLMAP model: masks need a transforms.json to point from
@@ -53,8 +54,12 @@ def run_masks(dataset: Path, run_dir: Path, method: str, mask_cfg, progress: Pro
         # the copy is run's own: a masks_<method>/ copied from the dataset is replaced there, not in the dataset
         result = make_masks(copy, method, mask_cfg, table_z_m=table_z_m, seed=seed, progress=progress,
                             may_replace="any")
-        return {"result": {"num_frames": result.num_frames, "mean_object_fraction": result.mean_object_fraction,
-                           "mean_iou": result.mean_iou, "min_iou": result.min_iou}}
+        record = {"method": result.method, "num_frames": result.num_frames,
+                  "mean_object_fraction": result.mean_object_fraction, "mean_iou": result.mean_iou,
+                  "min_iou": result.min_iou}
+        if (copy / MASK_CHOICE).is_file():  # auto: which method, and why
+            record["choice"] = json.loads((copy / MASK_CHOICE).read_text())
+        return {"result": record}
 
     return _edited_copy(dataset, run_dir / "masked", edit)
 

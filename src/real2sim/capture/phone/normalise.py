@@ -18,7 +18,10 @@ Steps (all lengths before the last one in model units):
 1. the sparse points within ``near_radius`` x (median camera distance) of the point the
    cameras look at, minus those inside the object's masks: the table around the object;
 2. RANSAC plane, normal towards the cameras -> a rigid "table frame" (z up, table z = 0,
-   origin under the look-at point);
+   origin under the look-at point); the plane of the **dense points** instead
+   (:func:`table_plane_or_dense`, :mod:`real2sim.multiview.dense`) where the masks came from geometry
+   (which found it already: ``dense_geometry.json``) or where the sparse points give none (a dozen
+   close-ups triangulate a few dozen points near the object);
 3. the object's height and footprint centre from the **visual hull of the masks, carved in
    the table frame** (:func:`real2sim.multiview.hull.visual_hull_mesh`, ``hull_voxels``
    along its longest side). Why the hull and not the sparse points above the plane: (a)
@@ -35,7 +38,8 @@ Steps (all lengths before the last one in model units):
    going on full width (a featureless lid the SfM found no points on): the hull's volume
    above them under ``cap_fill`` of a prism on its cross-section there (a cone's is 1/3).
    Otherwise the hull's height, with a WARNING when the two disagree by more than ``top_gap``
-   (:func:`object_top`);
+   (:func:`object_top`). With the dense plane, the dense points on the object (their 99th
+   percentile) stand in for the sparse ones, by the same rule;
 4. scale: ``scale`` (metres per model unit) as given, or ``object_height_m`` / measured height, or with
    ``marker_mm`` the printed markers' side over their triangulated side; the markers' corners then give
    the table plane of step 2 too (:mod:`real2sim.capture.phone.markers`).
@@ -207,24 +211,68 @@ def table_plane(points: np.ndarray, c2w_cv: np.ndarray, distance: float, config:
     return rf.orient_towards_cameras(plane, c2w_cv[:, :3, 3])
 
 
+def table_plane_or_dense(ds: Dataset, points: np.ndarray, off_object: np.ndarray, c2w_cv: np.ndarray,
+                         distance: float, config: NormaliseConfig, seed: int) -> tuple[rf.Plane, dict | None, dict]:
+    """Step 2's plane, from the dense points (:mod:`real2sim.multiview.dense`) where the masks stage found them
+    (``dense_geometry.json``: masks from geometry) or where the sparse points ``off_object`` (near the object, off
+    its masks) give no plane; else from those. The plane, the dense record (None: not used) and how it was found.
+    A WARNING when the sparse and the dense planes disagree by more than ``config.max_plane_disagreement_deg``,
+    and for each doubt of the dense geometry found here."""
+    import warnings
+
+    from real2sim.multiview.dense import DENSE_RECORD, dataset_geometry, scene_json
+
+    sparse, why = None, None
+    try:
+        sparse = table_plane(off_object, c2w_cv, distance, config, seed)
+    except UserInputError as exc:
+        why = str(exc)
+    path = Path(ds.root) / DENSE_RECORD
+    if path.is_file():
+        dense = json.loads(path.read_text())
+        record = {"from": "the dense points (the masks from geometry found them)"}
+    elif sparse is None:
+        geometry, _ = dataset_geometry(ds, points)
+        for doubt in geometry.doubts:
+            warnings.warn(f"dense geometry is doubtful: {doubt}", RuntimeWarning, stacklevel=2)
+        dense = scene_json(geometry)
+        record = {"from": "the dense points (the sparse points give no plane)"}
+    else:
+        return sparse, None, {"from": "the sparse points near the object"}
+    plane = rf.Plane(np.asarray(dense["normal"], float), float(dense["offset"]), int(dense["record"]["plane_inliers"]),
+                     int(dense["record"]["points_near"]), float(dense["band"]))
+    record.update({"dense": dense["record"], "sparse_plane": why or f"{sparse.inliers} of {len(off_object)} points"})
+    if sparse is not None:
+        tilt = float(np.degrees(np.arccos(np.clip(abs(sparse.normal @ plane.normal), -1.0, 1.0))))
+        record["sparse_vs_dense_deg"] = tilt
+        if tilt > config.max_plane_disagreement_deg:
+            warnings.warn(f"the table planes of the sparse and the dense points differ by {tilt:.1f} degrees: the "
+                          "dense one is used; check that the table is flat and in view around the object",
+                          RuntimeWarning, stacklevel=2)
+    return plane, dense, record
+
+
 def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config: NormaliseConfig,
                      seed: int) -> tuple[rf.Similarity, dict]:
     """``robot_from_model`` and a JSON-ready record of how it was found (steps 1-4 of the module docstring)."""
     c2w_cv = ds.poses_c2w_cv()
     look_at, distance, near = points_near_object(c2w_cv, points, config)
     on_object = rf.object_point_mask(near, ds.intrinsics, c2w_cv, masks, config.object_vote_fraction)
-    markers = None
+    markers, dense, plane_record = None, None, {"from": "the sparse points near the object"}
     if config.marker_mm is not None:  # scale and plane from the printed markers
         markers = markers_frame([ds.root / f.file_path for f in ds.frames], ds.intrinsics, c2w_cv, config.marker_mm,
                                 config.marker_dictionary)
         plane = markers.plane
+        plane_record = {"from": "the printed markers' corners"}
     else:
-        plane = table_plane(near[~on_object], c2w_cv, distance, config, seed)
+        plane, dense, plane_record = table_plane_or_dense(ds, points, near[~on_object], c2w_cv, distance, config, seed)
     table = rf.table_similarity(plane, centre=look_at)
     hull = measure_object(ds, masks, table, config)
     if not hull.top > 0:
         raise UserInputError("the masks' visual hull has no height above the fitted table plane")
-    if config.object_height_m is not None:
+    if config.object_height_m is not None and dense is not None:  # measured on the dense object
+        height, top_record = object_top(hull, None, config, dense_top=dense["height"])
+    elif config.object_height_m is not None:
         height, top_record = object_top(hull, table.apply(near[on_object])[:, 2], config)
     else:  # the height sets nothing
         given = "--scale" if config.scale is not None else "--marker-mm"
@@ -248,6 +296,7 @@ def find_robot_frame(ds: Dataset, points: np.ndarray, masks: np.ndarray, config:
         "sparse_points": {"total": len(points), "near_object": len(near), "on_object": int(on_object.sum()),
                           "table_inliers": plane.inliers},
         "table_plane_model": {"normal": plane.normal.tolist(), "offset_units": plane.offset},
+        "table_plane_from": plane_record,
         "table_fit_rms_mm": 1000.0 * plane.rms * scale,
         "inlier_threshold_mm": 1000.0 * plane.threshold * scale,
         "median_camera_distance_m": distance * scale,

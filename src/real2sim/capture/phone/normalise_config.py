@@ -37,6 +37,9 @@ class NormaliseConfig:
     """RANSAC hypotheses (3-point samples) for the table plane."""
     min_table_points: int = 30
     """Fewest inliers the table plane needs."""
+    max_plane_disagreement_deg: float = 2.0
+    """A WARNING when the sparse points' table plane and the dense points' differ by more than this, degrees
+    (> 0): on the bundled objects' captures they agree within a degree."""
     object_vote_fraction: float = 0.8
     """A sparse point is the object's when it lies inside the masks in at least this share (0-1) of the views
     that see it; those are left out of the table's fit."""

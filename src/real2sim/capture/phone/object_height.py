@@ -46,32 +46,40 @@ def measure_object(ds: Dataset, masks: np.ndarray, table: rf.Similarity, config:
     return HullMeasure(float(hi[2]), 0.5 * (lo[:2] + hi[:2]), slice_z, slice_area.astype(float), float(grid.voxel_m))
 
 
-def object_top(hull: HullMeasure, point_heights: np.ndarray, config: NormaliseConfig) -> tuple[float, dict]:
+def object_top(hull: HullMeasure, point_heights: np.ndarray | None, config: NormaliseConfig,
+               dense_top: float | None = None) -> tuple[float, dict]:
     """The object's top above the table (model units) and a record of how it was chosen: the hull's
     top, or that of the sparse points on the object (``point_heights``, model units above the table)
-    where the hull stands over them as a cap (module docstring, step 3)."""
-    heights = np.sort(point_heights[point_heights > 0])[::-1]
-    record = {"hull_top_units": hull.top, "object_points": len(heights)}
-    if len(heights) < config.min_object_points:
-        return hull.top, {**record, "from": f"the visual hull (fewer than {config.min_object_points} sparse "
-                                            "points on the object)"}
-    points_top = float(np.median(heights[:config.top_points]))
+    where the hull stands over them as a cap (module docstring, step 3). ``dense_top``: the top of the
+    dense points on the object (:mod:`real2sim.multiview.dense`) in their place, the same rule."""
+    if dense_top is not None:
+        points_top, label = float(dense_top), "dense points"
+        record = {"hull_top_units": hull.top, "dense_top_units": points_top}
+    else:
+        heights = np.sort(point_heights[point_heights > 0])[::-1]
+        record = {"hull_top_units": hull.top, "object_points": len(heights)}
+        if len(heights) < config.min_object_points:
+            return hull.top, {**record, "from": f"the visual hull (fewer than {config.min_object_points} sparse "
+                                                "points on the object)"}
+        points_top, label = float(np.median(heights[:config.top_points])), "sparse points"
     record["points_top_units"] = points_top
     gap = (hull.top - points_top) / hull.top
     record["hull_above_points"] = gap
     if gap <= config.top_gap:
-        return hull.top, {**record, "from": "the visual hull (the sparse points reach its top)"}
+        return hull.top, {**record, "from": f"the visual hull (the {label} reach its top)"}
     above = hull.slice_z >= points_top
     prism = np.interp(points_top, hull.slice_z, hull.slice_area) * (hull.top - points_top)
     fill = float(hull.slice_area[above].sum() * hull.voxel / prism) if prism > 0 else 1.0
     record["cap_fill"] = fill
     if fill < config.cap_fill:
-        return points_top, {**record, "from": f"the top of the sparse points on the object (the median of the "
-                                              f"{config.top_points} highest): the visual hull rises {100 * gap:.1f} % "
-                                              "above them as a cap, an outer bound over a top seen only from above"}
+        which = ("their 99th percentile" if dense_top is not None
+                 else f"the median of the {config.top_points} highest")
+        return points_top, {**record, "from": f"the top of the {label} on the object ({which}): the visual hull "
+                                              f"rises {100 * gap:.1f} % above them as a cap, an outer bound over a "
+                                              "top seen only from above"}
     warnings.warn(f"the object's height is read from the masks' visual hull, which stands {100 * gap:.1f} % above "
-                  "the highest sparse points on the object and full width: a top with no features, or a hull "
+                  f"the highest {label} on the object and full width: a top with no features, or a hull "
                   "that no view bounds there; if the asset comes out small, lay the printed board under the "
                   "object (`real2sim board`) or give --scale", stacklevel=2)
-    return hull.top, {**record, "from": "the visual hull (it stands full width above the sparse points: a top "
+    return hull.top, {**record, "from": f"the visual hull (it stands full width above the {label}: a top "
                                         "with no features; warned)"}
