@@ -53,7 +53,7 @@ def main() -> int:
 
     rows = []
     for size in args.sizes:
-        cfg = MaskConfig(weights=weights, maskrcnn_min_size_px=size, maskrcnn_max_size_px=max(size, 1333))
+        cfg = MaskConfig(mask_weights=weights, maskrcnn_min_size_px=size, maskrcnn_max_size_px=max(size, 1333))
         model = load_maskrcnn(weights, "cpu", cfg.maskrcnn_min_size_px, cfg.maskrcnn_max_size_px,
                               cfg.score_threshold, cfg.maskrcnn_max_instances)
         start = time.perf_counter()

@@ -118,9 +118,9 @@ def test_background_missing_leaves_dataset_untouched(tmp_path, captures):
 def test_maskrcnn_error_paths(tmp_path, captures):
     root = captures["bottle"]
     with pytest.raises(UserInputError, match="--mask-weights"):
-        compute_masks(root, "maskrcnn", MaskConfig(weights=None))
+        compute_masks(root, "maskrcnn", MaskConfig(mask_weights=None))
     with pytest.raises(UserInputError, match="not found"):
-        compute_masks(root, "maskrcnn", MaskConfig(weights=tmp_path / "missing.pth"))
+        compute_masks(root, "maskrcnn", MaskConfig(mask_weights=tmp_path / "missing.pth"))
     weights = tmp_path / "w.pth"
     weights.write_bytes(b"not weights")
     # Not `import torchvision`: on a CPU-only torch that raises RuntimeError until
@@ -129,10 +129,10 @@ def test_maskrcnn_error_paths(tmp_path, captures):
 
     if importlib.util.find_spec("torchvision") is None:
         with pytest.raises(UserInputError, match="torchvision"):
-            compute_masks(root, "maskrcnn", MaskConfig(weights=weights))
+            compute_masks(root, "maskrcnn", MaskConfig(mask_weights=weights))
     else:
         with pytest.raises(UserInputError, match="is not a Mask R-CNN weights file"):
-            compute_masks(root, "maskrcnn", MaskConfig(weights=weights))
+            compute_masks(root, "maskrcnn", MaskConfig(mask_weights=weights))
     assert not (root / "masks_maskrcnn").exists()
 
 

@@ -254,7 +254,7 @@ def test_compute_masks_maskrcnn_end_to_end(weights_file, small_dataset, tmp_path
     root = tmp_path / "ds"
     shutil.copytree(small_dataset, root)
     before = json.loads((root / "transforms.json").read_text())
-    result = compute_masks(root, "maskrcnn", MaskConfig(weights=weights_file, **SMALL))
+    result = compute_masks(root, "maskrcnn", MaskConfig(mask_weights=weights_file, **SMALL))
     assert result.method == "maskrcnn" and result.num_frames == 2 and result.mask_dir == "masks_maskrcnn"
     assert 0.0 <= result.mean_object_fraction <= 1.0
     assert result.mean_iou is not None  # simulated captures carry ground-truth masks
@@ -265,7 +265,7 @@ def test_compute_masks_maskrcnn_end_to_end(weights_file, small_dataset, tmp_path
     from real2sim.formats.dataset import load_image_rgb
     from real2sim.capture.masks.methods import load_maskrcnn
 
-    cfg = MaskConfig(weights=weights_file, **SMALL)
+    cfg = MaskConfig(mask_weights=weights_file, **SMALL)
     model = load_maskrcnn(weights_file, "cpu", cfg.maskrcnn_min_size_px, cfg.maskrcnn_max_size_px,
                           cfg.score_threshold, cfg.maskrcnn_max_instances)
     frame = read_dataset(root).frames[0]

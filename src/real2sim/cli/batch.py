@@ -181,7 +181,7 @@ def plan(args: argparse.Namespace, first: tuple[list[str], dict[str, float], Pat
     for name, dataset in zip(names, args.datasets):
         mass, reason = _mass_of(name, dataset_folder(dataset), args, table)
         per = argparse.Namespace(**vars(args))  # config_from_args sets some flags on what it is given
-        per.dataset, per.out, per.mass, per.overwrite = Path(dataset), out / name, mass or 1.0, False
+        per.dataset, per.out, per.mass_kg, per.overwrite = Path(dataset), out / name, mass or 1.0, False
         per.frames = per.board_square_mm = per.board = None
         try:
             config = config_from_args(per)  # checks the dataset itself: not a dataset -> one line
