@@ -95,7 +95,7 @@ def depth_bounds(c2w_cv: np.ndarray, look_at: np.ndarray, points: np.ndarray | N
     """(V, 2) near and far depth for each view, world units.
 
     With ``points`` (P, 3, sparse structure-from-motion points) and ``k``: the 1st and 99th percentile of the
-    depths of those in the view's picture, widened by a quarter. Without: the region the cameras share, a
+    depths of those in the view's picture, widened by a quarter, the near one no farther than without. Without: the region the cameras share, a
     ball around ``look_at`` as large as the cameras' median distance to it (so a camera's far bound is about
     twice its distance), the near bound at least a quarter of the camera's distance.
     """
@@ -112,7 +112,9 @@ def depth_bounds(c2w_cv: np.ndarray, look_at: np.ndarray, points: np.ndarray | N
         seen = (z > 0) & (u >= 0) & (u <= k.width) & (v >= 0) & (v <= k.height)
         for i in np.nonzero(seen.sum(axis=1) >= 8)[0]:
             lo, hi = np.percentile(z[i, seen[i]], [1.0, 99.0])
-            near[i], far[i] = 0.75 * lo, 1.25 * hi
+            # the near bound no farther than the cameras' region's: a few close-ups triangulate the table
+            # around the object and little of it, and its top is nearer than any of them
+            near[i], far[i] = min(0.75 * lo, near[i]), 1.25 * hi
     return np.stack([near, far], axis=1)
 
 

@@ -10,7 +10,8 @@ world may be a COLMAP model's. The *object* is the points higher above the plane
 the radius of the look-at point's foot, linked into clusters by a voxel grid of the points' own spacing:
 the largest cluster, and every other whose points stand, half of them at least, inside its footprint on the
 plane (the convex hull of its points there): a textureless band splits an object into stacked clusters, and a
-bottle's neck stands inside the ring of its body's seen surface, not on it. Its height is a high percentile of its points' heights.
+bottle's neck stands inside the ring of its body's seen surface, not on it; and every cluster within two
+cells of it (a handle whose join to the body has no trusted depth). Its height is a high percentile of its points' heights.
 
 Frames: the points' world frame (any unit). The plane is ``normal . x = offset`` with ``normal`` towards
 the cameras.
@@ -154,7 +155,8 @@ def support_and_object(dense: DensePoints, c2w_cv: np.ndarray, fl_px: float, sho
 
 def _object_cluster(dense: DensePoints, candidate: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """Indices of the object's points among ``candidate``: the largest cluster of a voxel grid of the points'
-    spacing (four median footprints) and the clusters standing inside its footprint on the plane."""
+    spacing (four median footprints) and the clusters standing inside its footprint on the plane or within two
+    cells of it."""
     if len(candidate) == 0:
         return candidate
     pts = dense.points[candidate]
@@ -184,8 +186,12 @@ def _object_cluster(dense: DensePoints, candidate: np.ndarray, normal: np.ndarra
     except QhullError:  # a main cluster flat in the plane's view: no footprint to stand in
         return candidate[keep[point_label]]
     inside = footprint.find_simplex(plane_xy) >= 0
+    # and those that come within two cells of it: a handle whose join to the body has no trusted depth
+    from scipy.ndimage import binary_dilation
+
+    touching = np.unique(labels[binary_dilation(labels == main, iterations=2)])
     for label in np.nonzero(counts)[0]:
         if label != main:
             mine = point_label == label
-            keep[label] = inside[mine].mean() >= 0.5
+            keep[label] = inside[mine].mean() >= 0.5 or label in touching
     return candidate[keep[point_label]]

@@ -308,3 +308,55 @@ def phone_stages(runner, phone: PhoneInput, run_dir: Path, config) -> Path:
     runner.stage("board_frame", {"sfm": digests.files_digest(sfm_dir, digests.tree_files(sfm_dir))},
                  {"board": board_spec(cfg).to_json()}, upstream, [f"{mf.RUN_DIRNAME}/{PHONE_DIRNAME}"], board_work)
     return phone_dir
+
+
+#: In ``ASSETDIR/.run/``: the reconstruction's outline drawn over a few of the photos, to check by eye.
+OUTLINE_PNG = "outline.png"
+
+
+def write_outline(dataset: Path, mesh_path: Path, out_png: Path, views: int = 4, side_px: int = 480) -> Path:
+    """``out_png``: the outline of the mesh at ``mesh_path`` (the frame of ``dataset``'s poses) drawn in green over
+    ``views`` of ``dataset``'s photos spread through it, each no longer than ``side_px``, side by side in two rows.
+    The check a capture without truth allows: an outline that leaves the object, or cuts into it, shows where
+    the reconstruction (or its scale, or the table) went wrong."""
+    import cv2
+    from PIL import Image
+
+    from real2sim.formats.dataset import load_image_rgb, read_dataset
+    from real2sim.geometry.mesh_io import load_mesh
+
+    ds = read_dataset(dataset)
+    mesh = load_mesh(mesh_path)
+    k = ds.intrinsics
+    scale = min(1.0, side_px / max(k.width, k.height))
+    size = (max(1, round(k.width * scale)), max(1, round(k.height * scale)))
+    small = k.scaled(*size)
+    picks = np.unique(np.linspace(0, len(ds.frames) - 1, min(views, len(ds.frames))).round().astype(int))
+    panels = []
+    for i in picks:
+        frame = ds.frames[i]
+        image = np.asarray(Image.fromarray(load_image_rgb(Path(dataset) / frame.file_path)).resize(size)).copy()
+        w2c = np.linalg.inv(frame.transform_matrix @ CV_FROM_GL)
+        cam = mesh.vertices @ w2c[:3, :3].T + w2c[:3, 3]
+        z = np.maximum(cam[:, 2], 1e-9)
+        uv = np.stack([small.fl_x * cam[:, 0] / z + small.cx, small.fl_y * cam[:, 1] / z + small.cy], axis=1)
+        front = (cam[mesh.faces, 2] > 0).all(axis=1)
+        drawn = np.zeros((size[1], size[0]), np.uint8)
+        corners = np.round((uv[mesh.faces[front]] - 0.5) * 16).astype(np.int32)  # 1/16 px, pixel centres at +0.5
+        corners = corners[(np.abs(corners) < 16 * 8 * max(size)).all(axis=(1, 2))]
+        if len(corners):
+            cv2.fillPoly(drawn, list(corners), 1, lineType=cv2.LINE_8, shift=4)
+        # the outline and the holes through the silhouette (a handle's), not the specks between triangles
+        drawn = cv2.morphologyEx(drawn, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+        contours, _ = cv2.findContours(drawn, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+        contours = [c for c in contours if cv2.contourArea(c) >= 0.002 * drawn.size]
+        cv2.drawContours(image, contours, -1, (40, 255, 40), max(1, round(side_px / 320)))
+        panels.append(image)
+    while len(panels) % 2:
+        panels.append(np.zeros_like(panels[0]))
+    rows = [np.concatenate(panels[j:j + 2], axis=1) for j in range(0, len(panels), 2)]
+    out_png = Path(out_png)
+    tmp = out_png.with_name(f".{out_png.name}.tmp")
+    Image.fromarray(np.concatenate(rows, axis=0)).save(tmp, format="PNG")
+    tmp.replace(out_png)
+    return out_png

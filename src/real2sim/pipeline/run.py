@@ -22,6 +22,10 @@ Stages, in order (each one the existing stage function, called as it is; ``masks
    ``ground_truth/model_from_world.json``, see :mod:`real2sim.capture.phone.normalise`): ``ASSETDIR/truth.json``;
 5. ``evaluate`` (optional): :func:`real2sim.evaluate.sweep.evaluate` -> ``ASSETDIR/results/``.
 
+A capture whose frame the run found (robot_frame, board_frame) also gets ``ASSETDIR/.run/outline.png``: the
+reconstruction's outline over four of its photos (:func:`real2sim.pipeline.phone.write_outline`), the check by
+eye where there is no truth.
+
 Caching, resuming and the manifest: :mod:`real2sim.pipeline.manifest`. Every Python warning a
 stage raises (a fallback, pose refinement that kept the given poses) is shown when it happens,
 recorded in the stage's run.json entry, and returned in :attr:`RunResult.stage_warnings` (those of
@@ -50,6 +54,7 @@ from real2sim.pipeline.stages import (RESERVED, RESULTS_DIRNAME, TRUTH_RESULTS_D
                                       run_robot_frame, run_truth)
 from real2sim.pipeline.run_folder import (check_dataset, dataset_files, discard, kept_note,  # noqa: F401
                                           poses_to_refine, prepare_asset_dir, remove_stale_temporaries)
+from real2sim.pipeline.phone import OUTLINE_PNG, PHONE_DIRNAME, write_outline
 from real2sim.pipeline.run_config import RunConfig, RunResult, phone_mask_config  # noqa: F401 (public here)
 from real2sim.pipeline.runner import Paused, RunProgress, Runner, StageFailed
 from real2sim.pipeline.support import support_height_m
@@ -258,6 +263,8 @@ def _run_stages(runner: Runner, dataset: Path, asset_dir: Path, config: RunConfi
         [f"{mf.RUN_DIRNAME}/reconstruct/mesh.obj", f"{mf.RUN_DIRNAME}/reconstruct/report.json"],
         lambda: run_reconstruct(used, recon_dir, recon_cfg, config.device, config.seed, progress))
 
+    if config.robot_frame() is not None or dataset == run_dir / PHONE_DIRNAME:  # photos without truth: a check by eye
+        write_outline(used, recon_dir / "mesh.obj", run_dir / OUTLINE_PNG)
     mesh_files = [f for f in digests.tree_files(recon_dir) if f != "report.json"]
     support_m, support_from = support_height_m(used, recon_dir / "mesh.obj", recon_cfg.table_z_m)
     asset_cfg = replace(asset_cfg, support_height_m=support_m)
