@@ -159,9 +159,10 @@ def test_photos_as_people_take_them(tmp_path, capsys, name):
     mesh = make_textured_object(name)
     photos = _capture(tmp_path / "photos", mesh, 15, 960, 540, auto_exposure=True, exposure_jitter_stops=0.0,
                       table_texture_px=4096)
-    code, _, err = run_cli(capsys, "run", photos, "--mass-kg", "0.3", "--object-height-m",
-                           float(np.ptp(mesh.vertices[:, 2])), "--backend", "hull", "--out", tmp_path / "asset")
+    code, out, err = run_cli(capsys, "run", photos, "--mass-kg", "0.3", "--object-height-m",
+                             float(np.ptp(mesh.vertices[:, 2])), "--backend", "hull", "--out", tmp_path / "asset")
     assert code == 0, err
+    assert "photos: " in out and "check by eye: " in out  # what a user without truth can judge
     truth = json.loads((tmp_path / "asset" / "truth.json").read_text())
     errors = truth["robot_frame"]["errors_vs_ground_truth"]
     assert errors["table_tilt_deg"] < 1.0 and abs(errors["scale_rel_error"]) < 0.03

@@ -260,9 +260,27 @@ def run(args: argparse.Namespace) -> int:
         print(f"vs truth: Chamfer {rec.get('chamfer_mm', float('nan')):.2f} mm, IoU {rec.get('iou', float('nan')):.3f}; "
               f"CoM {phys['com_error_mm']:.2f} mm, inertia eigenvalues {100 * phys['inertia_eigenvalue_max_rel_error']:.1f} %"
               f" ({result.asset_dir / 'truth.json'})")
+    for line in judged_lines(result):
+        print(line)
     for line in stage_warning_lines(result.stage_warnings):
         print(line)
     return 0
+
+
+def judged_lines(result) -> list[str]:
+    """What a run of photos without truth lets a user judge: the photos structure from motion placed and left
+    out, its reprojection error, and the outline picture (``.run/outline.png``) to check by eye."""
+    import json
+
+    lines = []
+    sfm = (json.loads(result.manifest_path.read_text()).get("stages", {}).get("sfm") or {}).get("result")
+    if sfm:
+        lines.append(f"photos: {sfm['registered']} placed, {sfm['left_out']} left out (why: .run/sfm/sfm.json), "
+                     f"reprojection {sfm['mean_reprojection_px']:.2f} px")
+    outline = result.asset_dir / ".run" / "outline.png"
+    if outline.is_file():
+        lines.append(f"check by eye: {outline} (the reconstruction's outline over four photos)")
+    return lines
 
 
 def stage_warning_lines(stage_warnings: list[dict]) -> list[str]:
