@@ -329,12 +329,20 @@ def test_bad_colmap_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
         "both": ([moved, "--object-height-m", "0.1", "--scale", "0.2"], "exactly one"),
         "metric dataset": ([robot, "--scale", "0.2"], "COLMAP model dataset"),
         "zero height": ([moved, "--object-height-m", "0"], "--object-height-m: expected a number > 0"),
-        "few points": ([captures["few_points"], "--object-height-m", "0.1"], "sparse points"),
         "table z for colmap": ([moved, "--object-height-m", "0.1", "--table-z-m", "0.2"], "--table-z-m is for"),
     }
     _assert_refused(cases, tmp_path, capsys)
     code, _, err = run_cli(capsys, moved, "--out", tmp_path / "x", *FAST)
     assert "--scale" in err and "--object-height-m" in err
+
+
+def test_too_few_sparse_points_take_the_table_from_dense_points(captures, tmp_path, capsys):
+    """12 sparse points give no table plane; the dense points from the photos do (issue #68 part 2)."""
+    code, _, err = run_cli(capsys, captures["few_points"], "--object-height-m", "0.1", "--out", tmp_path / "few",
+                           *FAST)
+    assert code == 0, err
+    record = json.loads((tmp_path / "few" / ".run" / "robot_frame" / "robot_frame.json").read_text())
+    assert record["table_plane_from"]["from"].startswith("the dense points")
 
 
 def test_nerfstudio_capture_reads_its_point_cloud_or_else_its_colmap_model(captures, assets, tmp_path):
