@@ -73,6 +73,7 @@ def test_a_ball_out_of_range_is_a_user_error(cup):
             filled_envelope(cup, radius, voxels=64)
 
 
+@pytest.mark.slow  # an asset build end to end (86 s on 2 busy cores); the envelope's own tests stay in the default suite
 def test_asset_fits_the_filled_cup_and_keeps_the_true_one_everywhere_else(cup, tmp_path):
     mesh = tmp_path / "cup.obj"
     cup.export(mesh)

@@ -107,6 +107,7 @@ def test_a_sliding_window_explains_more_of_the_band_beside_the_silhouettes(mug_o
     assert (stricter <= sliding).all()  # the pixel's own test only ever takes pixels away
 
 
+@pytest.mark.slow  # whole parallax masks of the mug on the board (165 s on 2 busy cores); the plate's own tests above stay in the default suite
 def test_parallax_masks_with_the_plate_cover_less_of_the_hole(mug_on_board):
     """The parallax masks of the capture (their own table test, then the plate round) against the truth
     (about 90 s). The plate round (the defaults: its sliding windows at 0.04, the object's second opinion off) takes

@@ -9,6 +9,8 @@ convex to very non-convex. Round parts are cut into flats at most
 :data:`REFERENCE_SAGITTA_M` deep around their axis and ten times that along a curved profile, so
 each object's chord error (:attr:`BundledObject.chord_m`) is 0 (boxes, prisms), 2.5 um (cylinders:
 the can, the stool, the hammer) or 27.5 um (curved both ways: the bottle, mug, bowl, torus, banana).
+The bottle, can and mug are bundled as 0.1.0 made them (:mod:`real2sim.geometry.objects_010`);
+their round versions are ``make_object(name, rolling_sagitta_m=REFERENCE_SAGITTA_M)``.
 
 * :func:`make_object` -- the watertight geometry (vertices merged), for
   geometry stages and tests.
@@ -31,6 +33,7 @@ from PIL import Image
 from real2sim.plumbing.errors import UserInputError
 from real2sim.geometry import shape_set
 from real2sim.geometry.mesh_io import export_textured_mesh
+from real2sim.geometry.objects_010 import MESHES_010
 from real2sim.geometry.round_surfaces import DENSE_PER_M, PROFILE_SAGITTA_FACTOR, Revolved, arc, dense_curve, revolve, ring_sections, simplify_profile
 
 _TEXTURE_PX = 512
@@ -81,7 +84,8 @@ class BundledObject:
 
     @property
     def chord_m(self) -> float:
-        """Stated chord error of its mesh as bundled: the farthest a flat lies from the true surface, m
+        """Stated chord error of its round mesh (:func:`object_surfaces`): the farthest a flat lies from the
+        true surface, m
         (around the axis :data:`REFERENCE_SAGITTA_M`, along a curved profile
         :data:`~real2sim.geometry.round_surfaces.PROFILE_SAGITTA_FACTOR` times it)."""
         around = REFERENCE_SAGITTA_M if self.curved_directions >= 1 else 0.0
@@ -211,9 +215,16 @@ def object_surfaces(name: str, sagitta_m: float | None = None) -> Built:
 def make_object(name: str, rolling_sagitta_m: float | None = None) -> trimesh.Trimesh:
     """Watertight geometry of a bundled object, metres, resting on z = 0, no texture.
 
-    ``rolling_sagitta_m``: None for the bundled object (sagitta :data:`REFERENCE_SAGITTA_M`);
-    a value tessellates every round part to that sagitta per curved direction instead, m (benchmarks that compare
-    tessellations; why: docs/design-notes/asset.md#bundled-objects-tessellation)."""
+    ``rolling_sagitta_m``: None for the bundled object as 0.1.0 made it where it has such a mesh (the
+    bottle, can and mug: :mod:`real2sim.geometry.objects_010`), else its round mesh; a value cuts every
+    round part to that sagitta around its axis (and :data:`~real2sim.geometry.round_surfaces.PROFILE_SAGITTA_FACTOR`
+    times it along a curved profile), m: :data:`REFERENCE_SAGITTA_M` gives the round reference whose chord
+    error :attr:`BundledObject.chord_m` states (why: docs/design-notes/asset.md#bundled-objects-tessellation)."""
+    if rolling_sagitta_m is None and name in MESHES_010:
+        built = MESHES_010[name]()
+        mesh = trimesh.Trimesh(built.vertices, built.faces, process=True)
+        mesh.fix_normals()
+        return mesh
     return object_surfaces(name, rolling_sagitta_m)[0]
 
 
@@ -291,6 +302,7 @@ def listing() -> list[str]:
     for obj in OBJECTS.values():
         mark = "shape set, " if obj.shape_set else ""
         rest = "" if obj.rests_on == "base" else ", rests on its side"
-        lines.append(f"{obj.name:10s} mass {obj.mass_kg:.2f} kg  chord error <= {obj.chord_m * 1e6:g} um  "
+        mesh = "0.1.0 mesh; round reference" if obj.name in MESHES_010 else "round mesh"
+        lines.append(f"{obj.name:10s} mass {obj.mass_kg:.2f} kg  {mesh} chord error <= {obj.chord_m * 1e6:g} um  "
                      f"[{mark}{obj.curved_directions} curved directions{rest}]  {obj.description}")
     return lines
