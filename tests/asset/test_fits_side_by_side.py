@@ -36,10 +36,11 @@ def test_processes_never_exceed_the_threads_the_build_may_use(threads):
     threads(1)
     assert fit_processes(config(), 3) == 1
     threads(4)
-    assert fit_processes(config(), 3) == 3
-    assert fit_processes(config(), 2) == 2
-    assert fit_processes(config(fit_workers=1), 3) == 1
-    assert fit_processes(config(fit_workers=8), 3) == 3
+    assert fit_processes(config(), 3) == 1  # one after another unless asked
+    assert fit_processes(config(fit_workers=2), 3) == 2
+    assert fit_processes(config(fit_workers=8), 3) == 3  # at most one per fit
+    threads(2)
+    assert fit_processes(config(fit_workers=8), 3) == 2  # and one per thread
     assert fit_processes(config(device="cuda"), 3) == 1  # CUDA does not survive a fork; one GPU is one fit
 
 

@@ -1,8 +1,6 @@
-"""The collision fits of one asset build, side by side: one process per SPEC, sized to the threads
-this process may use, so that processes times threads never exceeds them.
-
-A primitive fit on a laptop CPU is many small tensor operations, which a second thread speeds up
-less than a second fit does (why: docs/design-notes/asset.md#fits-side-by-side). Every fit is seeded
+"""The collision fits of one asset build: one after another by default, or side by side (one process
+per SPEC, ``--fit-workers``) sized to the threads this process may use, so that processes times
+threads never exceeds them (why: docs/design-notes/asset.md#fits-side-by-side). Every fit is seeded
 on its own, so which process fits a SPEC, and in which order they finish, changes no result.
 """
 
@@ -110,13 +108,14 @@ def fit_and_measure(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, spec:
 
 
 def fit_processes(config: AssetConfig, fits: int) -> int:
-    """How many processes fit side by side: ``config.fit_workers``, else one per thread this process
-    may use (``torch.get_num_threads()``: ``--threads``, a batch worker's share), at most one per fit.
-    A GPU fit stays in this process: CUDA does not survive a fork, and one GPU gains nothing."""
+    """How many processes fit side by side: ``config.fit_workers`` (default 1), at most one per fit and
+    one per thread this process may use (``torch.get_num_threads()``: ``--threads``, a batch worker's
+    share). One by default: on 2 cores a fit already uses both threads, and a process of its own costs
+    its start (why: docs/design-notes/asset.md#fits-side-by-side). A GPU fit stays in this process."""
     if config.device != "cpu":
         return 1
     budget = max(1, torch.get_num_threads())
-    wanted = config.fit_workers if config.fit_workers is not None else budget
+    wanted = config.fit_workers if config.fit_workers is not None else 1
     return max(1, min(wanted, fits, budget))
 
 
