@@ -57,7 +57,7 @@ class SimulationTimeout(SimulationError):
 CHUNK_STEPS = 25
 
 
-class _Deadline:
+class Deadline:
     """The wall-clock limit of one simulation (both runs together); None: no limit."""
 
     def __init__(self, timeout_s: float | None) -> None:
@@ -142,7 +142,7 @@ def _intervals(num_steps: int, interval: int | None) -> list[tuple[int, int]]:
 
 
 def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: SceneConfig,
-              label: str, representation: str, run: int, deadline: _Deadline | None = None) -> Trajectory:
+              label: str, representation: str, run: int, deadline: Deadline | None = None) -> Trajectory:
     _check_object_instance(scene)
     plant = scene.plant
     dt = cfg.time_step_s
@@ -155,7 +155,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
                              "(same SceneConfig and task)")
     spans = _intervals(n, interval)
     reset_steps = np.array([a for a, _ in spans if a > 0], dtype=int)
-    deadline = deadline or _Deadline(None)
+    deadline = deadline or Deadline(None)
     deadline.check(label, 0.0)  # building the scene may already have used the time
 
     # 1. The timed rollout; 2. the same rollout again, instrumented.
@@ -219,7 +219,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
 
 
 def _timed_run(scene: Scene, initial: _State, reference: Trajectory | None, spans, dt: float, label: str,
-               deadline: _Deadline) -> tuple[float, np.ndarray]:
+               deadline: Deadline) -> tuple[float, np.ndarray]:
     """The rollout that is timed: bare AdvanceTo between resets, in chunks so that the wall-clock
     limit is looked at in between. (wall seconds spent advancing, final plant positions)."""
     simulator, pctx = _started(scene, initial, label)
@@ -323,7 +323,7 @@ def simulate_reference(reference_mesh_path: Path, physical_properties, run_spec:
     (defaults when None). ``timeout_s``: wall-clock limit of the whole call
     (:class:`SimulationTimeout` past it); None: none. ``stable_poses``: the object's resting
     poses kept by the caller (:class:`~real2sim.evaluate.scene.placement.StablePoseCache`; None: computed)."""
-    deadline = _Deadline(timeout_s)
+    deadline = Deadline(timeout_s)
     scene = build_scene(run_spec.task, "hydroelastic",
                         reference_object_adder(reference_mesh_path, physical_properties, object_contact),
                         run_spec, scene_config)
@@ -354,7 +354,7 @@ def simulate_candidate(representation_urdf_path: Path, contact_model: str, run_s
     on that mesh. ``timeout_s``: wall-clock limit of the whole call (:class:`SimulationTimeout`
     past it); None: none.
     """
-    deadline = _Deadline(timeout_s)
+    deadline = Deadline(timeout_s)
     urdf = Path(representation_urdf_path)
     scene = build_scene(run_spec.task, contact_model, urdf_object_adder(urdf), run_spec, scene_config)
     name = representation_name(urdf)

@@ -30,7 +30,7 @@ from real2sim.evaluate.mujoco.config import MujocoConfig
 from real2sim.evaluate.mujoco.scene import MujocoScene, build_mujoco_scene
 from real2sim.evaluate.scene.scene_config import SceneConfig
 from real2sim.evaluate.scene.tasks import RunSpec, run_steps
-from real2sim.evaluate.simulate import CHUNK_STEPS, SimulationError, SimulationTimeout
+from real2sim.evaluate.simulate import CHUNK_STEPS, Deadline, SimulationError, SimulationTimeout
 from real2sim.formats.rotations import quaternions_to_matrices
 from real2sim.formats.trajectory import Trajectory
 
@@ -75,17 +75,6 @@ def _check(scene: MujocoScene, label: str, t_s: float) -> None:
                               f"{np.abs(q[:3]).max():.3g} m, |velocity| {np.abs(v).max():.3g})")
 
 
-class _Deadline:
-    def __init__(self, timeout_s: float | None) -> None:
-        self.timeout_s = timeout_s
-        self._end = None if timeout_s is None else time.monotonic() + float(timeout_s)
-
-    def check(self, label: str, t_s: float) -> None:
-        if self._end is not None and time.monotonic() > self._end:
-            raise SimulationTimeout(f"timeout: {label} ran past its {self.timeout_s:g} s wall-clock limit "
-                                    f"(sim_timeout_s) at simulated t = {t_s:.3f} s")
-
-
 def _spans(num_steps: int, interval: int | None) -> list[tuple[int, int]]:
     if not interval:
         return [(0, num_steps)]
@@ -100,7 +89,7 @@ def _reset(scene: MujocoScene, reference: Trajectory, step: int, dt: float, labe
 
 
 def _timed_run(scene: MujocoScene, reference: Trajectory, spans, dt: float, substeps: int, label: str,
-               deadline: _Deadline) -> tuple[float, np.ndarray]:
+               deadline: Deadline) -> tuple[float, np.ndarray]:
     import mujoco
 
     m, d = scene.model, scene.data
@@ -159,7 +148,7 @@ def simulate_candidate_mujoco(model_xml: Path, run_spec: RunSpec, scene_config: 
     (:class:`SimulationTimeout` past it); None: none."""
     import mujoco
 
-    deadline = _Deadline(timeout_s)
+    deadline = Deadline(timeout_s)
     model_xml = Path(model_xml)
     name = representation or model_xml.resolve().parent.name
     label = f"{name} mujoco {run_spec.task} run {run_spec.run}"
