@@ -24,14 +24,20 @@ def test_cpd_paper_round_trips(tmp_path):
     assert table.rows[0]["cpd_paper"] == 0.004
 
 
-def test_a_runs_csv_from_before_cpd_paper_verifies_and_reads_it_as_nan(tmp_path):
-    old_columns = [c for c in RUN_COLUMNS if c not in ("cpd_paper", "simulator")]  # both came later
+def _old_runs_csv(tmp_path, old_columns: list[str]):
+    """A runs.csv of one row with only ``old_columns``, checksummed as it was written then."""
     fields = [repr(v) if isinstance(v, float) else str(v) for v in (_row()[c] for c in old_columns)]
     path = tmp_path / "runs.csv"
     with open(path, "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow([*old_columns, CHECK_COLUMN])
         writer.writerow([*fields, row_checksum(fields)])
+    return path
+
+
+def test_a_runs_csv_from_before_cpd_paper_verifies_and_reads_it_as_nan(tmp_path):
+    old_columns = [c for c in RUN_COLUMNS if c not in ("cpd_paper", "simulator")]  # both came later
+    path = _old_runs_csv(tmp_path, old_columns)
     table = load_runs_csv(path)
     assert table.verified and table.torn_lines == ()
     assert len(table.rows) == 1 and math.isnan(table.rows[0]["cpd_paper"])
@@ -45,12 +51,7 @@ def test_a_runs_csv_from_before_the_simulator_column_verifies_and_reads_as_drake
     from real2sim.formats.results import row_key, summarize
 
     old_columns = [c for c in RUN_COLUMNS if c != "simulator"]
-    fields = [repr(v) if isinstance(v, float) else str(v) for v in (_row()[c] for c in old_columns)]
-    path = tmp_path / "runs.csv"
-    with open(path, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow([*old_columns, CHECK_COLUMN])
-        writer.writerow([*fields, row_checksum(fields)])
+    path = _old_runs_csv(tmp_path, old_columns)
     table = load_runs_csv(path)
     assert table.verified and table.torn_lines == ()
     assert table.rows[0]["simulator"] == "drake"
