@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
             spec = make_run_specs(task, 1, seed=0)[0]
             ref = simulate_reference(mesh_path, props, spec, cfg)
             rows.append(("reference (mesh, rigid hydro)", "hydroelastic", task, ref, float("nan")))
-            print(f"{task} reference: {ref.sim_time_s / ref.sim_duration_s:.2f} s/s", flush=True)
+            print(f"{task} reference: {ref.instrumented_time_s / ref.sim_duration_s:.2f} s/s (instrumented; a reference is not timed)", flush=True)
             for name, urdf in reps.items():
                 for cm in ("point", "hydroelastic"):
                     try:
@@ -133,8 +133,11 @@ def main(argv: list[str] | None = None) -> int:
                           flush=True)
     header = ("| representation | contact | task | wall s / sim s (timed) | instrumented / timed | "
               "equation-error ATE (mm) |\n|---|---|---|---|---|---|")
-    lines = [f"| {n} | {cm} | {task} | {t.sim_time_s / t.sim_duration_s:.2f} | "
-             f"{t.instrumented_time_s / t.sim_time_s:.2f} | {'' if np.isnan(a) else f'{a * 1e3:.2f}'} |"
+    # a reference is not timed: its row gives the instrumented run's rate
+    lines = [f"| {n} | {cm} | {task} | "
+             + (f"{t.instrumented_time_s / t.sim_duration_s:.2f} (instrumented) | |" if np.isnan(t.sim_time_s) else
+                f"{t.sim_time_s / t.sim_duration_s:.2f} | {t.instrumented_time_s / t.sim_time_s:.2f} |")
+             + f" {'' if np.isnan(a) else f'{a * 1e3:.2f}'} |"
              for n, cm, task, t, a in rows]
     table = header + "\n" + "\n".join(lines)
     print(table)

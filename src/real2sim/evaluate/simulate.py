@@ -7,14 +7,16 @@ contact (:func:`simulate_candidate`). Equation error: every ``reset_interval_s``
 candidate's state (object pose + spatial velocity, and the pusher's / table's joint
 state) is set to the reference's state at that step, then one interval is simulated.
 
-Each simulation runs twice on the same diagram:
+A candidate's simulation runs twice on the same diagram:
 1. the timed run: bare ``Simulator.AdvanceTo`` from reset to reset (in chunks of
    :data:`CHUNK_STEPS` steps), with no Python per step; ``sim_time_s`` is its wall time
    (resets included: they cost microseconds);
 2. the instrumented run: one ``AdvanceTo`` per step, reading the state and the plant's
    contact results; its wall time is ``instrumented_time_s``.
 Both runs execute the same discrete updates on the same states; their final states agree
-bit for bit (checked on every run: a RuntimeWarning if not).
+bit for bit (checked on every run: a RuntimeWarning if not). The reference runs the
+instrumented run only: nothing scores its speed, and on a big mesh its timed run was half
+of the sweep's longest job (its ``sim_time_s`` is NaN).
 
 Wall-clock limit: with ``timeout_s`` both runs advance in chunks of at most
 :data:`CHUNK_STEPS` steps and check the clock between chunks; past the limit the simulation
@@ -142,7 +144,8 @@ def _intervals(num_steps: int, interval: int | None) -> list[tuple[int, int]]:
 
 
 def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: SceneConfig,
-              label: str, representation: str, run: int, deadline: Deadline | None = None) -> Trajectory:
+              label: str, representation: str, run: int, deadline: Deadline | None = None,
+              timed: bool = True) -> Trajectory:
     _check_object_instance(scene)
     plant = scene.plant
     dt = cfg.time_step_s
@@ -158,8 +161,9 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
     deadline = deadline or Deadline(None)
     deadline.check(label, 0.0)  # building the scene may already have used the time
 
-    # 1. The timed rollout; 2. the same rollout again, instrumented.
-    sim_time_s, timed_final_q = _timed_run(scene, initial, reference, spans, dt, label, deadline)
+    # 1. The timed rollout (``timed``); 2. the same rollout again, instrumented.
+    sim_time_s, timed_final_q = (_timed_run(scene, initial, reference, spans, dt, label, deadline) if timed
+                                 else (float("nan"), None))
 
     # one AdvanceTo per step, logging state and contacts
     simulator, pctx = _started(scene, initial, label)
@@ -200,7 +204,7 @@ def _simulate(scene: Scene, initial: _State, reference: Trajectory | None, cfg: 
         if (i + 1) % CHUNK_STEPS == 0:
             deadline.check(label, (i + 1) * dt)
     instrumented_time_s = time.perf_counter() - t0
-    if not np.array_equal(plant.GetPositions(pctx), timed_final_q):
+    if timed_final_q is not None and not np.array_equal(plant.GetPositions(pctx), timed_final_q):
         # Same diagram, same states, same discrete updates: they should agree bit for bit.
         # The logged run is still valid; only sim_time_s timed a (slightly) different rollout.
         warnings.warn(f"{label}: timed and instrumented runs ended apart (max |dq| "
@@ -322,7 +326,8 @@ def simulate_reference(reference_mesh_path: Path, physical_properties, run_spec:
     ``object_contact``: real2sim.formats.contact.ContactProperties for friction/dissipation
     (defaults when None). ``timeout_s``: wall-clock limit of the whole call
     (:class:`SimulationTimeout` past it); None: none. ``stable_poses``: the object's resting
-    poses kept by the caller (:class:`~real2sim.evaluate.scene.placement.StablePoseCache`; None: computed)."""
+    poses kept by the caller (:class:`~real2sim.evaluate.scene.placement.StablePoseCache`; None: computed).
+    Simulated once, instrumented: its ``sim_time_s`` is NaN, ``instrumented_time_s`` its wall time."""
     deadline = Deadline(timeout_s)
     scene = build_scene(run_spec.task, "hydroelastic",
                         reference_object_adder(reference_mesh_path, physical_properties, object_contact),
@@ -331,7 +336,7 @@ def simulate_reference(reference_mesh_path: Path, physical_properties, run_spec:
                                com_m=physical_properties.com_m, cache=stable_poses)
     label = f"reference {run_spec.task} run {run_spec.run}"
     return _simulate(scene, _initial_state(scene, X_WO), None, scene_config, label, "reference",
-                     run_spec.run, deadline)
+                     run_spec.run, deadline, timed=False)
 
 
 def representation_name(urdf_path: Path) -> str:

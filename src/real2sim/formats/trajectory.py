@@ -39,7 +39,8 @@ class Trajectory:
     contact_surface_counts: (T,) int, how many of each sample's contact points (the last ones)
         are hydroelastic surface centroids, the others being point pairs (the paper's CPD
         picks one kind per run); empty in trajectories saved before it existed.
-    sim_time_s: wall seconds of the bare timed run (see module docstring).
+    sim_time_s: wall seconds of the bare timed run (see module docstring); NaN for a reference,
+        which is not timed.
     sim_duration_s: simulated seconds.
     instrumented_time_s: wall seconds of the per-step logging run.
     reset_steps: (r,) step indices where the state was reset to the reference (multiples of
