@@ -55,6 +55,13 @@ def _stable_poses(mesh_path: Path, properties: Path) -> StablePoseCache:
     return cache
 
 
+def _phase(pending: dict) -> str:
+    """The sweep's progress label: whether a reference is still among the ``pending`` jobs."""
+    if any(kind == "ref" for kind, _, _ in pending.values()):
+        return "reference and candidate simulations"
+    return "candidate simulations"
+
+
 def run_simulations(executor, todo, spec_by, asset_by_name, reference_meshes, config, partial, rows, runs_path,
                     progress: ProgressFn, target: Path, reference_properties: Path | None = None) -> int:
     """Simulate every reference of ``todo`` (the sweep's plan: (representation, contact model, simulator)
@@ -62,7 +69,9 @@ def run_simulations(executor, todo, spec_by, asset_by_name, reference_meshes, co
     its candidates, as ``executor`` finishes them; each finished row goes into ``rows`` and, at least
     once a second, into ``runs_path``. Returns how many candidate rows were written.
 
-    ``progress`` counts both, references first: ("references and simulations", done, total)."""
+    ``progress`` counts both, references first: ("reference and candidate simulations", done, total)
+    while a reference is still running (the candidates of finished ones run beside it), then
+    ("candidate simulations", done, total), so a profile sees how long the references hold the sweep."""
     total = len(todo) + sum(len(v) for v in todo.values())
     pending: dict[Any, tuple[str, Any, Any]] = {}  # handle -> (kind "ref" or "cand", row key, job)
     resting: dict[tuple[Path, Path], StablePoseCache] = {}  # one per reference object, for this sweep
@@ -83,7 +92,7 @@ def run_simulations(executor, todo, spec_by, asset_by_name, reference_meshes, co
 
     simulated = done = 0
     last_write = 0.0
-    progress("references and simulations", 0, total)
+    progress(_phase(pending), 0, total)
     with _checkpoint_on_exit(runs_path, rows):
         while pending:
             for handle in executor.wait(set(pending)):
@@ -109,7 +118,7 @@ def run_simulations(executor, todo, spec_by, asset_by_name, reference_meshes, co
                 else:
                     rows[key] = _private(result, target)
                     simulated += 1
-                progress("references and simulations", done, total)
+                progress(_phase(pending), done, total)
                 now = time.monotonic()
                 if now - last_write > 1.0 or not pending:
                     write_runs_csv(runs_path, sorted(rows.values(), key=row_key))
