@@ -180,6 +180,8 @@ def reconstruct(dataset: Path | str, config: ReconstructConfig = ReconstructConf
         report["train_field_phase_seconds"] = trained.phase_seconds  # where train_field's time went
         report["field_batches"] = {"rays_per_step": trained.config.rays_per_step,
                                    "coarse_steps": trained.config.coarse_steps, "fine_steps": trained.config.fine_steps}
+        # per grid, the steps it trained and why it ended: its cap, or its loss flattened (FieldConfig.convergence)
+        report["field_stages"] = [{"voxels": v, "steps": n, "ended": e} for v, n, e in trained.stages]
         report["field_voxel_mm"] = 1000.0 * trained.field.grid.voxel_m
         with clock.stage("extract_mesh"):
             if progress:

@@ -30,6 +30,7 @@ from real2sim.reconstruct.field.radiance import VoxelRadianceField
 from real2sim.multiview.hull import carve
 from real2sim.multiview.voxel_grid import VoxelGrid
 from real2sim.reconstruct.carving.photo import CarvingConfig, CarvingResult, photo_carve
+from real2sim.reconstruct.field.convergence import ConvergenceConfig, StageSchedule
 from real2sim.reconstruct.field.ray_pool import PoolRanges, RayPool, ray_pool
 from real2sim.reconstruct.field.view_corrections import CorrectionConfig, ViewCorrections
 from real2sim.multiview.views import PosedViews
@@ -98,6 +99,9 @@ class FieldConfig:
     """Learn each view's exposure and white balance (a gain and a bias per channel) all through training."""
     corrections: CorrectionConfig = dataclass_field(default_factory=CorrectionConfig)
     """The rates and priors of the pose and colour corrections."""
+    convergence: ConvergenceConfig = dataclass_field(default_factory=ConvergenceConfig)
+    """When each grid's training ends before its steps (then caps) because its loss has flattened, the rates
+    decaying with that progress (why: docs/design-notes/reconstruct.md#field-convergence)."""
     device_batch_scale: int = 2
     """On a GPU, each step draws this many times ``rays_per_step`` and the steps (and the poses' warm-up) are
     as many times fewer, so training sees the same rays; >= 1, 1 trains on a GPU as on a CPU. A GPU step is
@@ -112,7 +116,8 @@ class FieldConfig:
         fewer = lambda steps: -(-steps // scale)  # rounded up: a stage of one step keeps it
         return replace(self, rays_per_step=self.rays_per_step * scale, coarse_steps=fewer(self.coarse_steps),
                        fine_steps=fewer(self.fine_steps),
-                       corrections=replace(self.corrections, warmup_steps=self.corrections.warmup_steps // scale))
+                       corrections=replace(self.corrections, warmup_steps=self.corrections.warmup_steps // scale),
+                       convergence=self.convergence.on_device(scale))
 
     def with_budget(self, steps: int | None = None, voxels: int | None = None) -> "FieldConfig":
         """These settings with ``steps`` fine-grid training steps (the coarse grid gets half, so 1 step
@@ -141,22 +146,20 @@ class FieldConfig:
         if self.coarse_steps < 0 or self.fine_steps < 1:
             raise UserInputError("field training needs at least one fine step")
         self.corrections.validate()
+        self.convergence.validate()
 
 
 @dataclass(frozen=True)
 class TrainResult:
     field: VoxelRadianceField
-    loss_curve: tuple[tuple[int, float], ...]  # (step, mean MSE over the last reporting window)
+    loss_curve: tuple[tuple[int, float], ...]  # (steps trained, mean MSE over the last reporting window)
     seconds: float
     carved_voxels: int = 0  # coarse-grid voxels of the visual hull removed by photo-consistent carving
     # carving-grid voxels the carving removed and the masks' rays put back (poses off, see photo_carving)
     restored_voxels: int = 0
-    # carving-grid voxels the second pass (the hollow prior, see photo_carving) removed
-    opened_voxels: int = 0
-    # the views' exposure and white balance as photo carving found them (photo_carving.CarvingResult.exposure)
-    carving_exposure: dict | None = None
-    # the per-view corrections learnt with the field (None when neither poses nor colours are corrected)
-    corrections: ViewCorrections | None = None
+    opened_voxels: int = 0  # carving-grid voxels the second pass (the hollow prior, see photo_carving) removed
+    carving_exposure: dict | None = None  # the views' exposure and white balance as photo carving found them
+    corrections: ViewCorrections | None = None  # the per-view corrections learnt (None: neither poses nor colours)
     # (N, 4, 4) the training views' camera-to-world poses the field was fitted to: the corrected ones
     c2w_cv: np.ndarray | None = None
     # where ``seconds`` went: the rays' pool, the starting density, then per grid (named by its longest side
@@ -164,6 +167,8 @@ class TrainResult:
     phase_seconds: dict[str, float] = dataclass_field(default_factory=dict)
     # the settings the field trained with: the ones given, as this device takes them (FieldConfig.on_device)
     config: FieldConfig | None = None
+    # per grid: (voxels along its longest side, steps trained, why it ended: "cap" or "converged")
+    stages: tuple[tuple[int, int, str], ...] = ()
 
     @property
     def hull_and_carving_seconds(self) -> float:
@@ -249,14 +254,14 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
     if config.pose_refinement or config.colour_correction:
         corrections = ViewCorrections(views.c2w_cv, 0.5 * (np.asarray(lo) + np.asarray(hi)), config.corrections,
                                       poses=config.pose_refinement, colours=config.colour_correction, device=device)
-    stages = [(config.coarse_voxels, config.coarse_steps), (config.fine_voxels, config.fine_steps)]
-    stages = [(n, s) for n, s in stages if s > 0]
+    stages = [(n, s) for n, s in ((config.coarse_voxels, config.coarse_steps), (config.fine_voxels, config.fine_steps))
+              if s > 0]
     total = sum(s for _, s in stages)
     first_grid = VoxelGrid.covering(lo, hi, stages[0][0], table_z_m)
     t_hull = time.perf_counter()
     init_density, carved, carving = hull_density(views, first_grid, config, progress, device)
     hull_and_carving_s = time.perf_counter() - t_hull
-    field, done, curve = None, 0, []
+    field, done, curve, ended = None, 0, [], []
     # the rays' pool put on the device comes first: on a GPU it pays for starting the device
     phases = {"ray_pool": t_hull - t_start, "hull_and_carving": hull_and_carving_s}
     learner = _Learner(corrections, total) if corrections is not None else None
@@ -279,7 +284,9 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
                 # for no gain (why: docs/design-notes/reconstruct.md#field-pose-refinement).
                 corrections.freeze_poses()
         t_steps = time.perf_counter()
-        done = _optimise(field, pool, config, steps, done, total, gen, progress, curve, learner)
+        schedule = StageSchedule(steps, config.convergence)
+        done = _optimise(field, pool, config, steps, done, total, gen, progress, curve, learner, schedule=schedule)
+        ended.append((voxels, schedule.trained, schedule.stopped))
         phases[f"grid_{voxels}_setup"] = t_steps - t_setup
         phases[f"grid_{voxels}_steps"] = time.perf_counter() - t_steps  # the loss read at its end waits for them
     return TrainResult(field=field, loss_curve=tuple(curve), seconds=time.perf_counter() - t_start,
@@ -288,7 +295,7 @@ def train_field(views: PosedViews, region_m: tuple[np.ndarray, np.ndarray], conf
                        carving_exposure=carving.exposure if carving else None,
                        corrections=corrections,
                        c2w_cv=corrections.corrected_c2w() if corrections is not None else None, phase_seconds=phases,
-                       config=config)
+                       config=config, stages=tuple(ended))
 
 
 @dataclass
@@ -328,10 +335,13 @@ def fit_views_to_field(field: VoxelRadianceField, views: PosedViews, config: Fie
 
 def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, steps: int, done: int, total: int,
               gen: torch.Generator, progress: ProgressFn | None, curve: list, learner: _Learner | None = None,
-              learn_field: bool = True) -> int:
-    """``steps`` Adam steps on ``field`` (and on the corrections of ``learner``; on those alone when not
-    ``learn_field``); appends (step, mean loss) to ``curve``; returns the steps done so far."""
+              learn_field: bool = True, schedule: StageSchedule | None = None) -> int:
+    """Up to ``steps`` Adam steps on ``field`` (and on the corrections of ``learner``; on those alone when not
+    ``learn_field``), fewer when ``schedule``'s rule finds the loss flat; appends (steps trained, mean loss)
+    to ``curve``; returns the steps done so far, counting the stage's cap when it ended early."""
     corrections = learner.corrections if learner is not None else None
+    schedule = schedule or StageSchedule(steps)
+    start, trained_before = done, curve[-1][0] if curve else 0
     ranges = PoolRanges(field, pool, corrections)
     optimisers = []
     if learn_field:
@@ -345,14 +355,14 @@ def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, ste
     if learner is not None:
         optimisers.append(learner.optimiser)
     window: list[torch.Tensor] = []  # losses on the device, read once per reporting window (a GPU sync)
-    report_every = max(steps // 20, 1)
     device = field.device
     for step in range(steps):
-        # the grid's learning rate decays tenfold over each stage
+        # the grid's learning rate decays tenfold over each stage, by its steps or by its loss's progress
+        fraction = schedule.fraction(step)
         for group in optimisers[0].param_groups if learn_field else ():
-            group["lr"] = group["base"] * 0.1 ** (step / max(steps, 1))
-        if learner is not None:
-            corrections.schedule(learner.optimiser, done, learner.total)
+            group["lr"] = group["base"] * 0.1 ** fraction
+        if learner is not None:  # the corrections' schedule follows the same progress
+            corrections.schedule(learner.optimiser, start + round(fraction * steps), learner.total)
         pick = torch.randint(len(pool.origins), (config.rays_per_step,), generator=gen).to(device)
         jitter = torch.rand(config.rays_per_step, generator=gen).to(device)
         background = torch.rand(config.rays_per_step, 3, generator=gen).to(device)
@@ -378,9 +388,13 @@ def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, ste
             corrections.fix_gauge()
         window.append(loss.detach())
         done += 1
-        if step % report_every == report_every - 1 or step == steps - 1:
-            curve.append((done, float(torch.stack(window).mean())))
+        if step % schedule.window == schedule.window - 1 or step == steps - 1:
+            curve.append((trained_before + step + 1,
+                          schedule.observe(float(torch.stack(window).mean()), len(window), step)))
             window = []
+        done = start + steps if schedule.stopped else done  # an early end: the progress line jumps to the stage's end
         if progress:
             progress(f"training field ({field.grid.shape[0]}x{field.grid.shape[1]}x{field.grid.shape[2]})", done, total)
+        if schedule.stopped:
+            break
     return done
