@@ -197,3 +197,33 @@ def test_every_representation_of_every_bundled_object_loads(tmp_path_factory, na
         model, data = _load(rep / "model.xml", floor=True)
         assert len(_collision_geoms(model)) == len(read_collision_json(rep / "collision.json").shapes)
         mujoco.mj_step(model, data)
+
+
+def test_the_scene_carries_the_measured_contact_settings_and_the_model_keeps_mujocos(can_asset, tmp_path):
+    """scene.xml simulates as the evaluation did (its options, every geom's contact); model.xml leaves a
+    scene of the user's own to decide; asset_config.json records the settings and a rewrite keeps them."""
+    import shutil
+
+    from real2sim.asset.build import rewrite_models
+    from real2sim.formats.mujoco_settings import MujocoConfig
+
+    settings = MujocoConfig()
+    record = json.loads((can_asset / "asset_config.json").read_text())
+    assert MujocoConfig.from_record(record["mujoco"]) == settings
+    scene = mujoco.MjModel.from_xml_path(str(can_asset / "cylinders_1" / "scene.xml"))
+    assert scene.opt.timestep == settings.timestep_s and scene.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    touching = [g for g in range(scene.ngeom) if scene.geom_contype[g] or scene.geom_conaffinity[g]]
+    assert scene.geom("floor").id in touching and len(touching) >= 2
+    for g in touching:
+        assert tuple(scene.geom_solref[g]) == (settings.solref_timeconst_s, settings.solref_dampratio)
+        assert tuple(scene.geom_solimp[g]) == settings.solimp and scene.geom_condim[g] == settings.condim
+    model, _ = _load(can_asset / "cylinders_1" / "model.xml")
+    default = mujoco.MjModel.from_xml_string('<mujoco><worldbody><geom size="1"/></worldbody></mujoco>')
+    assert all(tuple(model.geom_solref[g]) == tuple(default.geom_solref[0]) for g in range(model.ngeom))
+
+    copy = shutil.copytree(can_asset, tmp_path / "copy")
+    other = {**record, "mujoco": {**record["mujoco"], "solref_timeconst_s": 0.02}}
+    (copy / "asset_config.json").write_text(json.dumps(other))
+    rewrite_models(copy, ContactProperties(), formats=("urdf", "mjcf"))
+    again = mujoco.MjModel.from_xml_path(str(copy / "cylinders_1" / "scene.xml"))
+    assert again.geom_solref[again.geom("floor").id][0] == 0.02

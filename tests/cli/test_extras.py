@@ -68,7 +68,6 @@ def test_asset_needs_no_extra(tmp_path):
     assert (tmp_path / "can_asset" / "spheres_4" / "model.urdf").is_file()
 
 
-@pytest.mark.slow
 def test_the_wheel_installs_with_the_core_alone(tmp_path):
     """Build the wheel, check it, install it with its core dependencies only into a fresh virtual
     environment (torch from the local CPU wheel first), build an asset, and see evaluate ask for [sim]."""

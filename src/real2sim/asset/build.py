@@ -30,6 +30,7 @@ from real2sim.asset.fits import fit_all
 from real2sim.asset.reuse import reuse_collision, reusable_representations
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
 from real2sim.formats.contact import ContactProperties
+from real2sim.formats.mujoco_settings import MujocoConfig
 from real2sim.geometry.mesh_io import export_textured_mesh, load_mesh, validate_mesh
 from real2sim.plumbing.digests import file_sha256
 from real2sim.plumbing.outputs import atomic_output_dir
@@ -201,7 +202,7 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
             geometry, report = fitted[spec.text].geometry, {**fitted[spec.text].report, **(filled or {})}
         write_representation(
             rep_dir, geometry, props, config.contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}",
-            formats=config.formats, model_name=spec.name,
+            formats=config.formats, model_name=spec.name, mujoco=config.mujoco,
         )
         if "reused" not in report:
             report = {
@@ -237,7 +238,8 @@ def rewrite_models(asset_dir: Path | str, contact: ContactProperties, formats: t
 
     Geometry (collision.json) and mass properties (physical_properties.json) are
     kept: changing friction, stiffness or hydroelastic settings needs no refit.
-    asset_config.json records the new material, which the evaluation's reference reads.
+    asset_config.json records the new material, which the evaluation's reference reads;
+    scene.xml keeps the MuJoCo settings asset_config.json records (the defaults if none).
     Returns the URDF paths written.
     """
     from real2sim.asset.export.writers import write_representation
@@ -246,15 +248,17 @@ def rewrite_models(asset_dir: Path | str, contact: ContactProperties, formats: t
 
     asset_dir = Path(asset_dir)
     props = read_physical_properties(asset_dir / "physical_properties.json")
+    config_path = asset_dir / ASSET_CONFIG_NAME
+    record = json.loads(config_path.read_text()) if config_path.is_file() else None
+    mujoco = MujocoConfig.from_record(record.get("mujoco", {})) if record else MujocoConfig()
     written = []
     for collision_json in sorted(asset_dir.glob("*/collision.json")):
         rep_dir = collision_json.parent
         write_representation(rep_dir, read_collision_json(collision_json), props, contact,
-                             visual_mesh_relpath=f"../{VISUAL_RELPATH}", formats=formats, model_name=rep_dir.name)
+                             visual_mesh_relpath=f"../{VISUAL_RELPATH}", formats=formats, model_name=rep_dir.name,
+                             mujoco=mujoco)
         written.append(rep_dir / "model.urdf")
-    config_path = asset_dir / ASSET_CONFIG_NAME
-    if config_path.is_file():
-        record = json.loads(config_path.read_text())
+    if record is not None:
         write_asset_config({**record, "contact": contact}, config_path)
     return written
 

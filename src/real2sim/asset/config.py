@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from real2sim.formats.contact import ContactProperties
+from real2sim.formats.mujoco_settings import MujocoConfig
 from real2sim.formats.physical import PhysicalProperties
 from real2sim.formats.spec import CollisionSpec
 from real2sim.plumbing.errors import UserInputError
@@ -60,6 +61,11 @@ class AssetConfig:
     """Torch device of the primitive fits ("cpu", "cuda", "cuda:1", ...); decompositions run on the CPU."""
     contact: ContactProperties = field(default_factory=ContactProperties)
     """Contact material written into every model file (:class:`~real2sim.formats.contact.ContactProperties`)."""
+    mujoco: MujocoConfig = field(default_factory=MujocoConfig)
+    """MuJoCo's settings written into every ``scene.xml`` (the world's options, and every geom's contact
+    default; ``model.xml`` keeps MuJoCo's defaults for the scenes that include it): the ones the evaluation
+    measured closest to the Drake reference
+    (:class:`~real2sim.formats.mujoco_settings.MujocoConfig`; why: docs/design-notes/evaluate.md#mujoco-contact-settings)."""
     fit_config: object | None = None
     """Settings of the primitive fits (:class:`real2sim.collision.fit.config.FitConfig`); None: its
     defaults, the paper's settings."""
@@ -152,6 +158,7 @@ def config_record(config: AssetConfig) -> dict:
         "seed": config.seed,
         "device": config.device,
         "contact": config.contact,
+        "mujoco": config.mujoco,
         "fit_config": config.fit_config or FitConfig(),
         "fill_cavities_m": config.fill_cavities_m,
         "coacd_config": config.coacd_config or CoacdConfig(),

@@ -18,7 +18,7 @@ from real2sim.plumbing.errors import UserInputError
 
 #: Settings of asset_config.json that do not shape the collision geometry: a representation fitted
 #: under other values of these is still valid (its model files are rewritten, see rewrite_models).
-NOT_GEOMETRY = ("mass_kg", "collision", "contact", "formats", "properties")
+NOT_GEOMETRY = ("mass_kg", "collision", "contact", "mujoco", "formats", "properties")
 #: What write_representation writes into a representation folder.
 MODEL_FILES = ("model.urdf", "model_point.urdf", "model.sdf", "model.xml", "model_portable.urdf", "scene.xml",
                "model.usda")

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from real2sim.evaluate.discovery import Asset
-from real2sim.evaluate.mujoco.config import MujocoConfig
+from real2sim.formats.mujoco_settings import MujocoConfig
 from real2sim.evaluate.scene.placement import StablePoseCache
 from real2sim.evaluate.scene.scene_config import SceneConfig
 from real2sim.evaluate.scene.tasks import RunSpec

@@ -17,8 +17,13 @@ MJX / MuJoCo Warp), in the same asset frame and units (metres, kg):
   group 1, no mass), with its texture from the visual MTL's ``map_Kd``;
 * friction from the asset's contact properties: MuJoCo has one sliding
   coefficient per geom, written from ``mu_dynamic``; torsional and rolling
-  friction keep MuJoCo's defaults. Contact stiffness stays MuJoCo's default
-  (``solref``), which has no one-to-one map from Drake's point-contact stiffness.
+  friction keep MuJoCo's defaults. Contact softness is not mapped from Drake's
+  point-contact stiffness (there is no one-to-one map). ``model.xml`` keeps MuJoCo's
+  defaults, so a scene that includes it decides; ``scene.xml`` sets the asset's
+  :class:`~real2sim.formats.mujoco_settings.MujocoConfig`, the settings the evaluation
+  measured closest to the Drake reference: its world options (time step, integrator,
+  friction cone, ``impratio``) and, as the default of every geom (the object's and the
+  floor), ``condim``, ``solref`` and ``solimp``.
 
 MuJoCo collides every mesh geom as its **convex hull**. The ``mesh``
 representation (the whole non-convex object) therefore changes shape in MuJoCo:
@@ -41,6 +46,7 @@ import numpy as np
 
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import ContactProperties
+from real2sim.formats.mujoco_settings import MujocoConfig
 from real2sim.formats.physical import PhysicalProperties
 
 MJCF_NAME = "model.xml"
@@ -188,11 +194,17 @@ def lowest_collision_z(model, data) -> float:
 SCENE_NAME = "scene.xml"
 
 
-def build_scene_xml(floor_z_m: float, model_file: str = MJCF_NAME) -> ET.Element:
-    """A MuJoCo Menagerie-style ``scene.xml``: includes ``model_file`` and adds a floor whose top is
-    at ``floor_z_m`` (the object's lowest collision point, so it stands on it when opened), a
-    light, a sky and a camera framing. The object keeps the asset frame: centred, not on z = 0."""
+def build_scene_xml(floor_z_m: float, model_file: str = MJCF_NAME, mujoco: MujocoConfig = MujocoConfig()) -> ET.Element:
+    """A MuJoCo Menagerie-style ``scene.xml``: ``mujoco``'s world options and, as every geom's default (the
+    included object's and the floor's), its contact settings; then ``model_file`` and a floor whose top is
+    at ``floor_z_m`` (the object's lowest collision point, so it stands on it when opened), a light, a sky
+    and a camera framing. The object keeps the asset frame: centred, not on z = 0."""
     root = ET.Element("mujoco", model="object scene")
+    ET.SubElement(root, "option", timestep=_num(mujoco.timestep_s), integrator=mujoco.integrator,
+                  cone=mujoco.cone, impratio=_num(mujoco.impratio))
+    defaults = ET.SubElement(root, "default")  # before the include: MuJoCo applies it to the included geoms
+    ET.SubElement(defaults, "geom", condim=str(mujoco.condim),
+                  solref=_nums((mujoco.solref_timeconst_s, mujoco.solref_dampratio)), solimp=_nums(mujoco.solimp))
     ET.SubElement(root, "include", file=model_file)
     ET.SubElement(root, "statistic", center=_nums((0.0, 0.0, 0.0)), extent="0.4")
     visual = ET.SubElement(root, "visual")
@@ -212,11 +224,11 @@ def build_scene_xml(floor_z_m: float, model_file: str = MJCF_NAME) -> ET.Element
     return root
 
 
-def write_scene_xml(rep_dir: Path, geometry: CollisionGeometry) -> Path:
+def write_scene_xml(rep_dir: Path, geometry: CollisionGeometry, mujoco: MujocoConfig = MujocoConfig()) -> Path:
     """Write ``rep_dir/scene.xml`` beside model.xml (:func:`build_scene_xml`); returns its path."""
     from real2sim.asset.export.round_pieces import lowest_point_z_m
 
-    root = build_scene_xml(lowest_point_z_m(geometry, rep_dir))
+    root = build_scene_xml(lowest_point_z_m(geometry, rep_dir), mujoco=mujoco)
     ET.indent(root, space=" ")
     path = Path(rep_dir) / SCENE_NAME
     path.write_text(ET.tostring(root, encoding="unicode") + "\n")

@@ -70,6 +70,7 @@ from real2sim.asset.export.portable_urdf import write_portable_urdf
 from real2sim.asset.export.urdf_common import num, nums, standard_urdf_geometry, urdf_link, urdf_origin
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
 from real2sim.formats.contact import POINT_URDF_NAME, ContactProperties
+from real2sim.formats.mujoco_settings import MujocoConfig
 from real2sim.formats.rotations import quaternion_to_rpy
 from real2sim.formats.physical import PhysicalProperties
 from real2sim.geometry.tessellation import sections_for
@@ -314,12 +315,13 @@ def write_representation(
     formats: tuple[str, ...] = ("urdf",),
     model_name: str = "object",
     link_name: str = LINK_NAME,
+    mujoco: MujocoConfig = MujocoConfig(),
 ) -> None:
     """Write ``rep_dir/model.urdf`` for Drake (and ``rep_dir/model_point.urdf``, the same for Drake's point
     contact, when ``contact.point_model`` says so) and ``rep_dir/model_portable.urdf`` for every other URDF
     consumer (always; :mod:`real2sim.asset.export.portable_urdf`), ``rep_dir/model.sdf`` (if "sdf" in
-    formats), ``rep_dir/model.xml`` and ``scene.xml`` for MuJoCo (if "mjcf" in formats; see
-    :mod:`real2sim.asset.export.mjcf`) and ``rep_dir/model.usda`` (if "usd"; :mod:`real2sim.asset.export.usd`).
+    formats), ``rep_dir/model.xml`` and ``scene.xml`` (with ``mujoco``'s settings) for MuJoCo (if "mjcf"
+    in formats; see :mod:`real2sim.asset.export.mjcf`) and ``rep_dir/model.usda`` (if "usd"; :mod:`real2sim.asset.export.usd`).
 
     ``geometry`` is in the asset frame (metres); mesh files of convex/mesh shapes are
     paths relative to ``rep_dir`` and must already exist there (the decomposition
@@ -356,7 +358,7 @@ def write_representation(
 
         (rep_dir / MJCF_NAME).write_text(write_model_mjcf_string(
             geometry, props, contact, rep_dir, visual_mesh_relpath, model_name))
-        write_scene_xml(rep_dir, geometry)
+        write_scene_xml(rep_dir, geometry, mujoco)
     if "usd" in formats:
         from real2sim.asset.export.usd import write_model_usda
 

@@ -1,5 +1,6 @@
-"""MuJoCo's contact and integration settings for the evaluation (:class:`MujocoConfig`), chosen by
-measurement against the Drake reference (docs/design-notes/evaluate.md#mujoco-contact-settings)."""
+"""MuJoCo's contact and integration settings (:class:`MujocoConfig`), chosen by measurement against the
+Drake reference (docs/design-notes/evaluate.md#mujoco-contact-settings): the asset writes them into
+``model.xml`` and ``scene.xml``, and the evaluation simulates with them."""
 
 from __future__ import annotations
 
@@ -14,8 +15,9 @@ CONES = ("pyramidal", "elliptic")
 
 @dataclass(frozen=True)
 class MujocoConfig:
-    """How MuJoCo simulates the evaluation's scenes: one setting for every geom that touches (the
-    object's collision geoms, the floor, the pusher, the ramp's table), so rows compare geometry.
+    """How MuJoCo simulates the object: one setting for every geom that touches (the object's collision
+    geoms, the floor, and in the evaluation the pusher and the ramp's table), so rows compare geometry;
+    ``model.xml`` carries the per-geom settings, ``scene.xml`` the world's options as well.
     Each default was picked by ``benchmarks/bench_mujoco_contact.py`` on the bundled objects
     (docs/design-notes/evaluate.md#mujoco-contact-settings)."""
 
@@ -66,3 +68,11 @@ class MujocoConfig:
             raise ValueError(f"the scene's time step {scene_time_step_s:g} s is not a whole number of MuJoCo "
                              f"steps of {self.timestep_s:g} s")
         return int(round(k))
+
+    @classmethod
+    def from_record(cls, record: dict) -> "MujocoConfig":
+        """The settings as ``asset_config.json`` records them (its ``"mujoco"`` object; lists for tuples)."""
+        known = {f: record[f] for f in cls.__dataclass_fields__ if f in record}
+        if "solimp" in known:
+            known["solimp"] = tuple(float(v) for v in known["solimp"])
+        return cls(**known)
