@@ -64,9 +64,17 @@ def views_and_region(can_capture):
     return views, object_region(views)
 
 
-def test_a_flattened_stage_ends_before_its_cap_and_a_falling_one_does_not(views_and_region):
+@pytest.fixture(scope="module")
+def trained_and_lines(views_and_region):
+    """The tiny field trained with the rule (seed 3), and its progress lines (text, i, n)."""
     views, region = views_and_region
-    trained = train_field(views, region, TINY, seed=0)
+    lines = []
+    trained = train_field(views, region, TINY, seed=3, progress=lambda text, i, n: lines.append((text, i, n)))
+    return trained, lines
+
+
+def test_a_flattened_stage_ends_before_its_cap_and_a_falling_one_does_not(trained_and_lines):
+    trained, lines = trained_and_lines
     (coarse, coarse_steps, coarse_end), (fine, fine_steps, fine_end) = trained.stages
     # the 40-step coarse stage still falls all along; the fine one flattens long before its 400 steps
     assert (coarse, coarse_steps, coarse_end) == (16, 40, STOP_CAP)
@@ -75,15 +83,13 @@ def test_a_flattened_stage_ends_before_its_cap_and_a_falling_one_does_not(views_
     # the loss it stopped at is no worse than a few per cent above its best window
     losses = [loss for _, loss in trained.loss_curve]
     assert losses[-1] <= 1.05 * min(losses)
+    # the progress line: one per step trained, counting up, its last one at the caps' end (440/440)
+    steps = [i for text, i, n in lines if text.startswith("training field")]
+    assert len(steps) == coarse_steps + fine_steps and steps == sorted(steps) and steps[-1] == lines[-1][2] == 440
 
 
-def test_the_progress_line_jumps_to_the_stage_end_and_the_same_seed_gives_the_same_field(views_and_region):
-    views, region = views_and_region
-    lines = []
-    first = train_field(views, region, TINY, seed=3, progress=lambda text, i, n: lines.append((text, i, n)))
-    again = train_field(views, region, TINY, seed=3)
+def test_the_same_seed_gives_the_same_field(trained_and_lines, views_and_region):
+    first, _ = trained_and_lines
+    again = train_field(*views_and_region, TINY, seed=3)
     assert first.stages == again.stages and first.loss_curve == again.loss_curve
     assert torch.equal(first.field.density_table, again.field.density_table)
-    steps = [i for text, i, n in lines if text.startswith("training field")]
-    assert steps[-1] == lines[-1][2] == 440  # the last line reads 440/440 although fewer steps ran
-    assert len(steps) == sum(s for _, s, _ in first.stages) and steps == sorted(steps)

@@ -26,14 +26,15 @@ class ConvergenceConfig:
     enabled: bool = False
     """End a stage (coarse or fine grid) once its loss has flattened, its steps (``coarse_steps``,
     ``fine_steps``) being the caps; False: every stage runs its steps with the rate decaying by the count."""
-    window_steps: int = 20
+    window_steps: int = 40
     """Steps whose training losses are averaged into one point of the smoothed loss the rule compares
-    (and the loss curve reports), on a CPU; >= 2. At 4096 rays a step, a window's mean varies by well
-    under the tolerance from sampling alone (why: docs/design-notes/reconstruct.md#field-convergence)."""
-    rel_tolerance: float = 0.01
+    (and the loss curve reports), on a CPU; >= 2. 40: the fixed schedule's reporting window on the fine
+    grid, whose means vary by about 1 % from window to window once the loss is flat (why:
+    docs/design-notes/reconstruct.md#field-convergence)."""
+    rel_tolerance: float = 0.02
     """A window is a plateau when its mean loss is not below the lowest earlier window's by this share of
-    it (0.01: 1 %); in [0, 1)."""
-    decays: int = 3
+    it; in [0, 1). 0.02: twice the windows' own scatter, so sampling noise alone rarely makes a plateau."""
+    decays: int = 2
     """Plateaus that take the grid's rate from its start to a tenth of it, each dropping it by
     ``10 ** (-1 / decays)``; the plateau after those ends the stage; >= 1."""
 
