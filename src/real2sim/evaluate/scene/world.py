@@ -5,7 +5,8 @@ asset (canonical) frame of ``ASSETDIR`` (metres, z = the object's longest axis):
 
 * world frame: z up, gravity -9.81 m/s^2 along z.
 * floor: a compliant hydroelastic box slab whose top is z = 0, ``floor_size_m`` wide
-  (large, so a rolling object never falls off the world).
+  (large, so a rolling object never falls off the world); in the hydroelastic scenes the
+  same slab as a graded tetrahedral mesh (:mod:`real2sim.evaluate.scene.floor`).
 * the task's actuated body (pusher or tilting table) and its desired trajectory come
   from the task object (:mod:`real2sim.evaluate.scene.tasks`); the object's initial pose from
   :mod:`real2sim.evaluate.scene.placement`.
@@ -19,6 +20,7 @@ from typing import Callable
 
 import numpy as np
 
+from real2sim.evaluate.scene.floor import floor_mesh_path
 from real2sim.evaluate.scene.plant_parts import contact_material
 from real2sim.evaluate.scene.scene_config import SceneConfig
 from real2sim.evaluate.scene.tasks import RunSpec, task_named
@@ -115,19 +117,25 @@ def urdf_object_adder(urdf_path: Path) -> ObjectAdder:
     return add
 
 
-def _add_floor(plant, cfg: SceneConfig) -> None:
+def _add_floor(plant, cfg: SceneConfig, contact_model: str) -> None:
     # A compliant *box*, not a half-space: Drake 1.51 gives a compliant half-space no
     # hydroelastic contact with compliant shapes and silently falls back to point
     # contact for those pairs, which would make every "hydroelastic" candidate a point
     # contact one. A slab 2 * floor_slab_thickness_m thick has its pressure field's
     # maximum at the same depth as the half-space's slab would.
-    from pydrake.geometry import AddCompliantHydroelasticProperties, Box, ProximityProperties
+    from pydrake.geometry import AddCompliantHydroelasticProperties, Box, Mesh, ProximityProperties
     from pydrake.math import RigidTransform
 
     props = ProximityProperties()
     AddCompliantHydroelasticProperties(1.0, cfg.environment_hydroelastic_modulus_pa, props)
     contact_material(props, cfg.environment_dissipation_s_per_m, cfg.environment_relaxation_time_s,
               cfg.floor_mu, cfg.floor_mu)
+    if contact_model == "hydroelastic":
+        # the same slab and pressure field, in tetrahedra that let Drake cull (floor.py)
+        plant.RegisterCollisionGeometry(
+            plant.world_body(), RigidTransform(),
+            Mesh(str(floor_mesh_path(cfg.floor_size_m, cfg.floor_slab_thickness_m))), "floor", props)
+        return
     thickness = 2.0 * cfg.floor_slab_thickness_m
     plant.RegisterCollisionGeometry(
         plant.world_body(), RigidTransform([0.0, 0.0, -thickness / 2]),
@@ -161,7 +169,7 @@ def build_scene(task: str, contact_model: str, add_object: ObjectAdder, run_spec
         # the previous step's (off by v * dt, 4 mm at 4 m/s). Dynamics are unaffected.
         use_sampled_output_ports=False), builder)
     object_instance = add_object(plant)
-    _add_floor(plant, cfg)
+    _add_floor(plant, cfg, contact_model)
     actuated, q0, extra = chosen.add_actuated(plant, run_spec, cfg)
     desired = chosen.desired(run_spec, cfg)
     plant.Finalize()
