@@ -97,11 +97,15 @@ def register(sub) -> None:
         "file (pixels with probability > 0.5); 'background' differences each image with background/<image name> "
         "(the empty scene from the same pose); 'parallax' needs neither weights nor an empty scene: it finds "
         "what stands above the table from how it moves against the table between views (a textured table, "
-        "poses good to a pixel: refine them first). Computed masks go to masks_<method>/ and transforms.json "
+        "poses good to a pixel: refine them first); 'geometry' needs the poses alone: dense multi-view stereo, the "
+        "support plane and the object standing on it (written to dense_geometry.json), each mask the object's solid "
+        "drawn into the view (photos with clutter, close-ups that cut the object); 'auto' makes parallax masks and "
+        "keeps them unless they cannot be the object's, then masks from geometry, with a warning saying why "
+        "(mask_choice.json), as `run --mask auto` does. Computed masks go to masks_<method>/ and transforms.json "
         "points to them; IoU against ground_truth/masks is printed when present.",
     )
     p.add_argument("dataset", type=Path, help="dataset folder with transforms.json")
-    p.add_argument("--method", choices=["provided", "maskrcnn", "background", "parallax"], required=True)
+    p.add_argument("--method", choices=["provided", "maskrcnn", "background", "parallax", "geometry", "auto"], required=True)
     p.add_argument("--overwrite", action="store_true",
                    help="replace masks_<method>/ even where you edited masks `mask` wrote earlier; a folder `mask` "
                    "did not make, and files in it that `mask` did not write, are never replaced")
