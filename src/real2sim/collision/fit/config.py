@@ -34,10 +34,23 @@ class FitConfig:
     """Adam's step size, > 0; None takes the parameterization's default (:attr:`lr`: 1e-4 for
     "network", whose output moves by roughly ``lr * hidden_dim`` per step, 2e-2 for "direct")."""
     lr_schedule: str = "cosine"
-    """"cosine" (from ``lr`` down to ``final_lr_fraction * lr`` over ``max_iterations``) or
-    "constant"."""
+    """"cosine" (from ``lr`` down to ``final_lr_fraction * lr`` over ``max_iterations``),
+    "plateau" (``lr`` held while the smoothed loss improves, cut by ``lr_decay`` after
+    ``decay_patience`` steps without progress, down to ``final_lr_fraction * lr``; the fit stops
+    when that smallest step size plateaus too) or "constant". "plateau" is an option, not the
+    default: measured, it fitted as well or better but saved no iterations.
+    (why: docs/design-notes/collision.md#convergence-stop)"""
     final_lr_fraction: float = 0.02
-    """The cosine schedule's last step size as a fraction of ``lr``, in [0, 1]."""
+    """The schedule's smallest step size as a fraction of ``lr``, in [0, 1]: the cosine schedule's
+    last, the plateau schedule's floor."""
+    lr_decay: float = 0.3
+    """The plateau schedule's factor on the step size at each plateau, in (0, 1); other schedules ignore it.
+    (why: docs/design-notes/collision.md#convergence-stop)"""
+    decay_patience: int = 50
+    """Steps without progress of the smoothed loss (``plateau_tolerance``) after which the plateau
+    schedule cuts the step size, or stops the fit at its smallest step size, >= 1; other schedules
+    ignore it (they stop after ``patience``).
+    (why: docs/design-notes/collision.md#convergence-stop)"""
     batch_size: int = 8192
     """Samples per minibatch, >= 1 (all of them when there are fewer)."""
     max_iterations: int = 1000
@@ -111,8 +124,10 @@ class FitConfig:
             raise ValueError(f"init must be 'kmeans' or 'random', got {self.init!r}")
         if self.box_init not in ("cover", "kmeans"):
             raise ValueError(f"box_init must be 'cover' or 'kmeans', got {self.box_init!r}")
-        if self.lr_schedule not in ("cosine", "constant"):
-            raise ValueError(f"lr_schedule must be 'cosine' or 'constant', got {self.lr_schedule!r}")
+        if self.lr_schedule not in ("plateau", "cosine", "constant"):
+            raise ValueError(f"lr_schedule must be 'plateau', 'cosine' or 'constant', got {self.lr_schedule!r}")
+        if not 0 < self.lr_decay < 1 or self.decay_patience < 1:
+            raise ValueError("lr_decay must lie in (0, 1) and decay_patience be >= 1")
         if self.inside_loss not in ("hinge", "squared"):
             raise ValueError(f"inside_loss must be 'hinge' or 'squared', got {self.inside_loss!r}")
         if self.batch_size < 1 or self.max_iterations < 0:
@@ -168,6 +183,7 @@ class FitResult:
     history_every: int = 10
     revived: int = 0  # re-seedings of dead primitives during the fit
     contact_weight: float = 0.0  # the contact weighting's gain the fit used (FitConfig.contact_gain)
+    stop_reason: str = "max_iterations"  # "converged" (plateau schedule), "plateau" (early stop) or "max_iterations"
 
     def packed(self, kind: str) -> np.ndarray:
         """(P_kind, D) array of the rows of one kind, in order."""

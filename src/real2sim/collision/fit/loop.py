@@ -19,6 +19,7 @@ from real2sim.collision.fit.params import Layout, unconstrain, constrain_all, Pr
 from real2sim.collision.fit.contact_weights import contact_weights, hull_planes
 from real2sim.collision.fit.initialization import interior_fill_points, initial_packed, packed_from_blobs
 from real2sim.collision.fit.losses import sdf_loss, regularizers
+from real2sim.collision.fit.schedule import StepSchedule
 from real2sim.collision.fit.union import closest, paired_distance, truncate_estimates, alive
 from real2sim.plumbing.progress import ProgressFn, null_progress
 
@@ -99,7 +100,7 @@ def fit_primitives(
         else:
             model = DirectParams(base.cpu()).to(device)
         optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
-        iteration, history, revived = _iterate(model, optimiser, layout, points, target, weight, config, gen,
+        iteration, history, revived, stop_reason = _iterate(model, optimiser, layout, points, target, weight, config, gen,
                                                progress or null_progress)
 
         with torch.no_grad():
@@ -119,6 +120,7 @@ def fit_primitives(
         parameters=tuple(rows),
         final_loss=final_loss,
         iterations=iteration,
+        stop_reason=stop_reason,
         fit_seconds=time.perf_counter() - t0,
         effective_count=len(rows),
         requested_count=layout.total,
@@ -132,31 +134,23 @@ def fit_primitives(
 
 def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: Layout, points: torch.Tensor,
              target: torch.Tensor, weight: torch.Tensor | None, config: FitConfig, gen: torch.Generator,
-             progress: ProgressFn) -> tuple[int, list[float], int]:
-    """The Adam steps on minibatches, with revival and the early stop: (iterations, history, revived).
+             progress: ProgressFn) -> tuple[int, list[float], int, str]:
+    """The Adam steps on minibatches, with revival and the schedule's stop: (iterations, history,
+    revived, stop reason: "converged", "plateau" or "max_iterations").
 
     ``weight`` (N,) per point (contact-aware fitting) turns eq. 9's minibatch mean into the
     weighted mean; None keeps the plain mean."""
     device = points.device
-    total_steps = max(1, config.max_iterations)
-
-    def lr_at(it: int) -> float:
-        if config.lr_schedule == "constant":
-            return config.lr
-        f = config.final_lr_fraction
-        return config.lr * (f + (1 - f) * 0.5 * (1 + math.cos(math.pi * it / total_steps)))
-
     n = len(points)
     batch = min(config.batch_size, n)
     history: list[float] = []
-    smooth = best = float("inf")
-    since_best = 0
+    schedule = StepSchedule(config)
     revived = 0
     cover_counts = torch.zeros(layout.total, dtype=torch.long, device=device)
-    iteration = 0
+    iteration, reason = 0, "max_iterations"
     for iteration in range(1, config.max_iterations + 1):
         for group in optimiser.param_groups:
-            group["lr"] = lr_at(iteration - 1)
+            group["lr"] = schedule.lr
         idx = torch.randint(n, (batch,), generator=gen).to(device)
         x, s = points[idx], target[idx]
         raw = model()
@@ -186,14 +180,11 @@ def _iterate(model: torch.nn.Module, optimiser: torch.optim.Optimizer, layout: L
         if iteration % 10 == 0:
             history.append(value)
             progress("fit", iteration, config.max_iterations)
-        smooth = value if smooth == float("inf") else 0.95 * smooth + 0.05 * value
-        if smooth < best * (1 - config.plateau_tolerance):
-            best, since_best = smooth, 0
-        else:
-            since_best += 1
-        if iteration >= config.min_iterations and since_best >= config.patience:
+        stop = schedule.step(iteration, value)
+        if stop:
+            reason = stop
             break
-    return iteration, history, revived
+    return iteration, history, revived, reason
 
 
 def _rows(layout: Layout, packed: list[torch.Tensor]) -> tuple[list[str], list[tuple[float, ...]]]:

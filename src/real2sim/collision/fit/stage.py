@@ -26,7 +26,7 @@ def fit_collision(
 
     ``rep_dir`` receives the mesh pieces of superquadrics (see :func:`to_collision_geometry`).
     Returns the geometry and a report: final_loss, fit_seconds, effective_count,
-    requested_count, iterations, device, contact_weight (the gain of contact-aware fitting the fit
+    requested_count, iterations, stop_reason (why the fit ended: :class:`FitResult`), device, contact_weight (the gain of contact-aware fitting the fit
     used), and the superquadrics' parameters when there are any.
     ``progress``: the SDF sampling's steps ("sdf: ..."), then the fit's iterations ("fit").
     """
@@ -45,6 +45,7 @@ def fit_collision(
         "effective_count": result.effective_count,
         "requested_count": result.requested_count,
         "iterations": result.iterations,
+        "stop_reason": result.stop_reason,
         "device": result.device,
         "contact_weight": result.contact_weight,
     }
