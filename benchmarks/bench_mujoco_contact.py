@@ -163,7 +163,7 @@ def main() -> int:
     args = parser.parse_args()
 
     from real2sim.evaluate.discovery import discover_representations
-    from real2sim.formats.mujoco_settings import MujocoConfig
+    from real2sim.formats.contact import MujocoConfig
     from real2sim.evaluate.mujoco.simulate import simulate_candidate_mujoco
     from real2sim.evaluate.scene.scene_config import SceneConfig
     from real2sim.evaluate.simulate import simulate_candidate

@@ -205,7 +205,7 @@ def test_the_scene_carries_the_measured_contact_settings_and_the_model_keeps_muj
     import shutil
 
     from real2sim.asset.build import rewrite_models
-    from real2sim.formats.mujoco_settings import MujocoConfig
+    from real2sim.formats.contact import MujocoConfig
 
     settings = MujocoConfig()
     record = json.loads((can_asset / "asset_config.json").read_text())

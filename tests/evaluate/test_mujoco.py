@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from real2sim.formats.mujoco_settings import MujocoConfig
+from real2sim.formats.contact import MujocoConfig
 from real2sim.evaluate.mujoco.simulate import simulate_candidate_mujoco
 from real2sim.evaluate.scene.scene_config import SceneConfig
 from real2sim.evaluate.scene.tasks import make_run_specs, pusher_start_xy, run_steps

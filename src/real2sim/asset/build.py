@@ -29,8 +29,7 @@ from real2sim.asset.config import AssetConfig, config_record
 from real2sim.asset.fits import fit_all
 from real2sim.asset.reuse import reuse_collision, reusable_representations
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
-from real2sim.formats.contact import ContactProperties
-from real2sim.formats.mujoco_settings import MujocoConfig
+from real2sim.formats.contact import ContactProperties, MujocoConfig
 from real2sim.geometry.mesh_io import export_textured_mesh, load_mesh, validate_mesh
 from real2sim.plumbing.digests import file_sha256
 from real2sim.plumbing.outputs import atomic_output_dir

@@ -8,8 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.contact import ContactProperties
-from real2sim.formats.mujoco_settings import MujocoConfig
+from real2sim.formats.contact import ContactProperties, MujocoConfig
 from real2sim.formats.physical import PhysicalProperties
 from real2sim.formats.spec import CollisionSpec
 from real2sim.plumbing.errors import UserInputError
@@ -65,7 +64,7 @@ class AssetConfig:
     """MuJoCo's settings written into every ``scene.xml`` (the world's options, and every geom's contact
     default; ``model.xml`` keeps MuJoCo's defaults for the scenes that include it): the ones the evaluation
     measured closest to the Drake reference
-    (:class:`~real2sim.formats.mujoco_settings.MujocoConfig`; why: docs/design-notes/evaluate.md#mujoco-contact-settings)."""
+    (:class:`~real2sim.formats.contact.MujocoConfig`; why: docs/design-notes/evaluate.md#mujoco-contact-settings)."""
     fit_config: object | None = None
     """Settings of the primitive fits (:class:`real2sim.collision.fit.config.FitConfig`); None: its
     defaults, the paper's settings."""

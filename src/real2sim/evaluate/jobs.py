@@ -14,13 +14,12 @@ from pathlib import Path
 from typing import Any
 
 from real2sim.evaluate.discovery import Asset
-from real2sim.formats.mujoco_settings import MujocoConfig
+from real2sim.formats.contact import ContactProperties, MujocoConfig
 from real2sim.evaluate.scene.placement import StablePoseCache
 from real2sim.evaluate.scene.scene_config import SceneConfig
 from real2sim.evaluate.scene.tasks import RunSpec
 from real2sim.evaluate.scoring import score
 from real2sim.evaluate.simulate import SimulationTimeout
-from real2sim.formats.contact import ContactProperties
 from real2sim.formats.results import FLOAT_COLUMNS, KEY_COLUMNS
 from real2sim.formats.trajectory import load_trajectory, save_trajectory
 

@@ -62,7 +62,7 @@ from real2sim.evaluate.discovery import (Asset, Representation, discover_assets,
                                          place_reference_mesh, read_canonical_transform)
 from real2sim.evaluate.executors import EXECUTORS, default_jobs, make_executor
 from real2sim.evaluate.inputs import check_inputs
-from real2sim.formats.mujoco_settings import MujocoConfig
+from real2sim.formats.contact import MujocoConfig
 from real2sim.evaluate.record import check_resume_settings, config_record
 from real2sim.evaluate.schedule import run_simulations
 from real2sim.evaluate.scene.scene_config import SceneConfig

@@ -20,7 +20,7 @@ MJX / MuJoCo Warp), in the same asset frame and units (metres, kg):
   friction keep MuJoCo's defaults. Contact softness is not mapped from Drake's
   point-contact stiffness (there is no one-to-one map). ``model.xml`` keeps MuJoCo's
   defaults, so a scene that includes it decides; ``scene.xml`` sets the asset's
-  :class:`~real2sim.formats.mujoco_settings.MujocoConfig`, the settings the evaluation
+  :class:`~real2sim.formats.contact.MujocoConfig`, the settings the evaluation
   measured closest to the Drake reference: its world options (time step, integrator,
   friction cone, ``impratio``) and, as the default of every geom (the object's and the
   floor), ``condim``, ``solref`` and ``solimp``.
@@ -45,8 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
-from real2sim.formats.contact import ContactProperties
-from real2sim.formats.mujoco_settings import MujocoConfig
+from real2sim.formats.contact import ContactProperties, MujocoConfig
 from real2sim.formats.physical import PhysicalProperties
 
 MJCF_NAME = "model.xml"

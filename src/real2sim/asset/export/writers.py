@@ -69,8 +69,7 @@ import numpy as np
 from real2sim.asset.export.portable_urdf import write_portable_urdf
 from real2sim.asset.export.urdf_common import num, nums, standard_urdf_geometry, urdf_link, urdf_origin
 from real2sim.formats.collision import CollisionGeometry, CollisionShape
-from real2sim.formats.contact import POINT_URDF_NAME, ContactProperties
-from real2sim.formats.mujoco_settings import MujocoConfig
+from real2sim.formats.contact import POINT_URDF_NAME, ContactProperties, MujocoConfig
 from real2sim.formats.rotations import quaternion_to_rpy
 from real2sim.formats.physical import PhysicalProperties
 from real2sim.geometry.tessellation import sections_for

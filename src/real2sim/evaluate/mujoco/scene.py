@@ -17,7 +17,7 @@ A PD actuator is MuJoCo's affine ``general`` actuator ``kp * ctrl - kp * q - kd 
 
 Friction: Drake combines a pair's coefficients as ``2 a b / (a + b)``, MuJoCo takes the larger; the
 environment's geoms carry the Drake-combined coefficient with a higher ``priority``, so every contact
-has Drake's coefficient. Every touching geom gets :class:`~real2sim.formats.mujoco_settings.MujocoConfig`'s
+has Drake's coefficient. Every touching geom gets :class:`~real2sim.formats.contact.MujocoConfig`'s
 condim, solref and solimp.
 """
 
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.mujoco_settings import MujocoConfig
+from real2sim.formats.contact import MujocoConfig
 from real2sim.evaluate.scene.scene_config import SceneConfig
 from real2sim.evaluate.scene.tasks import RunSpec, pusher_start_xy, run_steps, task_named, tilt_angle_rad
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from real2sim.formats.mujoco_settings import MujocoConfig
+from real2sim.formats.contact import MujocoConfig
 from real2sim.evaluate.mujoco.scene import MujocoScene, build_mujoco_scene
 from real2sim.evaluate.scene.scene_config import SceneConfig
 from real2sim.evaluate.scene.tasks import RunSpec, run_steps
