@@ -55,7 +55,7 @@ def test_settings_are_checked_and_scaled_for_a_gpu():
         with pytest.raises(UserInputError):
             replace(TINY, convergence=bad).validate()
     assert TINY.on_device("cuda").convergence.window_steps == 5  # device_batch_scale 2: windows of the same rays
-    assert FieldConfig().convergence.enabled is False  # the default keeps the fixed schedule (see the design note)
+    assert FieldConfig().convergence.enabled is True  # on by default (see the design note)
 
 
 @pytest.fixture(scope="module")

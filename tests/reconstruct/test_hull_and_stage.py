@@ -129,7 +129,8 @@ def test_field_backend_end_to_end(field_result, truth, tiny_config):
     # measured: 0.049 at the start, 0.0035 at the end
     assert curve[-1, 1] < curve[0, 1]
     assert curve[-1, 1] < 0.5 * curve[0, 1]
-    assert curve[-5:, 1].mean() < curve[:5, 1].mean()
+    third = max(1, len(curve) // 3)  # the rule's curve has a point per 40-step window: few on a tiny run
+    assert curve[-third:, 1].mean() < curve[:third, 1].mean()
     # measured 21.9 dB (field) and 19.3 dB (textured mesh) on the held-out views
     assert math.isfinite(report["psnr_field_held_out_db"]) and report["psnr_field_held_out_db"] > 17.0
     assert math.isfinite(report["psnr_mesh_held_out_db"]) and report["psnr_mesh_held_out_db"] > 15.0
