@@ -78,8 +78,8 @@ def register(sub) -> None:
         "evaluation of each representation (planar pushing, actuated ramp; point and hydroelastic contact; "
         "one run each) against the reconstruction and against the true bottle -> OUT/bottle_asset/truth.json "
         "(pose, mask, reconstruction, mass-property and dynamics errors against the true bottle) -> Pareto "
-        "plots, animations and report.html in OUT/bottle_asset/results. 7.5 minutes on 2 idle CPU cores "
-        "(benchmarks/bench_demo.py). --quick: 60 noise-free views at 160x120 px, no pose refinement, "
+        "plots, animations and report.html in OUT/bottle_asset/results. About 6 minutes on 2 idle CPU cores "
+        "(benchmarks/results/profile.md). --quick: 60 noise-free views at 160x120 px, no pose refinement, "
         "visual-hull reconstruction, three representations: 1.3 minutes.",
     )
     p.add_argument("--out", type=Path, default=Path("demo_out"),
