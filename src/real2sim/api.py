@@ -247,7 +247,8 @@ def run(dataset: str | Path, out: str | Path, *, config: RunConfig, overwrite: b
         out: the asset folder: new, or an earlier run of the same dataset (resumed).
         config: every stage's settings, e.g. ``RunConfig(asset=AssetConfig(mass_kg=0.35,
             specs=(parse_spec("cylinders:10"),)))``. Unlike the command line, the API refines poses only
-            when ``config.refine`` is given, and photos need ``mask_method="parallax"`` (or another method).
+            when ``config.refine`` is given; photos and videos are masked ``"auto"`` unless
+            ``config.mask_method`` says otherwise, as on the command line.
         overwrite: discard ``out`` first (its cached stages and results).
         progress: ``progress(label, done, total)`` for long work, or None.
 

@@ -88,8 +88,8 @@ def run_pipeline(dataset: Path | str, asset_dir: Path | str, config: RunConfig, 
         dataset = check_dataset(Path(dataset), masks_needed=config.mask_method is None, scale_given=bool(robot_frame))
     else:
         dataset = phone.path
-        if config.mask_method is None:
-            raise UserInputError("photos or a video have no masks: pass --mask auto|geometry|parallax|background|maskrcnn")
+        if config.mask_method is None:  # photos have no masks: the command line's default, for the API too
+            config = replace(config, mask_method=AUTO)
     if robot_frame is not None:
         robot_frame.validate()
     recon_cfg = config.reconstruct or ReconstructConfig()

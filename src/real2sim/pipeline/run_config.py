@@ -30,9 +30,9 @@ class RunConfig:
     reconstruct: "ReconstructConfig | None" = None
     """The reconstruct stage's settings; None: its defaults."""
     mask_method: str | None = None
-    """None: the dataset's own masks (every frame must have one); else the method the masks stage makes them
-    with (:func:`real2sim.capture.masks.stage.make_masks`) on a copy; ``parallax`` (and ``auto``) masks of a robot
-    capture are made after refine_poses, on the refined poses. ``auto`` (the command's default for photos and
+    """None: the dataset's own masks (every frame must have one; photos and videos: ``auto``); else the method
+    the masks stage makes them with (:func:`real2sim.capture.masks.stage.make_masks`) on a copy; ``parallax``
+    (and ``auto``) masks of a robot capture are made after refine_poses, on the refined poses. ``auto`` (the default for photos and
     videos): parallax masks, or masks from geometry where the data shows parallax masks cannot be the object's."""
     mask: "MaskConfig | ParallaxConfig | None" = None
     """The mask method's settings (a ParallaxConfig for parallax masks); None: the method's defaults, and for
