@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from real2sim.evaluate.jobs import one_line, run_reference_job, runs_row
+from real2sim.plumbing.cores import usable_cores
 from real2sim.plumbing.errors import UserInputError
 
 
@@ -31,10 +32,7 @@ EXECUTORS = ("local", "ray")
 
 def default_jobs() -> int:
     """The sweep's default number of parallel simulations: the CPUs this process may run on (at least 1)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return max(1, os.cpu_count() or 1)
+    return usable_cores()
 
 
 class _SerialExecutor:

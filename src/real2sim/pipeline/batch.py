@@ -31,6 +31,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
+from real2sim.plumbing.cores import usable_cores
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import make_output_dir, output_lock
 from real2sim.plumbing.progress import ProgressFn, null_progress
@@ -112,13 +113,6 @@ class BatchResult:
     @property
     def failed(self) -> list[str]:
         return [n for n, o in self.outcomes.items() if o.get("status") != "done"]
-
-
-def cpu_count() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def object_key(job: ObjectJob) -> str:
@@ -302,7 +296,7 @@ def run_batch(jobs: list[ObjectJob], out: Path, config: BatchConfig, progress: P
         keys = {j.name: object_key(j) for j in jobs if j.config is not None}
         todo = [j for j in jobs if j.config is not None and not finished_before(out, j.name, j.asset_dir, keys[j.name])]
         result.skipped = [j.name for j in jobs if j.config is not None and j not in todo]
-        workers = max(1, min(config.workers or cpu_count(), len(todo) or 1))
+        workers = max(1, min(config.workers or usable_cores(), len(todo) or 1))
         executor = make_executor(config, workers) if todo else None  # Ray's refusal comes before any write
         make_output_dir(out, made_by=MADE_BY)
         (out / BATCH_DIRNAME).mkdir(exist_ok=True)
