@@ -169,15 +169,16 @@ def plan(args: argparse.Namespace, first: tuple[list[str], dict[str, float], Pat
     from real2sim.cli.run import config_from_args
     from real2sim.plumbing.errors import UserInputError
     from real2sim.pipeline.batch import BatchConfig, ObjectJob
-    from real2sim.plumbing.cores import usable_cores
     from real2sim.pipeline.catalogue import dataset_folder
+    from real2sim.plumbing.cores import usable_cores
 
     names, table, out = first or check_first(args)
     batch = BatchConfig(executor=args.executor, ray_address=args.ray_address, workers=args.workers,
                         ray_timeout_s=args.ray_timeout_s)
-    workers = max(1, min(args.workers or usable_cores(), len(names)))
+    cores = usable_cores()
+    workers = max(1, min(args.workers or cores, len(names)))
     # Ray gives a task with one CPU one thread (OMP_NUM_THREADS); numpy's BLAS is held to it as well
-    threads = max(1, usable_cores() // workers) if args.executor == "local" else 1
+    threads = max(1, cores // workers) if args.executor == "local" else 1
     jobs = []
     for name, dataset in zip(names, args.datasets):
         mass, reason = _mass_of(name, dataset_folder(dataset), args, table)

@@ -112,8 +112,8 @@ def config_from_args(args: argparse.Namespace):
     import dataclasses
     import math
 
+    from real2sim.plumbing.cores import usable_cores
     from real2sim.plumbing.errors import UserInputError
-    from real2sim.evaluate.executors import default_jobs as _default_jobs
     from real2sim.evaluate.sweep import EvaluationConfig
     from real2sim.evaluate.scene.scene_config import SceneConfig
 
@@ -133,7 +133,7 @@ def config_from_args(args: argparse.Namespace):
     return EvaluationConfig(
         tasks=_csv_list(args.tasks), contact_models=_csv_list(args.contact), simulators=simulators_from_args(args),
         runs=args.runs, seed=args.seed,
-        jobs=args.jobs or _default_jobs(), executor=args.executor, ray_address=args.ray_address,
+        jobs=args.jobs or usable_cores(), executor=args.executor, ray_address=args.ray_address,
         simulation_error=args.simulation_error, scene=scene,
         # `real2sim run --evaluate` shares this function but not these flags: the defaults then.
         sim_timeout_s=getattr(args, "sim_timeout_s", 600.0), ray_timeout_s=getattr(args, "ray_timeout_s", 30.0),

@@ -23,16 +23,10 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from real2sim.evaluate.jobs import one_line, run_reference_job, runs_row
-from real2sim.plumbing.cores import usable_cores
 from real2sim.plumbing.errors import UserInputError
 
 
 EXECUTORS = ("local", "ray")
-
-
-def default_jobs() -> int:
-    """The sweep's default number of parallel simulations: the CPUs this process may run on (at least 1)."""
-    return usable_cores()
 
 
 class _SerialExecutor:

@@ -60,7 +60,7 @@ from typing import Sequence
 
 from real2sim.evaluate.discovery import (Asset, Representation, discover_assets, discover_representations,
                                          place_reference_mesh, read_canonical_transform)
-from real2sim.evaluate.executors import EXECUTORS, default_jobs, make_executor
+from real2sim.evaluate.executors import EXECUTORS, make_executor
 from real2sim.evaluate.inputs import check_inputs
 from real2sim.formats.contact import MujocoConfig
 from real2sim.evaluate.record import check_resume_settings, config_record
@@ -70,6 +70,7 @@ from real2sim.evaluate.scene.tasks import TASKS, make_run_specs
 from real2sim.evaluate.workdir import (check_partial, check_results_dir, fresh_partial, partial_dir, protected_inputs,
                                        resolve_target)
 from real2sim.formats.contact import CONTACT_MODELS
+from real2sim.plumbing.cores import usable_cores
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import output_lock, publish_dir, write_json_atomic
 from real2sim.plumbing.progress import ProgressFn, null_progress
@@ -96,7 +97,7 @@ class EvaluationConfig:
     """Seeded runs per (object, task); a whole number >= 1 (the paper uses 10)."""
     seed: int = 0
     """Seeds the runs' initial conditions (:func:`real2sim.evaluate.scene.tasks.make_run_specs`)."""
-    jobs: int = field(default_factory=default_jobs)
+    jobs: int = field(default_factory=usable_cores)
     """Simulations at once (the local pool's size, or Ray tasks in flight); >= 1 (default: this process's CPUs)."""
     executor: str = "local"
     """Where the simulations run: "local" (this process for ``jobs`` 1, else a process pool) or "ray"."""
