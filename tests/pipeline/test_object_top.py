@@ -12,16 +12,12 @@ from real2sim.capture.phone.object_height import HullMeasure, object_top
 VOXEL = 0.005
 
 
-def _hull(wall_top: float, cap_height: float, lowest_elevation_deg: float | None = None) -> HullMeasure:
-    """A round hull of unit cross-section up to ``wall_top``, then a cone ``cap_height`` tall over it (the
-    cap the silhouettes leave over a flat top seen only from above, or a real tip); with
-    ``lowest_elevation_deg``, the views' lowest elevation over its top and each slice's reach."""
+def _hull(wall_top: float, cap_height: float) -> HullMeasure:
+    """A hull of unit cross-section up to ``wall_top``, then a cone ``cap_height`` tall over it (the
+    cap the silhouettes leave over a flat top seen only from above)."""
     z = np.arange(0.0, wall_top + cap_height + 3 * VOXEL, VOXEL)
     area = np.where(z <= wall_top, 1.0, np.clip(1.0 - (z - wall_top) / max(cap_height, 1e-9), 0.0, None) ** 2)
-    extra = {} if lowest_elevation_deg is None else {
-        "slice_reach": np.sqrt(area / np.pi), "lowest_elevation_rad": float(np.radians(lowest_elevation_deg))}
-    return HullMeasure(top=wall_top + cap_height, centre_xy=np.zeros(2), slice_z=z, slice_area=area, voxel=VOXEL,
-                       **extra)
+    return HullMeasure(top=wall_top + cap_height, centre_xy=np.zeros(2), slice_z=z, slice_area=area, voxel=VOXEL)
 
 
 def _points_up_to(top: float, count: int = 300, seed: int = 0) -> np.ndarray:
@@ -36,24 +32,6 @@ def test_a_cap_over_a_flat_top_gives_way_to_the_sparse_points():
     height, record = object_top(hull, _points_up_to(1.0), NormaliseConfig(object_height_m=0.1))
     assert height == pytest.approx(1.0, abs=0.005), record
     assert record["cap_fill"] < 0.7 and "sparse points" in record["from"]
-
-
-def test_a_cap_no_higher_than_the_views_lowest_elevation_allows_gives_way_to_the_points():
-    hull = _hull(1.0, 0.08, lowest_elevation_deg=30.0)  # a cap of up to 0.56 tan 30 deg = 0.33 possible
-    height, record = object_top(hull, _points_up_to(1.0), NormaliseConfig(object_height_m=0.1))
-    assert height == pytest.approx(1.0, abs=0.005) and "sparse points" in record["from"], record
-    assert record["cap_bound_units"] == pytest.approx(np.sqrt(1 / np.pi) * np.tan(np.radians(30.0)), rel=0.05)
-
-
-def test_a_narrowing_tip_higher_than_any_cap_keeps_the_hull():
-    # Views from 2 deg above the top could leave a cap at most 0.56 tan 2 deg = 0.02 high over a flat top
-    # at the points' top: a cone 0.08 high above it is the object (a nozzle the points missed).
-    hull = _hull(1.0, 0.08, lowest_elevation_deg=2.0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        height, record = object_top(hull, _points_up_to(1.0), NormaliseConfig(object_height_m=0.1))
-    assert height == hull.top and "narrowing top" in record["from"], record
-    assert record["cap_fill"] < 0.7 and record["cap_bound_units"] < 0.03
 
 
 def test_a_wall_standing_full_width_above_the_points_keeps_the_hull_and_warns():

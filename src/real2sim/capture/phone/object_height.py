@@ -12,26 +12,20 @@ import numpy as np
 
 from real2sim.capture.phone import robot_frame as rf
 from real2sim.capture.phone.normalise_config import NormaliseConfig
-from real2sim.formats.dataset import CV_FROM_GL, CameraIntrinsics, Dataset
+from real2sim.formats.dataset import CV_FROM_GL, Dataset
 
 
 @dataclass(frozen=True)
 class HullMeasure:
     """The masks' visual hull in the rigid table frame (model units): its ``top`` above the table, its
     footprint ``centre_xy`` (2,), and per horizontal slice of its grid the slice's height ``slice_z``
-    (Z,) and the hull's area in it ``slice_area`` (Z,); ``slice_reach`` (Z,): the farthest the hull reaches
-    from each slice's own centroid, and ``lowest_elevation_rad``: the lowest elevation from which a view
-    holding the hull's top (its highest slice's centroid) in its frame looks at it (radians, negative from
-    below; None: no view, or not measured). The two bound the cap the silhouettes can leave over a flat
-    top (:func:`object_top`)."""
+    (Z,) and the hull's area in it ``slice_area`` (Z,)."""
 
     top: float
     centre_xy: np.ndarray
     slice_z: np.ndarray
     slice_area: np.ndarray
     voxel: float
-    slice_reach: np.ndarray | None = None
-    lowest_elevation_rad: float | None = None
 
 
 def measure_object(ds: Dataset, masks: np.ndarray, table: rf.Similarity, config: NormaliseConfig) -> HullMeasure:
@@ -47,35 +41,9 @@ def measure_object(ds: Dataset, masks: np.ndarray, table: rf.Similarity, config:
     mesh, grid, scores = visual_hull_mesh(views, longest_side_voxels=config.hull_voxels,
                                           outlier_fraction=config.hull_outlier_fraction, table_z_m=0.0)
     lo, hi = mesh.bounds
-    centre_xy = 0.5 * (lo[:2] + hi[:2])
-    inside = scores >= 0.5
     slice_z = grid.origin_m[2] + np.arange(grid.shape[2]) * grid.voxel_m
-    slice_area = inside.sum(axis=(0, 1)) * grid.voxel_m ** 2
-    # Per slice, the farthest reach of the hull from that slice's own centroid: a cap over a flat top is
-    # as high as the top is wide, wherever on the footprint the top stands (an off-centre cap).
-    x = grid.origin_m[0] + np.arange(grid.shape[0]) * grid.voxel_m
-    y = grid.origin_m[1] + np.arange(grid.shape[1]) * grid.voxel_m
-    count = np.maximum(inside.sum(axis=(0, 1)), 1)
-    cx = np.einsum("xyz,x->z", inside, x) / count
-    cy = np.einsum("xyz,y->z", inside, y) / count
-    reach = np.hypot(x[:, None, None] - cx, y[None, :, None] - cy) + 0.5 * np.sqrt(2.0) * grid.voxel_m
-    slice_reach = np.where(inside, reach, 0.0).max(axis=(0, 1))
-    highest = int(np.flatnonzero(inside.any(axis=(0, 1)))[-1]) if inside.any() else grid.shape[2] - 1
-    top_point = np.array([cx[highest], cy[highest], hi[2]])
-    return HullMeasure(float(hi[2]), centre_xy, slice_z, slice_area.astype(float), float(grid.voxel_m),
-                       slice_reach.astype(float), lowest_elevation(k, c2w_cv, top_point))
-
-
-def lowest_elevation(k: CameraIntrinsics, c2w_cv: np.ndarray, point: np.ndarray) -> float | None:
-    """The lowest elevation (radians above the horizontal, table frame) of the cameras ``c2w_cv`` (V, 4, 4)
-    that hold ``point`` (3,) in their frame; None when none does."""
-    pixels, depth = rf.project_points(k, c2w_cv, point[None])
-    seen = (depth[:, 0] > 0) & (pixels[:, 0, 0] >= 0) & (pixels[:, 0, 0] < k.width) \
-        & (pixels[:, 0, 1] >= 0) & (pixels[:, 0, 1] < k.height)
-    if not seen.any():
-        return None
-    offset = c2w_cv[seen, :3, 3] - point
-    return float(np.arctan2(offset[:, 2], np.hypot(offset[:, 0], offset[:, 1])).min())
+    slice_area = (scores >= 0.5).sum(axis=(0, 1)) * grid.voxel_m ** 2
+    return HullMeasure(float(hi[2]), 0.5 * (lo[:2] + hi[:2]), slice_z, slice_area.astype(float), float(grid.voxel_m))
 
 
 def object_top(hull: HullMeasure, point_heights: np.ndarray | None, config: NormaliseConfig,
@@ -103,13 +71,6 @@ def object_top(hull: HullMeasure, point_heights: np.ndarray | None, config: Norm
     prism = np.interp(points_top, hull.slice_z, hull.slice_area) * (hull.top - points_top)
     fill = float(hull.slice_area[above].sum() * hull.voxel / prism) if prism > 0 else 1.0
     record["cap_fill"] = fill
-    cap_bound = _cap_bound(hull, points_top)
-    if cap_bound is not None:
-        record["cap_bound_units"] = cap_bound
-    if fill < config.cap_fill and cap_bound is not None and hull.top - points_top > cap_bound + hull.voxel:
-        return hull.top, {**record, "from": f"the visual hull: it rises {100 * gap:.1f} % above the {label} as a "
-                                            "narrowing top, higher than any cap the silhouettes can leave over "
-                                            "them from the views' lowest elevation (a tip the points missed)"}
     if fill < config.cap_fill:
         which = ("their 99th percentile" if dense_top is not None
                  else f"the median of the {config.top_points} highest")
@@ -122,14 +83,3 @@ def object_top(hull: HullMeasure, point_heights: np.ndarray | None, config: Norm
                   "object (`real2sim board`) or give --scale", stacklevel=2)
     return hull.top, {**record, "from": f"the visual hull (it stands full width above the {label}: a top "
                                         "with no features; warned)"}
-
-
-def _cap_bound(hull: HullMeasure, points_top: float) -> float | None:
-    """The highest cap (model units) the silhouettes can leave over a flat top at ``points_top``: its reach
-    from its centroid there times the tangent of the lowest elevation a view sees the top from (a cone of
-    slope tan(elevation) over the top's outline; docs/design-notes/capture.md#normalise-object-top).
-    None where the hull does not say (no reach or no view measured)."""
-    if hull.slice_reach is None or hull.lowest_elevation_rad is None:
-        return None
-    reach = float(np.interp(points_top, hull.slice_z, hull.slice_reach))
-    return reach * float(np.tan(max(hull.lowest_elevation_rad, 0.0)))
