@@ -5,11 +5,19 @@ hydroelastic contact, equation error, N seeded runs; our rows side by side with 
     python benchmarks/bench_table1.py --full     # the paper's: 10 runs, the issue's representations
     python benchmarks/bench_table1.py --runs 3 --specs boxes:10 cylinders:10 coacd
     python benchmarks/bench_table1.py --full --objects carton,mug_side --work W --tag shapes
+    python benchmarks/bench_table1.py --round --objects bottle,can,shapes --simulator drake mujoco --bounds --work W
 
-``--objects`` also takes two shapes made here that are neither bottles nor cans (issue #32 part 5):
-``carton``, a gable-top drinks carton standing upright, and ``mug_side``, the bundled mug lying on
-its side (its handle sticks out sideways, its rim is an edge to tip over). The paper's columns stay
-for orientation: its Table I is of other objects.
+``--objects`` takes any bundled object (``real2sim objects``: the bottle and can, and the shape set, built
+resting as they are made), ``shapes`` for the whole shape set, and ``carton``, a gable-top drinks carton
+standing upright made here (issue #32 part 5). ``--round``: the bottle, can and mug as their round
+references (``make_object(name, rolling_sagitta_m=REFERENCE_SAGITTA_M)``, named ``<name>_round``) instead
+of the 0.1.0 meshes. ``--simulator drake mujoco``: the candidates in MuJoCo too (point contact; the builds
+get model.xml). The paper's columns stay for orientation: its Table I is of other objects.
+
+Issue #66's verdicts, from runs.csv per object: in each setting (Drake hydroelastic, Drake point, MuJoCo
+point) the primitive rows faster than CoACD with OCAE and cpd_paper no worse (:func:`against_coacd`); with
+``--bounds``, the share of CoACD's OCAE gap to ``bound_mesh`` the best primitive closes (:func:`gap_rows`);
+and CoACD's hull count and fit time per object.
 
 Work is kept in benchmarks/out/table1 (assets and results); re-running resumes the
 evaluation sweep (rows already in runs.csv are skipped). Writes benchmarks/results/table1.md.
@@ -18,9 +26,11 @@ evaluation sweep (rows already in runs.csv are skipped). Writes benchmarks/resul
 from __future__ import annotations
 
 import argparse
+import math
 import shutil
 import sys
 import time
+from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -33,15 +43,16 @@ FULL_SPECS = ("boxes:1", "boxes:10", "boxes:50", "boxes:150", "boxes:400", "cyli
               "ellipsoids:64", "rotated_boxes:50", "coacd")
 QUICK_SPECS = ("boxes:10", "cylinders:10", "spheres:64", "coacd")
 OBJECTS = ("bottle", "can")
-GENERATED_MASS_KG = {"carton": 0.5, "mug_side": 0.3}
+GENERATED_MASS_KG = {"carton": 0.5}
+SHAPES = "shapes"
+"""``--objects`` shorthand for every shape-set object of :data:`real2sim.geometry.objects.OBJECTS`."""
+ROUND_SUFFIX = "_round"
+"""Asset name suffix of a round reference (``--round``), so its builds never mix with the 0.1.0 mesh's."""
 
 
 def generated_shape(name: str):
-    """A shape of part 5 as a watertight trimesh in metres, resting on z = 0 as it is to be simulated."""
+    """A shape made here as a watertight trimesh in metres, resting on z = 0 as it is to be simulated."""
     import trimesh
-    from trimesh.transformations import rotation_matrix
-
-    from real2sim.geometry.objects import make_object
 
     if name == "carton":
         # 7 x 7 cm, 17 cm to the shoulders, a gable roof 2.5 cm high with a sealed fin along its ridge.
@@ -52,9 +63,6 @@ def generated_shape(name: str):
         fin = trimesh.creation.box((0.006, 0.07, 0.012))
         fin.apply_translation([0, 0, 0.19])
         mesh = trimesh.boolean.union([body, roof, fin], engine="manifold")
-    elif name == "mug_side":
-        mesh = make_object("mug")
-        mesh.apply_transform(rotation_matrix(np.pi / 2, [1, 0, 0]))  # the handle along +x stays horizontal
     else:
         raise ValueError(f"unknown shape {name!r}; known: bundled objects and {', '.join(GENERATED_MASS_KG)}")
     mesh.apply_translation([0, 0, -mesh.bounds[0, 2]])
@@ -64,19 +72,76 @@ def generated_shape(name: str):
     return mesh
 
 
+def object_names(text: str) -> tuple[str, ...]:
+    """``--objects``: comma-separated names, ``shapes`` standing for every shape-set object; ValueError on an
+    unknown name."""
+    from real2sim.geometry.objects import OBJECTS as BUNDLED
+
+    names = []
+    for name in (n.strip() for n in text.split(",") if n.strip()):
+        expanded = [n for n, o in BUNDLED.items() if o.shape_set] if name == SHAPES else [name]
+        names += [n for n in expanded if n not in names]
+    unknown = [n for n in names if n not in BUNDLED and n not in GENERATED_MASS_KG]
+    if unknown:
+        raise ValueError(f"unknown objects {', '.join(unknown)}; known: {', '.join([*BUNDLED, *GENERATED_MASS_KG])} "
+                         f"and {SHAPES}")
+    return tuple(names)
+
+
+def export_source(name: str, work: Path, round_reference: bool) -> tuple[str, Path, float, bool]:
+    """``(asset name, mesh path, mass kg, pca_up)`` of object ``name``, its mesh written under work/objects.
+    Shape-set and generated objects rest as built (pca_up False); the bottle and can are canonicalised as the
+    paper's. ``round_reference``: an object with a 0.1.0 mesh is its round reference instead, named
+    ``<name>_round`` (a plain OBJ: the evaluation needs no texture)."""
+    from real2sim.geometry.objects import OBJECTS as BUNDLED
+    from real2sim.geometry.objects import REFERENCE_SAGITTA_M, export_object, make_object
+    from real2sim.geometry.objects_010 import MESHES_010
+
+    if name in GENERATED_MASS_KG:
+        mesh = work / "objects" / name / "model.obj"
+        mesh.parent.mkdir(parents=True, exist_ok=True)
+        generated_shape(name).export(mesh)
+        return name, mesh, GENERATED_MASS_KG[name], False
+    bundled = BUNDLED[name]
+    if round_reference and name in MESHES_010:
+        asset_name = name + ROUND_SUFFIX
+        mesh = work / "objects" / asset_name / "model.obj"
+        mesh.parent.mkdir(parents=True, exist_ok=True)
+        make_object(name, rolling_sagitta_m=REFERENCE_SAGITTA_M).export(mesh)
+    else:
+        asset_name, mesh = name, export_object(name, work / "objects" / name / "model.obj")
+    return asset_name, mesh, bundled.mass_kg, not bundled.shape_set
+
+
+def check_cached_build(build: Path, mesh: Path, pca_up: bool) -> None:
+    """Refuse a build in ``build`` made from other mesh bytes or another pca_up: builds are reused by folder, and
+    the objects' meshes and orientation have changed (mug_side, the shape set) since earlier work folders."""
+    import json
+
+    from real2sim.formats.asset_config import ASSET_CONFIG_NAME
+    from real2sim.plumbing.digests import file_sha256
+
+    record = json.loads((build / ASSET_CONFIG_NAME).read_text())
+    if record.get("input_mesh_sha256") != file_sha256(mesh) or bool(record.get("pca_up")) != pca_up:
+        raise SystemExit(f"{build} was built from another mesh or orientation than this run's {mesh} "
+                         f"(pca_up {pca_up}): use a --work folder of its own")
+
+
 def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fit_config=None,
                  objects: tuple[str, ...] = OBJECTS, extra_hints: tuple[float, ...] = (),
-                 fill_cavities_m: float | None = None) -> list[Path]:
+                 fill_cavities_m: float | None = None, formats: tuple[str, ...] = ("urdf",),
+                 round_references: bool = False) -> list[Path]:
     """One asset folder per object holding every SPEC.
 
     Each SPEC is built alone into work/build/<object>/<SPEC> (so an interrupted run
     resumes per SPEC), then the representation folders are gathered into
     work/assets/<object>; the shared files are identical across builds (same mesh,
-    same seed), so one evaluation reference serves them all. Every URDF is then
-    rewritten with ``contact`` (default: ``ContactProperties()``), so the gathered
-    copies never keep the contact settings of an earlier run. ``fit_config``: the primitive
+    same seed), so one evaluation reference serves them all. Every model is then
+    rewritten with ``contact`` (default: ``ContactProperties()``) in ``formats`` (add "mjcf" for MuJoCo), so
+    the gathered copies never keep the contact settings of an earlier run. ``fit_config``: the primitive
     fits' settings (default: ``FitConfig()``); a work folder holds builds of one setting only.
-    ``objects``: bundled objects, or the shapes of :func:`generated_shape`, built with their +z kept up.
+    ``objects``: names of :func:`export_source` (``round_references``: the bottle, can and mug as their
+    round references, folders ``<name>_round``).
     ``extra_hints``: each representation with compliant round shapes (spheres, cylinders, ellipsoids) also
     as ``<representation>_hint<M>``, the same fit written with Drake's resolution hint M (m), so that one
     sweep, on one set of references, compares the hints. ``fill_cavities_m``: ``AssetConfig.fill_cavities_m`` of
@@ -87,46 +152,40 @@ def build_assets(work: Path, specs: tuple[str, ...], seed: int, contact=None, fi
 
     from real2sim.asset.build import AssetConfig, build_asset, rewrite_models
     from real2sim.formats.contact import ContactProperties
-    from real2sim.geometry.objects import OBJECTS as BUNDLED
-    from real2sim.geometry.objects import export_object
     from real2sim.formats.spec import parse_spec
 
     assets = []
     for name in objects:
-        generated = name not in BUNDLED
-        if generated:
-            mesh = work / "objects" / name / "model.obj"
-            mesh.parent.mkdir(parents=True, exist_ok=True)
-            generated_shape(name).export(mesh)
-        else:
-            mesh = export_object(name, work / "objects" / name / "model.obj")
-        mass_kg = GENERATED_MASS_KG[name] if generated else BUNDLED[name].mass_kg
-        asset = work / "assets" / name
+        asset_name, mesh, mass_kg, pca_up = export_source(name, work, round_references)
+        asset = work / "assets" / asset_name
         for spec_text in specs:
             spec = parse_spec(spec_text)
-            build = work / "build" / name / spec.name
-            if not (build / spec.name / "model.urdf").exists():
+            build = work / "build" / asset_name / spec.name
+            if (build / spec.name / "model.urdf").exists():
+                check_cached_build(build, mesh, pca_up)
+            else:
                 start = time.perf_counter()
-                build_asset(mesh, build, AssetConfig(mass_kg=mass_kg, specs=(spec,), seed=seed, pca_up=not generated,
-                                                     fit_config=fit_config, fill_cavities_m=fill_cavities_m),
+                build_asset(mesh, build, AssetConfig(mass_kg=mass_kg, specs=(spec,), seed=seed, pca_up=pca_up,
+                                                     fit_config=fit_config, fill_cavities_m=fill_cavities_m,
+                                                     formats=formats),
                             overwrite=True)
-                print(f"built {name} {spec_text} in {time.perf_counter() - start:.1f} s", flush=True)
+                print(f"built {asset_name} {spec_text} in {time.perf_counter() - start:.1f} s", flush=True)
             if not asset.exists():
                 shutil.copytree(build, asset, ignore=shutil.ignore_patterns(spec.name))
             if not (asset / spec.name).exists():
                 shutil.copytree(build / spec.name, asset / spec.name)
         for stale in asset.glob("*_hint*"):
             shutil.rmtree(stale)
-        rewrite_models(asset, contact or ContactProperties())  # no refit: contact settings only
+        rewrite_models(asset, contact or ContactProperties(), formats)  # no refit: contact settings only
         for hint in extra_hints:
-            hinted_copies(asset, dataclasses.replace(contact or ContactProperties(), resolution_hint_m=hint))
+            hinted_copies(asset, dataclasses.replace(contact or ContactProperties(), resolution_hint_m=hint), formats)
         assets.append(asset)
     return assets
 
 
-def write_variant(rep_dir: Path, geometry, contact) -> None:
+def write_variant(rep_dir: Path, geometry, contact, formats: tuple[str, ...] = ("urdf",)) -> None:
     """``geometry`` (asset frame, m) as representation folder ``rep_dir`` of the asset ``rep_dir.parent``:
-    its collision.json and models written with ``contact``, the asset's mass properties and visual mesh.
+    its collision.json and models (``formats``) written with ``contact``, the asset's mass properties and visual mesh.
     Every variant this benchmark and bench_contact_cost.py add beside the fits is written through here."""
     from real2sim.asset.build import VISUAL_RELPATH
     from real2sim.asset.export.writers import write_representation
@@ -136,12 +195,12 @@ def write_variant(rep_dir: Path, geometry, contact) -> None:
     rep_dir.mkdir(parents=True, exist_ok=True)
     write_collision_json(geometry, rep_dir / "collision.json")
     write_representation(rep_dir, geometry, read_physical_properties(rep_dir.parent / "physical_properties.json"),
-                         contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}", model_name=rep_dir.name)
+                         contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}", formats=formats, model_name=rep_dir.name)
 
 
-def hinted_copies(asset: Path, contact) -> None:
+def hinted_copies(asset: Path, contact, formats: tuple[str, ...] = ("urdf",)) -> None:
     """Copy each representation of ``asset`` holding compliant round shapes to ``<name>_hint<M>``, written with
-    ``contact`` (whose ``resolution_hint_m`` is M)."""
+    ``contact`` (whose ``resolution_hint_m`` is M) in ``formats``."""
     from real2sim.formats.collision import read_collision_json
 
     for collision_json in sorted(asset.glob("*/collision.json")):
@@ -151,13 +210,13 @@ def hinted_copies(asset: Path, contact) -> None:
             continue
         copy = asset / f"{rep_dir.name}_hint{contact.resolution_hint_m:g}"
         shutil.copytree(rep_dir, copy)
-        write_variant(copy, geometry, contact)
+        write_variant(copy, geometry, contact, formats)
 
 
 CYLINDER_SECTIONS = 72  # as the bundled can's own mesh: flats 0.03 mm deep on its 34 mm radius
 
 
-def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
+def polytope_representation(rep_dir: Path, out_dir: Path, contact, formats: tuple[str, ...] = ("urdf",)) -> None:
     """``out_dir``: representation ``rep_dir`` again with each ellipsoid a compliant convex piece, its
     portable polytope (:func:`real2sim.asset.export.round_pieces.round_polytope`), and each cylinder a
     ``CYLINDER_SECTIONS``-gon prism of the cylinder's volume, under ``polytopes/``, written with
@@ -187,7 +246,7 @@ def polytope_representation(rep_dir: Path, out_dir: Path, contact) -> None:
             piece.export(out_dir / relpath, include_normals=False)
             shape = CollisionShape("convex", (), shape.position_m, shape.quaternion_wxyz, relpath)
         shapes.append(shape)
-    write_variant(out_dir, replace(geometry, shapes=tuple(shapes)), contact)
+    write_variant(out_dir, replace(geometry, shapes=tuple(shapes)), contact, formats)
 
 
 BOUND_SCALE = 0.001
@@ -228,8 +287,8 @@ def revolution_profile(mesh) -> tuple[np.ndarray, int] | None:
     return (profile, sections) if gap_m.max() < 1e-6 else None
 
 
-def bound_representations(asset: Path, contact) -> None:
-    """Rows that bound what any fit can reach, written into ``asset`` (they are not fits):
+def bound_representations(asset: Path, contact, formats: tuple[str, ...] = ("urdf",)) -> None:
+    """Rows that bound what any fit can reach, written into ``asset`` in ``formats`` (they are not fits):
     ``bound_hull``, the exact convex hull of the reference mesh as one piece with ``contact`` (compliant by
     default, as every candidate: a perfect convex fit), and ``bound_mesh``, the reference mesh itself
     0.1 % larger about its centroid as a rigid body (the reference's own model, so its error is the
@@ -255,7 +314,7 @@ def bound_representations(asset: Path, contact) -> None:
         (rep / "pieces").mkdir(parents=True, exist_ok=True)
         mesh.export(rep / "pieces" / "piece_000.obj")
         write_variant(rep, CollisionGeometry(name, name, (CollisionShape(kind, (), mesh_file="pieces/piece_000.obj"),)),
-                      contact)
+                      contact, formats)
 
 
 def fit_table(work: Path, specs: tuple[str, ...], objects: tuple[str, ...] = OBJECTS) -> list[list]:
@@ -280,18 +339,202 @@ def fit_table(work: Path, specs: tuple[str, ...], objects: tuple[str, ...] = OBJ
 
 
 def per_object_table(runs_csv: Path) -> list[list]:
-    """Rows (representation, object, task, mean OCAE, ATE, CPD, sim time) of runs.csv, failed runs left out."""
-    import csv
-    from collections import defaultdict
+    """Rows (representation, object, task, mean OCAE, ATE, CPD, sim time) of runs.csv, failed runs left out;
+    the representation is summary.csv's label, so a simulator's rows stay apart."""
+    from real2sim.formats.results import read_runs_csv, summary_label
 
     groups: dict[tuple, list[dict]] = defaultdict(list)
-    with open(runs_csv, newline="") as f:
-        for row in csv.DictReader(f):
-            if not row.get("error"):
-                groups[(f"{row['representation']}_{row['contact_model']}", row["object"], row["task"])].append(row)
+    for row in read_runs_csv(runs_csv):
+        if not row.get("error"):
+            label = summary_label(row["representation"], row["contact_model"], row["simulator"])
+            groups[(label, row["object"], row["task"])].append(row)
     return [[*key, *(sum(float(r[k]) for r in rows) / len(rows)
                      for k in ("ocae_m", "ate_m", "cpd_m_per_s", "sim_time_s"))]
             for key, rows in sorted(groups.items())]
+
+
+SETTINGS = (("drake", "hydroelastic"), ("drake", "point"), ("mujoco", "point"))
+"""(simulator, contact model) of the settings issue #66 judges primitives against CoACD in, in table order."""
+BASELINE = "coacd"
+NOT_PRIMITIVE = ("coacd", "vhacd", "mesh", "bound_")
+"""Representation name prefixes that are no primitive fit: decompositions, meshes, bounds."""
+VERDICT_METRICS = ("ocae_m", "sim_time_s", "cpd_paper")
+GAP_SETTING = ("drake", "hydroelastic")
+"""The setting the gap to exact geometry is measured in: the reference's own."""
+
+
+def is_primitive(representation: str) -> bool:
+    """True for a primitive fit's row (boxes_10, spheres_64_hint0.01, ...), not a decomposition, mesh or bound."""
+    return not representation.startswith(NOT_PRIMITIVE)
+
+
+def setting_name(simulator: str, contact_model: str) -> str:
+    return f"{simulator} {contact_model}"
+
+
+def as_number(value) -> float:
+    """A runs.csv field as a float: text or number; empty or missing is NaN."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def object_means(rows) -> dict[tuple[str, str, str, str], dict[str, float]]:
+    """Mean OCAE (m), sim time (s) and cpd_paper per (object, simulator, contact model, representation), over
+    the runs and tasks of ``rows`` (runs.csv rows as dicts, numbers as text or floats). Rows with an error are
+    left out and each mean is over the metric's finite values (NaN where none), as summary.csv's."""
+    groups: dict[tuple[str, str, str, str], list[dict]] = defaultdict(list)
+    for row in rows:
+        if not row.get("error"):
+            simulator = row.get("simulator") or "drake"  # a row from before the column is Drake's
+            groups[(row["object"], simulator, row["contact_model"], row["representation"])].append(row)
+    means = {}
+    for key, group in groups.items():
+        means[key] = {}
+        for metric in VERDICT_METRICS:
+            values = [v for v in (as_number(r.get(metric)) for r in group) if math.isfinite(v)]
+            means[key][metric] = sum(values) / len(values) if values else math.nan
+    return means
+
+
+def faster_and_as_accurate(candidate: dict[str, float], baseline: dict[str, float]) -> bool:
+    """Mean sim time strictly lower than ``baseline``'s, mean OCAE and cpd_paper no higher (a cpd_paper
+    undefined for both, no sustained contact in either, counts as no higher)."""
+    cpd, cpd_baseline = candidate["cpd_paper"], baseline["cpd_paper"]
+    return (candidate["sim_time_s"] < baseline["sim_time_s"] and candidate["ocae_m"] <= baseline["ocae_m"]
+            and (cpd <= cpd_baseline or (math.isnan(cpd) and math.isnan(cpd_baseline))))
+
+
+def against_coacd(rows) -> list[dict]:
+    """Per object and setting of :data:`SETTINGS` that has a CoACD row: ``{"object", "setting", "coacd"``
+    (its means), ``"best"`` (the primitive of lowest mean OCAE, None if no primitive ran), ``"best_means"``,
+    ``"winners"`` (the primitives :func:`faster_and_as_accurate` than CoACD, sorted)``}``; objects sorted."""
+    means = object_means(rows)
+    verdicts = []
+    for name in sorted({key[0] for key in means}):
+        for simulator, contact_model in SETTINGS:
+            baseline = means.get((name, simulator, contact_model, BASELINE))
+            if baseline is None:
+                continue
+            primitives = {key[3]: m for key, m in means.items()
+                          if key[:3] == (name, simulator, contact_model) and is_primitive(key[3])}
+            ranked = sorted((m["ocae_m"], rep) for rep, m in primitives.items() if math.isfinite(m["ocae_m"]))
+            best = ranked[0][1] if ranked else None
+            verdicts.append({"object": name, "setting": setting_name(simulator, contact_model), "coacd": baseline,
+                             "best": best, "best_means": primitives.get(best),
+                             "winners": sorted(rep for rep, m in primitives.items()
+                                               if faster_and_as_accurate(m, baseline))})
+    return verdicts
+
+
+def setting_counts(verdicts: list[dict]) -> dict[str, tuple[int, int]]:
+    """``(objects with a faster and as accurate primitive, objects compared)`` per setting name, in
+    :data:`SETTINGS` order; settings with no object left out."""
+    counts = {}
+    for simulator, contact_model in SETTINGS:
+        setting = [v for v in verdicts if v["setting"] == setting_name(simulator, contact_model)]
+        if setting:
+            counts[setting_name(simulator, contact_model)] = (sum(bool(v["winners"]) for v in setting), len(setting))
+    return counts
+
+
+def gap_share(coacd_ocae_m: float, primitive_ocae_m: float, bound_ocae_m: float) -> float:
+    """Share of CoACD's OCAE gap to the bound that the primitive closes: (CoACD - primitive) / (CoACD - bound)
+    (1: as good as the bound, 0: as CoACD, above 1: better than the bound). NaN where a value is missing or
+    CoACD is no worse than the bound (no gap to close)."""
+    gap_m = coacd_ocae_m - bound_ocae_m
+    if not all(math.isfinite(v) for v in (coacd_ocae_m, primitive_ocae_m, bound_ocae_m)) or gap_m <= 0:
+        return math.nan
+    return (coacd_ocae_m - primitive_ocae_m) / gap_m
+
+
+def gap_rows(rows) -> list[dict]:
+    """Per object with a CoACD row in :data:`GAP_SETTING`: mean OCAE (m) of CoACD, of the best primitive (by
+    OCAE), of ``bound_mesh`` and ``bound_hull`` (NaN where the row is missing), and :func:`gap_share`
+    against ``bound_mesh``; objects sorted."""
+    means = object_means(rows)
+    out = []
+    for verdict in against_coacd(rows):
+        if verdict["setting"] != setting_name(*GAP_SETTING):
+            continue
+        bounds = {key[3]: m["ocae_m"] for key, m in means.items()
+                  if key[:3] == (verdict["object"], *GAP_SETTING) and key[3].startswith("bound_")}
+        coacd_m = verdict["coacd"]["ocae_m"]
+        best_m = verdict["best_means"]["ocae_m"] if verdict["best"] else math.nan
+        mesh_m = bounds.get("bound_mesh", math.nan)
+        out.append({"object": verdict["object"], "coacd_ocae_m": coacd_m, "best": verdict["best"],
+                    "best_ocae_m": best_m, "bound_mesh_ocae_m": mesh_m,
+                    "bound_hull_ocae_m": bounds.get("bound_hull", math.nan),
+                    "share": gap_share(coacd_m, best_m, mesh_m)})
+    return out
+
+
+def mean_share(gaps: list[dict]) -> tuple[float, int]:
+    """Mean of the finite gap shares of :func:`gap_rows` and how many there are (NaN, 0 for none)."""
+    shares = [g["share"] for g in gaps if math.isfinite(g["share"])]
+    return (sum(shares) / len(shares) if shares else math.nan), len(shares)
+
+
+def coacd_fit(report: dict) -> tuple[int | None, float]:
+    """(hull count, fit seconds) from a CoACD build's fit_report.json."""
+    hulls = report.get("num_primitives", report.get("num_pieces"))
+    return (None if hulls is None else int(hulls)), as_number(report.get("fit_seconds"))
+
+
+def half_or_more(count: int, total: int) -> bool:
+    """Issue #66's target for the faster-and-as-accurate verdict: at least half of the objects."""
+    return total > 0 and 2 * count >= total
+
+
+GAP_SHARE_TARGET = 0.5
+"""Issue #66's target for the mean share of CoACD's gap to bound_mesh the best primitive closes."""
+
+
+def verdict_sections(rows, work: Path, asset_names: list[str], bounds: bool) -> str:
+    """The markdown of issue #66's verdicts from runs.csv ``rows``: against CoACD per object and setting, the
+    gap to exact geometry (``bounds``), and CoACD's hulls and fit time per object from the builds in ``work``."""
+    import json
+
+    verdicts = against_coacd(rows)
+    table = []
+    for v in verdicts:
+        c, b = v["coacd"], v["best_means"] or dict.fromkeys(VERDICT_METRICS, math.nan)
+        table.append([v["object"], v["setting"], c["ocae_m"], c["sim_time_s"], c["cpd_paper"], v["best"] or "-",
+                      b["ocae_m"], b["sim_time_s"], b["cpd_paper"], ", ".join(v["winners"]) or "none"])
+    counts = "\n".join(f"- {setting}: {n} of {m} objects have one; target (at least half): "
+                        f"{'met' if half_or_more(n, m) else 'not met'}"
+                        for setting, (n, m) in setting_counts(verdicts).items())
+    text = ("**Against CoACD, per object and setting.** Means over the runs and both tasks of each object "
+            "(runs.csv). \"Faster and as accurate\": the primitive rows with mean sim time below CoACD's and mean "
+            "OCAE and cpd_paper no higher; best primitive: lowest mean OCAE.\n\n"
+            + markdown_table(["object", "setting", "CoACD OCAE m", "CoACD sim s", "CoACD cpd_paper", "best primitive",
+                              "OCAE m", "sim s", "cpd_paper", "faster and as accurate"], table)
+            + "\n\n" + (counts or "- no object has a CoACD row") + "\n")
+    if bounds:
+        gaps = gap_rows(rows)
+        share, n = mean_share(gaps)
+        text += ("\n**Gap to exact geometry (Drake hydroelastic).** Share of the gap between CoACD's OCAE and "
+                 "bound_mesh's that the best primitive closes: (CoACD - best) / (CoACD - bound_mesh); "
+                 "none where CoACD is no worse than bound_mesh.\n\n"
+                 + markdown_table(["object", "CoACD OCAE m", "best primitive", "OCAE m", "bound_mesh OCAE m",
+                                   "bound_hull OCAE m", "share closed"],
+                                  [[g["object"], g["coacd_ocae_m"], g["best"] or "-", g["best_ocae_m"],
+                                    g["bound_mesh_ocae_m"], g["bound_hull_ocae_m"],
+                                    g["share"] if math.isfinite(g["share"]) else "none"] for g in gaps])
+                 + f"\n\n- mean share over {n} objects: {share:.3g}; target (at least {GAP_SHARE_TARGET:g}): "
+                 + ("met" if n and share >= GAP_SHARE_TARGET else "not met") + "\n")
+    fits = []
+    for name in asset_names:
+        report = work / "build" / name / BASELINE / BASELINE / "fit_report.json"
+        if report.is_file():
+            hulls, fit_s = coacd_fit(json.loads(report.read_text()))
+            fits.append([name, "-" if hulls is None else hulls, fit_s])
+    if fits:
+        text += ("\n**CoACD per object** (its build's fit_report.json; fit seconds: the decomposition alone, when "
+                 "the build ran, on this machine under whatever load it had):\n\n"
+                 + markdown_table(["object", "hulls", "fit s"], fits) + "\n")
+    return text
 
 
 def main() -> int:
@@ -302,8 +545,15 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=None)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--objects", default=",".join(OBJECTS),
-                        help=f"comma-separated: bundled objects and/or {', '.join(GENERATED_MASS_KG)} (default "
-                        f"{','.join(OBJECTS)}); use a --work folder per set")
+                        help=f"comma-separated: bundled objects (real2sim objects), {SHAPES} (the whole shape set) "
+                        f"and/or {', '.join(GENERATED_MASS_KG)} (default {','.join(OBJECTS)}); use a --work folder "
+                        "per set")
+    parser.add_argument("--round", action="store_true",
+                        help="the bottle, can and mug as their round references (make_object(name, "
+                        "rolling_sagitta_m=REFERENCE_SAGITTA_M)), assets <name>_round, instead of the 0.1.0 meshes")
+    parser.add_argument("--simulator", nargs="+", default=["drake"], choices=["drake", "mujoco"],
+                        help="EvaluationConfig.simulators (default drake); mujoco simulates point contact only and "
+                        "has every build write model.xml")
     parser.add_argument("--work", type=Path, default=ROOT / "benchmarks" / "out" / "table1")
     parser.add_argument("--contact", nargs="+", default=["point", "hydroelastic"], choices=["point", "hydroelastic"])
     parser.add_argument("--dissipation", type=float, default=None, metavar="S_PER_M",
@@ -351,7 +601,11 @@ def main() -> int:
     from real2sim.report.html import paper_name, read_paper_table
 
     specs = tuple(args.specs or (FULL_SPECS if args.full else QUICK_SPECS))
-    objects = tuple(args.objects.split(","))
+    try:
+        objects = object_names(args.objects)
+    except ValueError as error:
+        parser.error(str(error))
+    formats = ("urdf", "mjcf") if "mujoco" in args.simulator else ("urdf",)
     runs = args.runs or (10 if args.full else 2)
     start = time.perf_counter()
     from real2sim.formats.contact import ContactProperties
@@ -370,12 +624,12 @@ def main() -> int:
                     **({} if args.protrusion_weight is None else {"protrusion_weight": args.protrusion_weight})}
     fit_config = FitConfig(**fit_settings) if fit_settings else None
     asset_dirs = build_assets(args.work, specs, args.seed, contact, fit_config, objects, tuple(args.extra_hint),
-                              args.fill_cavities)
+                              args.fill_cavities, formats, args.round)
     for asset in asset_dirs:
         for stale in [*asset.glob("bound_*"), *asset.glob("*_polytopes")]:
             shutil.rmtree(stale)
         if args.bounds:
-            bound_representations(asset, contact)
+            bound_representations(asset, contact, formats)
         if args.polytopes:
             from real2sim.formats.collision import read_collision_json
 
@@ -383,10 +637,11 @@ def main() -> int:
                 kinds = {s.kind for s in read_collision_json(collision_json).shapes}
                 if kinds & {"ellipsoid", "cylinder"}:
                     polytope_representation(collision_json.parent, asset / f"{collision_json.parent.name}_polytopes",
-                                            contact)
+                                            contact, formats)
     build_s = time.perf_counter() - start
     config = EvaluationConfig(tasks=("push", "ramp"), contact_models=tuple(args.contact), runs=runs,
-                              seed=args.seed, **({"jobs": args.jobs} if args.jobs else {}))
+                              simulators=tuple(args.simulator), seed=args.seed,
+                              **({"jobs": args.jobs} if args.jobs else {}))
     results_dir = args.work / (f"results_{args.tag}" if args.tag else "results")
     from real2sim.cli.progress import progress_display
 
@@ -399,14 +654,17 @@ def main() -> int:
     ours = {r["representation"]: r for r in result.summary}
     for label in sorted(ours):
         r = ours[label]
-        p = paper.get(paper_name(r["collision"], r["contact_model"]), {})
+        # the paper's Table I is Drake's: another simulator's rows get no paper column
+        p = paper.get(paper_name(r["collision"], r["contact_model"]), {}) if r.get("simulator") == "drake" else {}
         rows.append([label, r["ocae_m"], p.get("ocae_m", "-"), r["ate_m"], p.get("ate_m", "-"),
                      r["cpd_m_per_s"], p.get("cpd_m_per_s", "-"), r["sim_time_s"], p.get("sim_time_s", "-"),
                      r.get("cpd_force_weighted_m_per_s", float("nan")), r.get("cpd_paper", float("nan")),
                      p.get("cpd_m_per_s", "-")])
 
     def best(metric: str, prefix_filter) -> tuple[str, float]:
-        cands = [(lab, r[metric]) for lab, r in ours.items() if prefix_filter(lab) and r[metric] == r[metric]]
+        # Drake's rows only: the headlines are the paper's comparisons; MuJoCo's are judged per object below
+        cands = [(lab, r[metric]) for lab, r in ours.items()
+                 if prefix_filter(lab) and r[metric] == r[metric] and r.get("simulator") == "drake"]
         return min(cands, key=lambda t: t[1]) if cands else ("-", float("nan"))
 
     is_prim = lambda lab: not lab.startswith(("coacd", "vhacd", "mesh", "bound_"))  # noqa: E731
@@ -436,15 +694,27 @@ def main() -> int:
     for metric, paper_metric in (("ocae_m", "ocae_m"), ("ate_m", "ate_m"), ("cpd_paper", "cpd_m_per_s")):
         named = {lab: paper_name(r["collision"], r["contact_model"]) for lab, r in ours.items()}
         pairs = [(ours[lab][metric], paper[named[lab]][paper_metric]) for lab in ours
-                 if named[lab] in paper and ours[lab][metric] == ours[lab][metric]]
+                 if named[lab] in paper and ours[lab][metric] == ours[lab][metric]
+                 and ours[lab].get("simulator") == "drake"]
         better = sum(o < p for o, p in pairs)
         lines.append(f"- {metric}: ours lower than the paper's in {better} of {len(pairs)} rows")
-    fits = fit_table(args.work, specs, objects)
+    asset_names = [asset.name for asset in asset_dirs]
+    fits = fit_table(args.work, specs, tuple(asset_names))
     per_object = per_object_table(results_dir / "runs.csv")
+    from real2sim.formats.results import read_runs_csv
+
+    verdicts = verdict_sections(read_runs_csv(results_dir / "runs.csv"), args.work, asset_names, args.bounds)
     body = (
-        f"Objects: {', '.join(objects)}"
-        + (" (bundled)" if objects == OBJECTS else " (carton, mug_side: shapes made by bench_table1.generated_shape(); the "
-           "paper's columns are of its own objects, for orientation only)") + f". Tasks: push, ramp. Contact: {', '.join(args.contact)}. Runs: {runs} per "
+        f"Objects: {', '.join(asset_names)}"
+        + ("" if objects == OBJECTS else "; the paper's columns are of its own objects, for orientation only")
+        + (" (`--round`: the bottle, can and mug, named `<name>_round`, are their round references, "
+           "`make_object(name, rolling_sagitta_m=REFERENCE_SAGITTA_M)`, not the 0.1.0 meshes)"
+           if args.round and any(n.endswith(ROUND_SUFFIX) for n in asset_names) else "")
+        + (" (carton: made by bench_table1.generated_shape())" if "carton" in objects else "")
+        + ". Shape-set objects and the carton rest as built; the bottle and can are canonicalised (longest axis up). "
+        + f"Simulators: {', '.join(args.simulator)}"
+        + (" (MuJoCo: point contact only; its rows are labelled `_mujoco`)" if "mujoco" in args.simulator else "")
+        + f". Tasks: push, ramp. Contact: {', '.join(args.contact)}. Runs: {runs} per "
         f"object and task (seed {args.seed}). Equation error (resets every 0.1 s) against the full closed mesh "
         f"simulated with hydroelastic contact. "
         + (f"Hunt-Crossley dissipation of the assets' material: {args.dissipation:g} s/m (default "
@@ -498,6 +768,7 @@ def main() -> int:
         "Monte Carlo, 95 % half-width; Chamfer: symmetric, mm; pieces: kept / requested; seconds: the fit "
         "or decomposition alone, measured when the build ran, on this machine under whatever load it had):\n\n"
         + markdown_table(["object", "SPEC", "IoU", "Chamfer mm", "pieces", "seconds"], fits) + "\n"
+        + "\n" + verdicts
     )
     command = "python benchmarks/bench_table1.py " + " ".join(sys.argv[1:])
     title = "Table I protocol: ours vs the paper" + (f" ({args.tag})" if args.tag else "")

@@ -199,6 +199,7 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
             geometry, report = reuse_collision(reusable[spec.text], rep_dir)
         else:
             geometry, report = fitted[spec.text].geometry, {**fitted[spec.text].report, **(filled or {})}
+        say(f"collision {spec.text}: writing {', '.join(config.formats)}", 0, 0)
         write_representation(
             rep_dir, geometry, props, config.contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}",
             formats=config.formats, model_name=spec.name, mujoco=config.mujoco,

@@ -64,6 +64,8 @@ def build_collision(
             if closed_by != "as is" and progress is not None:
                 progress(f"the mesh is not closed: {spec.baseline} decomposes it remeshed closed", 0, 0)
         kwargs = {}
+        if progress is not None:  # a decomposition reports nothing while it works: its time is named here
+            progress(f"decomposing the solid with {spec.baseline}", 0, 0)
         if spec.baseline == "coacd" and config.coacd_config is not None:
             kwargs["coacd_config"] = config.coacd_config
         if spec.baseline == "vhacd" and config.vhacd_config is not None:
@@ -100,6 +102,8 @@ def fit_and_measure(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, spec:
 
     geometry, report = build_collision(fitted_solid, spec, rep_dir, config, sdf_cache, progress=progress)
     write_collision_json(geometry, rep_dir / "collision.json")
+    if progress is not None:
+        progress("measuring IoU and Chamfer against the solid", 0, 0)
     fidelity = measure_fidelity(solid, geometry, rep_dir, seed=config.seed)
     if fitted_solid is not solid:  # how well it fits what it was fitted to, beside the true solid
         to_filled = measure_fidelity(fitted_solid, geometry, rep_dir, seed=config.seed)
