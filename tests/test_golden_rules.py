@@ -55,3 +55,20 @@ def test_json_and_long_texts_follow_the_same_rule(tmp_path):
 
     report.write_text(json.dumps({"mass_kg": 0.35, "com_m": [1.4929455901845595e-05, 0.1], "new": 1}, indent=1))
     assert any(p.startswith("report.json:") for p in compare_outputs(golden, tmp_path))
+
+
+def test_a_json_layout_leaves_out_hashes_and_versions(tmp_path):
+    config = tmp_path / "asset_config.json"
+
+    def write(digest: str, numpy_version: str, mode: str = "compliant") -> None:
+        config.write_text(json.dumps({"mass_kg": 0.6, "contact": {"hydroelastic": mode},
+                                      "software": {"numpy": numpy_version},
+                                      "input_mesh_sha256": digest}, indent=1))
+
+    write("4dcade6b95ca7942", "2.4.6")
+    golden = recorded(tmp_path, "asset_config.json")
+    write("b6e8717a129f8564", "2.5")  # another input's hash (digits elsewhere), a version of two parts
+    assert compare_outputs(golden, tmp_path) == []
+    write("4dcade6b95ca7942", "2.4.6", mode="rigid")  # a setting's word is behaviour
+    problems = compare_outputs(golden, tmp_path)
+    assert len(problems) == 1 and "text around them changed" in problems[0]

@@ -164,11 +164,11 @@ SUFFIX_KINDS = {".json": "json", ".obj": "mesh", ".stl": "mesh", ".ply": "mesh",
 #: JSON keys whose numbers are timings, dates, paths, hosts, versions, memory or hashes of inputs that hold
 #: those: they change run to run (or machine to machine) without the behaviour changing. A key path is
 #: left out when any key on it matches.
-IGNORED_KEY = re.compile(r"second|time|date|peak|memory|path|host|version|sha256|_at$|_s$|_ms$")
-#: Whole fields, by key path (fnmatch), that vary for a reason their names do not say: the byte size of an
-#: input file that itself holds timings (run.json's truth stage reads reconstruct's report.json, whose
-#: stage seconds change the length of the file when one gains a digit; the same in the recorded runs).
-IGNORED_FIELDS = ["stages.*.inputs.*report*.bytes", "stages.*.inputs.*record*.bytes"]
+IGNORED_KEY = re.compile(r"second|time|date|peak|memory|path|host|version|software|sha256|_at$|_s$|_ms$")
+#: Whole fields, by key path (fnmatch), that vary for a reason their names do not say: the byte size of a
+#: stage's input files (run.json), which changes when a timing in them gains a digit or a float's last digit
+#: rounds otherwise; those files are compared themselves, number by number.
+IGNORED_FIELDS = ["stages.*.inputs.*.bytes"]
 
 
 def sha256(path: Path) -> str:
@@ -215,12 +215,34 @@ def text_numbers(path: Path) -> list[float]:
     return [float(m) for m in NUMBER.findall(path.read_text(errors="replace"))]
 
 
+def _without_ignored(value, keys: tuple[str, ...] = (), dotted: str = ""):
+    """VALUE with every field that :data:`IGNORED_KEY` or :data:`IGNORED_FIELDS` names replaced by a mark."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            child = f"{dotted}.{k}" if dotted else str(k)
+            ignored = any(IGNORED_KEY.search(x.lower()) for x in (*keys, str(k))) or \
+                any(fnmatch.fnmatchcase(child, p) for p in IGNORED_FIELDS)
+            out[k] = "(ignored)" if ignored else _without_ignored(v, (*keys, str(k)), child)
+        return out
+    if isinstance(value, list):
+        return [_without_ignored(v, keys, f"{dotted}[{i}]") for i, v in enumerate(value)]
+    return value
+
+
 def layout_sha256(path: Path) -> str | None:
-    """SHA-256 of the file's text with every number masked; None for a file that is not UTF-8 text."""
+    """SHA-256 of the file's text with every number masked; None for a file that is not UTF-8 text. A JSON
+    file's layout leaves out its ignored fields too: an input's hash is hex text whose digits fall where they
+    may, a version string may gain a part, and neither is behaviour."""
     try:
         text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError:
         return None
+    if kind_of(path) == "json":
+        try:
+            text = json.dumps(_without_ignored(json.loads(text)), indent=1, sort_keys=True)
+        except ValueError:
+            pass  # not JSON after all: its text as it is
     return hashlib.sha256(NUMBER.sub("#", text).encode()).hexdigest()
 
 
