@@ -54,3 +54,18 @@ def test_too_few_points_on_the_object_keep_the_hull():
     hull = _hull(1.0, 0.08)
     height, record = object_top(hull, _points_up_to(1.0, count=5)[:12], NormaliseConfig(object_height_m=0.1))
     assert height == hull.top and record["object_points"] == 12 and "fewer than" in record["from"]
+
+
+def test_a_narrowing_top_above_the_points_is_the_object_not_a_cap():
+    # a bottle: a body of unit section up to 0.9, then a nozzle whose section falls to 2 % of it by 0.97 and
+    # ends at 1.0; the points stop on the nozzle at 0.97 (too thin for them), the cone above fills a third
+    z = np.arange(0.0, 1.0 + 3 * VOXEL, VOXEL)
+    area = np.interp(z, [0.0, 0.9, 0.97, 1.0, 1.0 + VOXEL], [1.0, 1.0, 0.02, 0.0, 0.0])
+    hull = HullMeasure(top=1.0, centre_xy=np.zeros(2), slice_z=z, slice_area=area, voxel=VOXEL)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        height, record = object_top(hull, _points_up_to(0.97), NormaliseConfig(object_height_m=0.1))
+    assert height == hull.top and record["top_section_share"] < 0.05 and "narrowing top" in record["from"]
+    wide = _hull(0.97, 0.03)  # the same gap over a wide flat top is a cap: the points' top
+    height, record = object_top(wide, _points_up_to(0.97), NormaliseConfig(object_height_m=0.1))
+    assert height == pytest.approx(0.97, abs=0.005) and record["top_section_share"] > 0.9

@@ -40,6 +40,30 @@ def check_not_full(fractions: Sequence[float], names: Sequence[str], what: str, 
                   "background: check these masks", RuntimeWarning, stacklevel=stacklevel)
 
 
+#: fixed-point bits of the triangles' corners given to OpenCV: 1/16 px
+_SUBPIXEL_BITS = 4
+
+
+def filled_triangles(height_px: int, width_px: int, corners_px: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 mask, 1 where the union of the triangles ``corners_px`` ((T, 3, 2) image coordinates,
+    pixel (u, v) spanning [u, u + 1) x [v, v + 1)) covers a pixel's centre: a mesh's silhouette from its
+    projected faces. Each triangle is drawn alone: OpenCV fills the polygons of one call by the even-odd
+    rule, so overlapping faces (a surface's front and back) would cancel into holes."""
+    import cv2
+
+    drawn = np.zeros((height_px, width_px), np.uint8)
+    if len(corners_px) == 0:
+        return drawn
+    corners = np.asarray(corners_px, dtype=np.float64) - 0.5
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    # a triangle off the picture draws nothing, and fixed-point coordinates must fit in int32
+    keep = (hi[:, 0] >= -1) & (hi[:, 1] >= -1) & (lo[:, 0] <= width_px) & (lo[:, 1] <= height_px) & \
+        (np.abs(corners) < 8 * max(width_px, height_px)).all(axis=(1, 2))
+    for triangle in np.round(corners[keep] * (1 << _SUBPIXEL_BITS)).astype(np.int32):
+        cv2.fillConvexPoly(drawn, triangle, 1, lineType=cv2.LINE_8, shift=_SUBPIXEL_BITS)
+    return drawn
+
+
 #: how far (pixels per 160 px of the image's longer side) colour may move a mask's edge
 EDGE_BAND_PX_PER_160 = 1.0
 

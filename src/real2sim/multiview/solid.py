@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from real2sim.formats.dataset import CameraIntrinsics
-from real2sim.geometry.silhouettes import colour_refined_mask, edge_band_px
+from real2sim.geometry.silhouettes import colour_refined_mask, edge_band_px, filled_triangles
 from real2sim.multiview.fusion import DensePoints, back_projected
 from real2sim.multiview.stereo import DepthMaps
 from real2sim.multiview.support import SupportScene
@@ -118,25 +118,16 @@ def solid_masks(solid: ObjectSolid, k: CameraIntrinsics, c2w_cv: np.ndarray, rgb
                 device: str | torch.device = "cpu") -> np.ndarray:
     """(V, H, W) float32 masks (1 = object) of cameras ``c2w_cv`` (V, 4, 4) of size ``k``: the solid's outline
     (module docstring), snapped to the colour edges of ``rgb`` (V, H, W, 3, 0-1) when given."""
-    import cv2
-
     mesh = surface_from_grid(solid.occupied.astype(np.float32), solid.grid, 0.5, 0.0)
     verts = np.asarray(mesh.vertices) @ solid.world_from_table[:3, :3].T + solid.world_from_table[:3, 3]
     w2c = torch.from_numpy(np.linalg.inv(c2w_cv)).float().to(device)
     u, v, z = (t.cpu().numpy() for t in project_torch(k, w2c, torch.from_numpy(verts.astype(np.float32)).to(device)))
     faces = np.asarray(mesh.faces)
-    shift = 4  # OpenCV's sub-pixel drawing: 1/16 px; pixel centres at +0.5
     masks = np.zeros((len(c2w_cv), k.height, k.width), np.float32)
     band = edge_band_px(k.width, k.height)
     for i in range(len(c2w_cv)):
         front = (z[i][faces] > 0).all(axis=1)
-        corners = np.stack([u[i][faces[front]], v[i][faces[front]]], axis=-1) - 0.5
-        # a triangle far off the picture is dropped (OpenCV's fixed-point coordinates are int32)
-        near = (np.abs(corners) < 8 * max(k.width, k.height)).all(axis=(1, 2))
-        polygons = list(np.round(corners[near] * (1 << shift)).astype(np.int32))
-        drawn = np.zeros((k.height, k.width), np.uint8)
-        if polygons:
-            cv2.fillPoly(drawn, polygons, 1, lineType=cv2.LINE_8, shift=shift)
+        drawn = filled_triangles(k.height, k.width, np.stack([u[i][faces[front]], v[i][faces[front]]], axis=-1))
         masks[i] = drawn
         if rgb is not None and drawn.any():
             masks[i] = colour_refined_mask(rgb[i], masks[i], band)

@@ -40,6 +40,7 @@ import numpy as np
 from real2sim.capture.phone.sfm import SfmConfig, list_images
 from real2sim.capture.phone.video import DEFAULT_FRAMES, VIDEO_SUFFIXES
 from real2sim.formats.dataset import CV_FROM_GL, Dataset, Frame, read_ground_truth, write_transforms
+from real2sim.geometry.silhouettes import filled_triangles
 from real2sim.plumbing.errors import UserInputError
 from real2sim.plumbing.outputs import publish_dir, write_json_atomic
 from real2sim.plumbing.progress import ProgressFn, null_progress
@@ -341,13 +342,7 @@ def write_outline(dataset: Path, mesh_path: Path, out_png: Path, views: int = 4,
         z = np.maximum(cam[:, 2], 1e-9)
         uv = np.stack([small.fl_x * cam[:, 0] / z + small.cx, small.fl_y * cam[:, 1] / z + small.cy], axis=1)
         front = (cam[mesh.faces, 2] > 0).all(axis=1)
-        drawn = np.zeros((size[1], size[0]), np.uint8)
-        corners = np.round((uv[mesh.faces[front]] - 0.5) * 16).astype(np.int32)  # 1/16 px, pixel centres at +0.5
-        corners = corners[(np.abs(corners) < 16 * 8 * max(size)).all(axis=(1, 2))]
-        if len(corners):
-            cv2.fillPoly(drawn, list(corners), 1, lineType=cv2.LINE_8, shift=4)
-        # the outline and the holes through the silhouette (a handle's), not the specks between triangles
-        drawn = cv2.morphologyEx(drawn, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+        drawn = filled_triangles(size[1], size[0], uv[mesh.faces[front]])
         contours, _ = cv2.findContours(drawn, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
         contours = [c for c in contours if cv2.contourArea(c) >= 0.002 * drawn.size]
         cv2.drawContours(image, contours, -1, (40, 255, 40), max(1, round(side_px / 320)))

@@ -36,7 +36,9 @@ Steps (all lengths before the last one in model units):
    ``top_points`` highest) replaces the hull's when the hull rises more than ``top_gap``
    of its height above them *and* what stands above them is such a cap, not the object
    going on full width (a featureless lid the SfM found no points on): the hull's volume
-   above them under ``cap_fill`` of a prism on its cross-section there (a cone's is 1/3).
+   above them under ``cap_fill`` of a prism on its cross-section there (a cone's is 1/3), that
+   cross-section at least ``narrow_top`` of the hull's widest (a cap stands on a top face as wide as
+   the object; a bottle's nozzle above the points is the object narrowing, too thin for them).
    Otherwise the hull's height, with a WARNING when the two disagree by more than ``top_gap``
    (:func:`object_top`). With the dense plane, the dense points on the object (their 99th
    percentile) stand in for the sparse ones, by the same rule;

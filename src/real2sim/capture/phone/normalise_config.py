@@ -57,6 +57,11 @@ class NormaliseConfig:
     cap_fill: float = 0.7
     """... and the hull's volume above the points' top is under this share of a prism on its cross-section
     there (a cone's: 1/3). (why: docs/design-notes/capture.md#normalise-object-top)"""
+    narrow_top: float = 0.25
+    """... and the hull's cross-section at the points' top is at least this share (0-1) of its widest: a cap's
+    base is a top face as wide as the object there, while a top narrowing below it (a bottle's nozzle, a
+    neck, a knob) is the object itself, too thin for the points to reach (bottle 0.02, can 1.0, mug 0.79;
+    docs/design-notes/capture.md#normalise-object-top)."""
 
     def validate(self) -> None:
         given = [v for v in (self.object_height_m, self.scale, self.marker_mm) if v is not None]

@@ -68,7 +68,14 @@ def object_top(hull: HullMeasure, point_heights: np.ndarray | None, config: Norm
     if gap <= config.top_gap:
         return hull.top, {**record, "from": f"the visual hull (the {label} reach its top)"}
     above = hull.slice_z >= points_top
-    prism = np.interp(points_top, hull.slice_z, hull.slice_area) * (hull.top - points_top)
+    section = float(np.interp(points_top, hull.slice_z, hull.slice_area))
+    share = section / float(hull.slice_area.max()) if hull.slice_area.max() > 0 else 0.0
+    record["top_section_share"] = share
+    if share < config.narrow_top:
+        return hull.top, {**record, "from": f"the visual hull (at the top of the {label} the object is "
+                                            f"{100 * share:.0f} % of its widest section: a narrowing top, a neck "
+                                            "or nozzle too thin for the points, not a cap over a wide top)"}
+    prism = section * (hull.top - points_top)
     fill = float(hull.slice_area[above].sum() * hull.voxel / prism) if prism > 0 else 1.0
     record["cap_fill"] = fill
     if fill < config.cap_fill:
