@@ -149,10 +149,7 @@ def test_photos_of_an_empty_table_are_refused_in_one_line(tmp_path, capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [pytest.param("bottle", marks=pytest.mark.xfail(
-    reason="the bottle's neck keeps few trusted depths at 473x266 and the solid's box stops at their top: the masks "
-           "and their hull lose the top 18 % (measured scale +17.9 %, Chamfer 6.8 mm; docs/design-notes/"
-           "reconstruct.md#dense-geometry-in-run)")), "can", "mug"])
+@pytest.mark.parametrize("name", ["bottle", "can", "mug"])
 def test_photos_as_people_take_them(tmp_path, capsys, name):
     """15 photos at 960x540 of each bundled object, half of them cutting it, a room behind, auto-exposure, no
     board: structure from motion, masks (auto), the table and the height from dense points, the hull; the plane
