@@ -5,8 +5,8 @@ import cv2
 import numpy as np
 
 from real2sim.formats.dataset import CameraIntrinsics
-from real2sim.geometry.silhouettes import edge_band_px, filled_triangles
-from real2sim.multiview.solid import ObjectSolid, SolidConfig, solid_band_px, solid_masks
+from real2sim.geometry.silhouettes import filled_triangles
+from real2sim.multiview.solid import ObjectSolid, solid_masks
 from real2sim.multiview.voxel_grid import VoxelGrid
 
 
@@ -47,15 +47,3 @@ def test_a_solid_s_mask_has_no_holes_where_its_surfaces_overlap():
     flood = np.zeros((k.height + 2, k.width + 2), np.uint8)
     cv2.floodFill(filled, flood, (0, 0), 1)
     assert mask.sum() > 500 and (filled == 0).sum() == 0  # every pixel not reached from outside is in the mask
-
-
-def test_the_colour_band_of_masks_from_geometry_covers_the_solid_s_own_margin():
-    grid = VoxelGrid.covering(np.array([-0.05, -0.05, 0.0]), np.array([0.05, 0.05, 0.1]), 20, table_z_m=0.0)
-    solid = ObjectSolid(grid, np.ones(grid.shape, bool), np.eye(4))
-    full = CameraIntrinsics(fl_x=1000.0, fl_y=1000.0, cx=480.0, cy=270.0, width=960, height=540)
-    working = full.scaled(320, 180)  # depth found at a third of the size: a working pixel is 3 of these
-    c2w = np.eye(4)
-    c2w[:3, 3] = [0.0, 0.0, -0.5]  # 0.5 m from the solid's middle: half a 5 mm voxel is 5 px
-    assert solid_band_px(solid, working, full, c2w[None]) == 3 * 3 + 5
-    c2w[:3, 3] = [0.0, 0.0, -5.0]  # far off, depth at full size: 1.5 px + 0.5 px, under the colour band's floor
-    assert solid_band_px(solid, full, full, c2w[None], SolidConfig(see_through_footprints=0.5)) == edge_band_px(960, 540) == 6

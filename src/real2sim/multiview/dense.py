@@ -25,7 +25,7 @@ import torch
 
 from real2sim.formats.dataset import MODEL_FRAME_KEYS, Dataset
 from real2sim.multiview.fusion import DensePoints, FusionConfig, consistent_depth, fused_points
-from real2sim.multiview.solid import ObjectSolid, SolidConfig, object_solid, solid_band_px, solid_masks
+from real2sim.multiview.solid import ObjectSolid, SolidConfig, object_solid, solid_masks
 from real2sim.multiview.stereo import DepthMaps, StereoConfig, depth_maps
 from real2sim.multiview.support import SupportConfig, SupportScene, support_and_object
 from real2sim.multiview.views import PosedViews, load_views, project_torch
@@ -140,13 +140,10 @@ def dense_geometry(views: PosedViews, config: DenseConfig = DenseConfig(), point
 
 
 def geometry_masks(geometry: DenseGeometry, views: PosedViews, size: tuple[int, int] | None = None,
-                   device: str | torch.device = "cpu", config: DenseConfig = DenseConfig()) -> np.ndarray:
+                   device: str | torch.device = "cpu") -> np.ndarray:
     """(V, H, W) bool masks of ``views``: the solid's outline snapped to their colour edges
-    (:func:`real2sim.multiview.solid.solid_masks`) as far as the solid may stand off the object
-    (:func:`real2sim.multiview.solid.solid_band_px`; ``config``: the one ``geometry`` was found with) at
-    ``views``' size, then brought to ``size`` (W, H; None: kept)."""
-    band = solid_band_px(geometry.solid, geometry.maps.intrinsics, views.intrinsics, views.c2w_cv, config.solid)
-    masks = solid_masks(geometry.solid, views.intrinsics, views.c2w_cv, views.rgb, device, band_px=band)
+    (:func:`real2sim.multiview.solid.solid_masks`) at ``views``' size, then brought to ``size`` (W, H; None: kept)."""
+    masks = solid_masks(geometry.solid, views.intrinsics, views.c2w_cv, views.rgb, device)
     if size is not None and tuple(size) != (views.intrinsics.width, views.intrinsics.height):
         t = torch.from_numpy(masks)[:, None]
         masks = torch.nn.functional.interpolate(t, size=(size[1], size[0]), mode="bilinear", align_corners=False)[:, 0].numpy()

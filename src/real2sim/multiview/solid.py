@@ -115,17 +115,16 @@ def _seen_through(maps: DepthMaps, trusted: np.ndarray, centres: np.ndarray, vox
 
 
 def solid_masks(solid: ObjectSolid, k: CameraIntrinsics, c2w_cv: np.ndarray, rgb: np.ndarray | None = None,
-                device: str | torch.device = "cpu", band_px: int | None = None) -> np.ndarray:
+                device: str | torch.device = "cpu") -> np.ndarray:
     """(V, H, W) float32 masks (1 = object) of cameras ``c2w_cv`` (V, 4, 4) of size ``k``: the solid's outline
-    (module docstring), snapped to the colour edges of ``rgb`` (V, H, W, 3, 0-1) when given, within ``band_px``
-    pixels of it (None: :func:`real2sim.geometry.silhouettes.edge_band_px`; :func:`solid_band_px`)."""
+    (module docstring), snapped to the colour edges of ``rgb`` (V, H, W, 3, 0-1) when given."""
     mesh = surface_from_grid(solid.occupied.astype(np.float32), solid.grid, 0.5, 0.0)
     verts = np.asarray(mesh.vertices) @ solid.world_from_table[:3, :3].T + solid.world_from_table[:3, 3]
     w2c = torch.from_numpy(np.linalg.inv(c2w_cv)).float().to(device)
     u, v, z = (t.cpu().numpy() for t in project_torch(k, w2c, torch.from_numpy(verts.astype(np.float32)).to(device)))
     faces = np.asarray(mesh.faces)
     masks = np.zeros((len(c2w_cv), k.height, k.width), np.float32)
-    band = edge_band_px(k.width, k.height) if band_px is None else band_px
+    band = edge_band_px(k.width, k.height)
     for i in range(len(c2w_cv)):
         front = (z[i][faces] > 0).all(axis=1)
         drawn = filled_triangles(k.height, k.width, np.stack([u[i][faces[front]], v[i][faces[front]]], axis=-1))
@@ -133,18 +132,3 @@ def solid_masks(solid: ObjectSolid, k: CameraIntrinsics, c2w_cv: np.ndarray, rgb
         if rgb is not None and drawn.any():
             masks[i] = colour_refined_mask(rgb[i], masks[i], band)
     return masks
-
-
-def solid_band_px(solid: ObjectSolid, working: CameraIntrinsics, k: CameraIntrinsics, c2w_cv: np.ndarray,
-                  config: SolidConfig = SolidConfig()) -> int:
-    """How far (pixels of cameras ``k``, ``c2w_cv`` (V, 4, 4)) the colour edges may move the outline of ``solid``:
-    as far as the solid can stand beside the object, which is where no depth carves (the room behind, beyond
-    the depth range): the see-through margin and the depth's one-pixel pooling, in pixels of the ``working``
-    size the depth was found at, and half a voxel at the cameras' median distance; at least
-    :func:`real2sim.geometry.silhouettes.edge_band_px`."""
-    middle = solid.grid.origin_m + 0.5 * solid.grid.voxel_m * (np.asarray(solid.grid.shape) - 1)
-    centre = solid.world_from_table[:3, :3] @ middle + solid.world_from_table[:3, 3]
-    distance = float(np.median(np.linalg.norm(c2w_cv[:, :3, 3] - centre, axis=1)))
-    working_px = (config.see_through_footprints + 1.0) * k.fl_x / working.fl_x
-    voxel_px = 0.5 * solid.grid.voxel_m * k.fl_x / max(distance, 1e-12)
-    return max(edge_band_px(k.width, k.height), int(np.ceil(working_px + voxel_px)))
