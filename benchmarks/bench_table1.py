@@ -667,8 +667,8 @@ def main() -> int:
                  if prefix_filter(lab) and r[metric] == r[metric] and r.get("simulator") == "drake"]
         return min(cands, key=lambda t: t[1]) if cands else ("-", float("nan"))
 
-    is_prim = lambda lab: not lab.startswith(("coacd", "vhacd", "mesh", "bound_"))  # noqa: E731
-    is_coacd = lambda lab: lab.startswith("coacd")  # noqa: E731
+    is_prim = is_primitive  # a summary label starts with its representation's name
+    is_coacd = lambda lab: lab.startswith(BASELINE)  # noqa: E731
     def verdict(bp: tuple[str, float], bc: tuple[str, float]) -> str:
         gain = 100 * (1 - bp[1] / bc[1]) if bc[1] == bc[1] and bc[1] > 0 else float("nan")
         return f"{gain:.1f}% lower" if gain >= 0 else f"{-gain:.1f}% higher"

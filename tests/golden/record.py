@@ -183,12 +183,17 @@ def kind_of(path: Path) -> str:
     return SUFFIX_KINDS.get(path.suffix.lower(), "other")
 
 
+def _is_ignored(keys: tuple[str, ...], dotted: str) -> bool:
+    """Whether the JSON field at key path ``dotted`` (its keys ``keys``, the field's own last) is left out."""
+    return (any(IGNORED_KEY.search(x.lower()) for x in keys)
+            or any(fnmatch.fnmatchcase(dotted, p) for p in IGNORED_FIELDS))
+
+
 def _json_leaves(value, keys: tuple[str, ...], dotted: str, out: dict, ignored: list) -> None:
     if isinstance(value, dict):
         for k, v in value.items():
             child = f"{dotted}.{k}" if dotted else str(k)
-            if any(IGNORED_KEY.search(x.lower()) for x in (*keys, str(k))) or \
-                    any(fnmatch.fnmatchcase(child, p) for p in IGNORED_FIELDS):
+            if _is_ignored((*keys, str(k)), child):
                 ignored.append(child)
                 continue
             _json_leaves(v, (*keys, str(k)), child, out, ignored)
@@ -221,9 +226,7 @@ def _without_ignored(value, keys: tuple[str, ...] = (), dotted: str = ""):
         out = {}
         for k, v in value.items():
             child = f"{dotted}.{k}" if dotted else str(k)
-            ignored = any(IGNORED_KEY.search(x.lower()) for x in (*keys, str(k))) or \
-                any(fnmatch.fnmatchcase(child, p) for p in IGNORED_FIELDS)
-            out[k] = "(ignored)" if ignored else _without_ignored(v, (*keys, str(k)), child)
+            out[k] = "(ignored)" if _is_ignored((*keys, str(k)), child) else _without_ignored(v, (*keys, str(k)), child)
         return out
     if isinstance(value, list):
         return [_without_ignored(v, keys, f"{dotted}[{i}]") for i, v in enumerate(value)]
