@@ -1,6 +1,6 @@
 """Where the whole job's time goes: wall and CPU seconds per stage and per phase inside each stage.
 
-    python benchmarks/bench_profile.py [--demo full|quick|none] [--phone VIEWS|0] [--note TEXT]
+    python benchmarks/bench_profile.py [--demo full|quick|none] [--phone VIEWS|0] [--before REV] [--note TEXT]
 
 Runs the demo's job (a simulated robot capture of the bundled bottle -> run -> evaluate, as
 `real2sim demo` does) and a handheld phone capture of the bundled mug through `run` (with the
@@ -11,13 +11,21 @@ says what the work before it was. CPU seconds are this process's and all its chi
 finished), so the simulation workers count. Nothing is instrumented: the profile sees what a user's
 progress display sees, at most one sample every 0.2 s per phase.
 
+With ``--before REV`` (a git revision, e.g. the last release or ``HEAD~3``) each job runs twice, back to
+back on the same machine: first with the package of REV (a temporary git worktree put first on
+``PYTHONPATH``), then with this tree's, each in a fresh process, and the tables give both side by side,
+so that a speed-up is read against the code before it under the same conditions.
+
 Writes the profile section of the benchmark results (see common.py).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import re
+import subprocess
 import sys
 import tempfile
 import time
@@ -145,21 +153,81 @@ def profile_phone(work: Path, views: int) -> Profile:
     return prof
 
 
+def profile_rows(job: str, arg: str, work: Path) -> list[list]:
+    """The profile rows of one job ("demo" with "full"/"quick", or "phone" with its photo count)."""
+    prof = profile_demo(work / "demo", arg == "quick") if job == "demo" else profile_phone(work / "phone", int(arg))
+    return prof.rows()
+
+
+def rows_in_process(job: str, arg: str, src: Path | None, work: Path) -> list[list]:
+    """:func:`profile_rows` in a fresh process, with the package at ``src`` (None: this tree's)."""
+    out = work / f"{job}_rows.json"
+    env = dict(os.environ)
+    if src is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(src), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    subprocess.run([sys.executable, __file__, "--rows-only", job, arg, str(out)], env=env, check=True)
+    return json.loads(out.read_text())
+
+
+def side_by_side(before: list[list], after: list[list]) -> list[list]:
+    """Rows (stage, phase, wall before, wall now, CPU before, CPU now), in the order of ``after``, then
+    the phases only ``before`` had."""
+    old = {(r[0], r[1]): r for r in before}
+    rows = []
+    for r in after:
+        b = old.pop((r[0], r[1]), None)
+        rows.append([r[0], r[1], b[2] if b else "", r[2], b[3] if b else "", r[3]])
+    rows += [[r[0], r[1], r[2], "", r[3], ""] for r in old.values()]
+    return rows
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--demo", choices=["full", "quick", "none"], default="full")
     parser.add_argument("--phone", type=int, default=60, metavar="VIEWS", help="photos of the phone capture (0: none)")
+    parser.add_argument("--before", metavar="REV", help="also profile git revision REV first, and show both")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
+    parser.add_argument("--rows-only", nargs=3, metavar=("JOB", "ARG", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.rows_only:
+        job, arg, out = args.rows_only
+        with tempfile.TemporaryDirectory(prefix="bench_profile-") as tmp:
+            Path(out).write_text(json.dumps(profile_rows(job, arg, Path(tmp))))
+        return 0
+    jobs = ([("demo", args.demo, f"The demo's job ({args.demo})")] if args.demo != "none" else []) + (
+        [("phone", str(args.phone), f"A {args.phone}-photo phone capture of the mug through `run`")] if args.phone else [])
     header = ["stage", "phase", "wall s", "CPU s", "% of wall"]
     parts = [args.note] if args.note else []
+    repo = Path(__file__).resolve().parent.parent
     with tempfile.TemporaryDirectory(prefix="bench_profile-") as tmp:
-        if args.demo != "none":
-            prof = profile_demo(Path(tmp) / "demo", args.demo == "quick")
-            parts += [f"### The demo's job ({args.demo})", markdown_table(header, prof.rows())]
-        if args.phone:
-            prof = profile_phone(Path(tmp) / "phone", args.phone)
-            parts += [f"### A {args.phone}-photo phone capture of the mug through `run`", markdown_table(header, prof.rows())]
+        tmp = Path(tmp)
+        before_src = None
+        if args.before:
+            rev = subprocess.run(["git", "rev-parse", "--short", args.before], cwd=repo, check=True,
+                                 capture_output=True, text=True).stdout.strip()
+            subprocess.run(["git", "worktree", "add", "--detach", str(tmp / "before"), rev], cwd=repo, check=True,
+                           capture_output=True)
+            before_src = tmp / "before" / "src"
+            head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=repo, check=True, capture_output=True,
+                                  text=True).stdout.strip()
+            dirty = subprocess.run(["git", "status", "--porcelain", "--", "src"], cwd=repo, check=True,
+                                   capture_output=True, text=True).stdout.strip()
+            parts.append(f"Before: {rev}; now: {head}{' with uncommitted changes' if dirty else ''}. Each job ran "
+                         "twice back to back on this machine, the revision before first.")
+        try:
+            for job, arg, title in jobs:
+                if before_src is None:
+                    parts += [f"### {title}", markdown_table(header, rows_in_process(job, arg, None, tmp))]
+                    continue
+                before = rows_in_process(job, arg, before_src, tmp)
+                after = rows_in_process(job, arg, None, tmp)
+                parts += [f"### {title}", markdown_table(
+                    ["stage", "phase", "wall s before", "wall s now", "CPU s before", "CPU s now"],
+                    side_by_side(before, after))]
+        finally:
+            if before_src is not None:
+                subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "before")], cwd=repo,
+                               capture_output=True)
     print(write_result("profile", "Profile: wall and CPU seconds per stage and phase", "\n\n".join(parts),
                         "python benchmarks/bench_profile.py " + " ".join(sys.argv[1:])))
     return 0

@@ -90,8 +90,10 @@ class AssetConfig:
     asset_config.json, and declared as an input the output may not touch. "": none (given in code)."""
     fit_workers: int | None = None
     """Processes that fit the collision SPECs side by side, >= 1, at most one per SPEC and one per thread
-    this process may use; None: 1, one after another (:func:`real2sim.asset.fits.fit_processes`). It changes results only by the
-    rounding of sums split over other threads, so asset_config.json does not record it (why: docs/design-notes/asset.md#fits-side-by-side)."""
+    this process may use; None: that many when the fits are long (``FitConfig.max_iterations`` >= 500),
+    else 1 (:func:`real2sim.asset.fits.fit_processes`). It changes results only by the rounding of sums
+    split over other threads, so asset_config.json does not record it (why:
+    docs/design-notes/asset.md#fits-side-by-side)."""
     fill_cavities_m: float | None = None
     """None, or the radius (m, > 0) of a ball the collision fits see the solid closed with
     (:func:`real2sim.geometry.envelope.filled_envelope`): a cup's cavity or a handle's hole narrower

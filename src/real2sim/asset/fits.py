@@ -1,6 +1,6 @@
-"""The collision fits of one asset build: one after another by default, or side by side (one process
-per SPEC, ``--fit-workers``) sized to the threads this process may use, so that processes times
-threads never exceeds them (why: docs/design-notes/asset.md#fits-side-by-side). Every fit is seeded
+"""The collision fits of one asset build: side by side in worker processes (``--fit-workers``; by default
+as many as the threads this process may use when the fits are long), so that processes times threads
+never exceeds those threads, or one after another (why: docs/design-notes/asset.md#fits-side-by-side). Every fit is seeded
 on its own, so which process fits a SPEC, and in which order they finish, changes no result.
 """
 
@@ -26,7 +26,7 @@ from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.spec import CollisionSpec
 from real2sim.plumbing.progress import ProgressFn, null_progress, prefixed
 
-#: Seconds between two looks at the workers' progress messages.
+#: Seconds between two looks at whether a busy worker still lives, while no message comes.
 POLL_S = 0.2
 
 
@@ -111,15 +111,29 @@ def fit_and_measure(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, spec:
     return Fitted(geometry, report, fidelity)
 
 
+#: ``FitConfig.max_iterations`` from which fits go side by side by default: a worker process's start
+#: (its imports, about 2 s) costs what some 200 iterations of a default fit do, so shorter fits gain
+#: less than they pay (docs/design-notes/asset.md#fits-side-by-side).
+SIDE_BY_SIDE_MIN_ITERATIONS = 500
+
+
 def fit_processes(config: AssetConfig, fits: int) -> int:
-    """How many processes fit side by side: ``config.fit_workers`` (default 1), at most one per fit and
-    one per thread this process may use (``torch.get_num_threads()``: ``--threads``, a batch worker's
-    share). One by default: on 2 cores a fit already uses both threads, and a process of its own costs
-    its start (why: docs/design-notes/asset.md#fits-side-by-side). A GPU fit stays in this process."""
+    """How many processes fit side by side: ``config.fit_workers``, at most one per fit and one per
+    thread this process may use (``torch.get_num_threads()``: ``--threads``, a batch worker's share).
+    ``fit_workers`` None: as many as that allows when the fits are long (``max_iterations`` at least
+    :data:`SIDE_BY_SIDE_MIN_ITERATIONS`), else one: a primitive fit is many small tensor operations
+    that a second thread does not speed up, while a second process halves the wall time (why:
+    docs/design-notes/asset.md#fits-side-by-side). A GPU fit stays in this process."""
     if config.device != "cpu":
         return 1
     budget = max(1, torch.get_num_threads())
-    wanted = config.fit_workers if config.fit_workers is not None else 1
+    if config.fit_workers is not None:
+        wanted = config.fit_workers
+    else:
+        from real2sim.collision.fit.config import FitConfig
+
+        long_fits = (config.fit_config or FitConfig()).max_iterations >= SIDE_BY_SIDE_MIN_ITERATIONS
+        wanted = budget if long_fits else 1
     return max(1, min(wanted, fits, budget))
 
 
@@ -127,11 +141,11 @@ def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[C
             config: AssetConfig, sdf_cache: Path | str | None, progress: ProgressFn | None = None) -> dict[str, Fitted]:
     """Every SPEC of ``specs`` fitted into ``folder/<spec.name>`` (which must exist), by SPEC text.
 
-    With more than one process (:func:`fit_processes`) each fit runs in a fresh ``python -m
-    real2sim.asset.fit_worker`` process with its share of the threads (a subprocess rather than a
-    multiprocessing pool, which would re-run a user's unguarded script), its progress coming back to
-    ``progress`` line by line. The signed-distance samples the primitive fits share are made once,
-    here, first.
+    With more than one process (:func:`fit_processes`) the fits run in that many ``python -m
+    real2sim.asset.fit_worker`` processes, each with its share of the threads and taking the next SPEC
+    when it is done with one (a subprocess rather than a multiprocessing pool, which would re-run a
+    user's unguarded script), their progress coming back to ``progress`` line by line. The
+    signed-distance samples the primitive fits share are made once, here, first.
     """
     say = progress or null_progress
     workers = fit_processes(config, len(specs))
@@ -149,74 +163,106 @@ def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[C
     say(f"fitting {len(specs)} collision SPECs in {workers} processes of {threads} thread(s) each", 0, 0)
     jobs = folder / ".fit_jobs"
     jobs.mkdir(exist_ok=True)
-    waiting, running, done = list(specs), {}, {}
+    waiting, done = list(specs), {}
     lines: queue.Queue = queue.Queue()
+    procs: list[subprocess.Popen] = []
+    busy: dict[int, CollisionSpec] = {}  # worker -> the SPEC it fits
+    finished = False
     try:
-        while waiting or running:
-            while waiting and len(running) < workers:
-                spec = waiting.pop(0)
+        idle = []
+        for k in range(workers):
+            proc = subprocess.Popen([sys.executable, "-m", "real2sim.asset.fit_worker", str(threads)],
+                                    stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                    env={**os.environ, "OMP_NUM_THREADS": str(threads)})
+            threading.Thread(target=_forward, args=(proc.stdout, lines, k), daemon=True).start()
+            procs.append(proc)
+            idle.append(k)
+        while waiting or busy:
+            while waiting and idle:
+                k, spec = idle.pop(0), waiting.pop(0)
                 job = jobs / f"{spec.name}.pkl"
-                job.write_bytes(pickle.dumps((solid, fitted_solid, spec, folder / spec.name, config, sdf_cache, threads)))
-                proc = subprocess.Popen([sys.executable, "-m", "real2sim.asset.fit_worker", str(job)], stdout=subprocess.PIPE,
-                                        text=True, env={**os.environ, "OMP_NUM_THREADS": str(threads)})
-                threading.Thread(target=_forward, args=(proc.stdout, lines), daemon=True).start()
-                running[spec.text] = (proc, job)
-            _drain(lines, say)
-            for text, (proc, job) in list(running.items()):
-                if proc.poll() is not None:
-                    proc.stdout.close()
-                    done[text] = _result(job, proc.returncode)
-                    del running[text]
-            if running:
-                time.sleep(POLL_S)
-        _drain(lines, say)
+                job.write_bytes(pickle.dumps((solid, fitted_solid, spec, folder / spec.name, config, sdf_cache)))
+                procs[k].stdin.write(f"{job}\n")
+                procs[k].stdin.flush()
+                busy[k] = spec
+            try:
+                k, line = lines.get(timeout=POLL_S)
+            except queue.Empty:
+                for k, spec in busy.items():
+                    if procs[k].poll() is not None:  # died without finishing its SPEC
+                        raise _result(jobs / f"{spec.name}.pkl", procs[k].returncode, missing=True)
+                continue
+            if line is None:  # its output closed: it ended; the next poll says how
+                continue
+            try:
+                message = json.loads(line)
+            except ValueError:  # a library's own print, not ours
+                continue
+            if isinstance(message, dict):  # {"done": job}: the SPEC's result is beside its job
+                spec = busy.pop(k)
+                done[spec.text] = _result(jobs / f"{spec.name}.pkl", None)
+                idle.append(k)
+            else:
+                say(*message)
+        finished = True
     finally:
-        for proc, _ in running.values():
-            proc.terminate()
-        for proc, _ in running.values():
-            proc.wait()
+        for proc in procs:
+            try:
+                proc.stdin.close()  # no more SPECs: an idle worker ends
+            except OSError:
+                pass
+            if not finished:  # an error or an interrupt: what the others fit is not wanted
+                proc.terminate()
+        deadline = time.monotonic() + 10.0
+        for proc in procs:
+            try:
+                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            proc.stdout.close()
         shutil.rmtree(jobs, ignore_errors=True)
     return {spec.text: done[spec.text] for spec in specs}
 
 
-def _forward(stream, lines: queue.Queue) -> None:
+def _forward(stream, lines: queue.Queue, worker: int) -> None:
     for line in stream:
-        lines.put(line)
+        lines.put((worker, line))
+    lines.put((worker, None))
 
 
-def _drain(lines: queue.Queue, say: ProgressFn) -> None:
-    while True:
-        try:
-            message, done, total = json.loads(lines.get_nowait())
-        except queue.Empty:
-            return
-        say(message, done, total)
-
-
-def _result(job: Path, returncode: int) -> Fitted:
-    """A worker's Fitted, or its exception raised here (one that never wrote one: a RuntimeError)."""
+def _result(job: Path, returncode: int | None, missing: bool = False) -> Fitted | BaseException:
+    """A worker's Fitted for ``job``, or its exception raised here; with ``missing`` (the worker ended
+    before writing one) the RuntimeError to raise."""
     out = job.with_suffix(".out")
-    if not out.exists():
-        raise RuntimeError(f"the fit worker for {job.stem} ended with exit status {returncode} and no result")
+    if missing or not out.exists():
+        error = RuntimeError(f"the fit worker for {job.stem} ended with exit status {returncode} and no result")
+        if missing:
+            return error
+        raise error
     result = pickle.loads(out.read_bytes())
     if isinstance(result, BaseException):
         raise result
     return result
 
 
-def work_on(job: Path) -> int:
-    """What a worker process does (:mod:`real2sim.asset.fit_worker`): fit the pickled job, write its
-    Fitted (or its exception) beside it."""
-    solid, fitted_solid, spec, rep_dir, config, sdf_cache, threads = pickle.loads(job.read_bytes())
+def work_on(jobs, threads: int) -> int:
+    """What a worker process does (:mod:`real2sim.asset.fit_worker`): for each job path read from
+    ``jobs`` (lines), fit it and write its Fitted (or its exception) beside it, then say so on stdout;
+    its progress goes to stdout as JSON lines too. Ends when ``jobs`` does."""
     torch.set_num_threads(threads)  # a process of our own: its pool is ours to size
 
     def report(message: str, done: int, total: int) -> None:
         print(json.dumps([message, done, total]), flush=True)
 
-    try:
-        result: Fitted | BaseException = fit_and_measure(solid, fitted_solid, spec, rep_dir, config, sdf_cache,
-                                                         progress=prefixed(report, f"collision {spec.text}"))
-    except Exception as exc:  # raised again in the build's process, which reports it
-        result = exc
-    job.with_suffix(".out").write_bytes(pickle.dumps(result))
+    for line in jobs:
+        job = Path(line.strip())
+        solid, fitted_solid, spec, rep_dir, config, sdf_cache = pickle.loads(job.read_bytes())
+        try:
+            result: Fitted | BaseException = fit_and_measure(solid, fitted_solid, spec, rep_dir, config, sdf_cache,
+                                                             progress=prefixed(report, f"collision {spec.text}"))
+        except Exception as exc:  # raised again in the build's process, which reports it
+            result = exc
+        job.with_suffix(".out").write_bytes(pickle.dumps(result))
+        print(json.dumps({"done": str(job)}), flush=True)
     return 0

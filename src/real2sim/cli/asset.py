@@ -87,8 +87,8 @@ def add_asset_arguments(p: argparse.ArgumentParser, *, seed_max: int = SEED_MAX)
     g = p.add_argument_group("primitive fitting (paper IV-C3)")
     g.add_argument("--iterations", type=integer(1, 100_000), default=None, metavar="N", help="maximum fitting iterations (default 1000)")
     g.add_argument("--fit-workers", type=integer(1, 1024), default=None, metavar="N",
-                   help="processes fitting the SPECs side by side (default 1; at most one per SPEC and one per "
-                   "thread this command may use, see --threads)")
+                   help="processes fitting the SPECs side by side (default: one per thread this command may use, "
+                   "see --threads, when --iterations is at least 500, else 1; at most one per SPEC)")
     g.add_argument("--fit-parameterization", choices=["direct", "network"], default=None,
                    help="optimise the primitive parameters directly (default, measured better) or through the "
                    "paper's over-parameterized network g_theta()")
