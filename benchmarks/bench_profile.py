@@ -169,16 +169,33 @@ def rows_in_process(job: str, arg: str, src: Path | None, work: Path) -> list[li
     return json.loads(out.read_text())
 
 
+def _by_stage(rows: list[list]) -> dict[str, list[list]]:
+    """Profile rows grouped under their stage's row (a phase row's stage cell is empty)."""
+    stages: dict[str, list[list]] = {}
+    stage = ""
+    for row in rows:
+        if row[0]:
+            stage = row[0]
+        stages.setdefault(stage, []).append(row)
+    return stages
+
+
 def side_by_side(before: list[list], after: list[list]) -> list[list]:
-    """Rows (stage, phase, wall before, wall now, CPU before, CPU now), in the order of ``after``, then
-    the phases only ``before`` had."""
-    old = {(r[0], r[1]): r for r in before}
-    rows = []
-    for r in after:
-        b = old.pop((r[0], r[1]), None)
-        rows.append([r[0], r[1], b[2] if b else "", r[2], b[3] if b else "", r[3]])
-    rows += [[r[0], r[1], r[2], "", r[3], ""] for r in old.values()]
-    return rows
+    """Rows (stage, phase, wall before, wall now, CPU before, CPU now): each stage's row, then its phases,
+    matched by (stage, phase); stages and phases in the order of ``after``, then those only ``before`` had.
+    A phase under 1 % of a job's wall time is left out of its rows (:meth:`Profile.rows`), so a cell is
+    blank where one run had it above that and the other below."""
+    old, new = _by_stage(before), _by_stage(after)
+    out = []
+    for stage in list(new) + [s for s in old if s not in new]:
+        b_rows = {r[1]: r for r in old.get(stage, [])}
+        a_rows = {r[1]: r for r in new.get(stage, [])}
+        for phase in list(a_rows) + [p for p in b_rows if p not in a_rows]:
+            b, a = b_rows.get(phase), a_rows.get(phase)
+            out.append([stage if phase == "" else "", phase, b[2] if b else "", a[2] if a else "",
+                        b[3] if b else "", a[3] if a else ""])
+    total = [r for r in out if r[0] == "**total**"]
+    return [r for r in out if r[0] != "**total**"] + total
 
 
 def main() -> int:

@@ -37,11 +37,14 @@ def mug_mesh():
 
 
 # With the suite spread over workers one file at a time (make test), a long file that starts last
-# keeps one worker busy alone at the end: the longest files (minutes each on 2 cores) go first, by their
-# CPU seconds measured one file at a time (the suite's workers share the cores, so CPU is what they cost).
-_LONGEST_FIRST = ("tests/test_pipeline.py", "tests/pipeline/test_robot_frame.py", "tests/cli/test_demo.py",
-                  "tests/pipeline/test_parallax_run.py", "tests/reconstruct/test_photo_carving.py",
-                  "tests/pipeline/test_batch.py", "tests/evaluate/test_reliability.py", "tests/pipeline/test_phone.py")
+# keeps one worker busy alone at the end: the longest files (a minute or more each on 2 cores) go first,
+# by the seconds their tests took in the suite (`pytest --durations`, 2 workers, 2026-12-07).
+_LONGEST_FIRST = ("tests/pipeline/test_robot_frame.py", "tests/multiview/test_dense_run.py",
+                  "tests/reconstruct/test_parallax_masks.py", "tests/cli/test_extras.py", "tests/test_pipeline.py",
+                  "tests/pipeline/test_parallax_run.py", "tests/cli/test_demo.py", "tests/pipeline/test_batch_signals.py",
+                  "tests/reconstruct/test_table_plate.py", "tests/test_behaviour_unchanged.py",
+                  "tests/reconstruct/test_photo_carving.py", "tests/pipeline/test_batch.py",
+                  "tests/evaluate/test_reliability.py", "tests/pipeline/test_phone.py")
 
 
 def pytest_collection_modifyitems(session, config, items):

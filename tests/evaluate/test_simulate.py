@@ -142,6 +142,16 @@ def test_contact_points_belong_to_the_logged_pose_of_a_fast_rolling_can(can_asse
         assert checked > 20
 
 
+def test_an_untimed_candidate_is_the_same_trajectory_without_a_time(can_asset):
+    mesh_path, urdf, _ = can_asset
+    spec = make_run_specs("push", 1, seed=0)[0]
+    timed = simulate_candidate(urdf, "point", spec, SHORT_PUSH, initial_mesh_path=mesh_path)
+    shown = simulate_candidate(urdf, "point", spec, SHORT_PUSH, initial_mesh_path=mesh_path, timed=False)
+    assert np.isfinite(timed.sim_time_s) and timed.sim_time_s > 0 and np.isnan(shown.sim_time_s)
+    assert np.array_equal(timed.object_position_m, shown.object_position_m)
+    assert np.array_equal(timed.object_quaternion_wxyz, shown.object_quaternion_wxyz)
+
+
 def test_ramp_tilts_to_45_degrees_and_object_moves_down_slope(can_asset):
     mesh_path, urdf, _ = can_asset
     spec = make_run_specs("ramp", 1, seed=0)[0]

@@ -89,7 +89,7 @@ def mug_run(tmp_path_factory):
     height = float(np.ptp(mesh.vertices[:, 2]))
     from real2sim.cli import main
 
-    code = main(["run", str(dataset), "--mass-kg", "0.3", "--object-height-m", str(height), "--mask", "auto",
+    code = main(["run", str(dataset), "--mass-kg", "0.3", "--object-height-m", str(height), "--mask", "auto", "--collision", "mesh",
                  "--backend", "hull", "--out", str(root / "asset")])
     return code, root / "asset"
 

@@ -165,7 +165,7 @@ def write_animations(results_dir: Path | str, summary: list[Mapping], preference
         run_spec = make_run_specs(task, 1, int(config.get("seed", 0)))[0]
         model = Representation.at(asset_name, rep_dir).urdf_for(str(chosen["contact_model"]))
         candidate = simulate_candidate(model, str(chosen["contact_model"]), run_spec, free,
-                                       reference, timeout_s=timeout_s)
+                                       reference, timeout_s=timeout_s, timed=False)  # shown, not timed
         title = (f"{task}: reference (grey) and {chosen['collision']} with {chosen['contact_model']} contact "
                  f"(orange, free roll-out)")
         written[task] = write_animation(reference, candidate, reference_mesh, rep_dir, scene,

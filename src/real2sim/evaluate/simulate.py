@@ -346,7 +346,8 @@ def representation_name(urdf_path: Path) -> str:
 
 def simulate_candidate(representation_urdf_path: Path, contact_model: str, run_spec: RunSpec,
                        scene_config: SceneConfig, reference: Trajectory | None = None,
-                       initial_mesh_path: Path | None = None, timeout_s: float | None = None) -> Trajectory:
+                       initial_mesh_path: Path | None = None, timeout_s: float | None = None,
+                       timed: bool = True) -> Trajectory:
     """Simulate a candidate URDF with ``contact_model`` ("point" | "hydroelastic").
 
     With ``reference``: it starts from the reference's initial state and, when
@@ -357,7 +358,8 @@ def simulate_candidate(representation_urdf_path: Path, contact_model: str, run_s
     ``visual/model.obj`` two folders up from the URDF) and the CoM in the asset's
     ``physical_properties.json`` when present, so it matches :func:`simulate_reference`
     on that mesh. ``timeout_s``: wall-clock limit of the whole call (:class:`SimulationTimeout`
-    past it); None: none.
+    past it); None: none. ``timed`` False: no separate timed roll-out, ``sim_time_s`` NaN (for a
+    trajectory that is shown, not scored).
     """
     deadline = Deadline(timeout_s)
     urdf = Path(representation_urdf_path)
@@ -370,7 +372,7 @@ def simulate_candidate(representation_urdf_path: Path, contact_model: str, run_s
         initial = _state_at(reference, 0)
     else:
         initial = candidate_initial_state(scene, urdf, run_spec, scene_config, initial_mesh_path, label)
-    return _simulate(scene, initial, reference, scene_config, label, name, run_spec.run, deadline)
+    return _simulate(scene, initial, reference, scene_config, label, name, run_spec.run, deadline, timed=timed)
 
 
 def candidate_initial_state(scene: Scene, urdf: Path, run_spec: RunSpec, scene_config: SceneConfig,

@@ -21,11 +21,14 @@ opacity = sum w_i.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Iterator
 
 import numpy as np
 import torch
 import torch.nn.functional as F
+from scipy.ndimage import binary_dilation
 
 from real2sim.multiview.views import ray_box
 from real2sim.multiview.voxel_grid import VoxelGrid
@@ -75,6 +78,7 @@ class VoxelRadianceField(torch.nn.Module):
         # made once: a tensor made per lookup is a host-to-device copy on a GPU, several per training step
         self._corner_offsets = torch.tensor([(dx * ny + dy) * nz + dz for dx in (0, 1) for dy in (0, 1)
                                              for dz in (0, 1)], device=device)
+        self._compact: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None  # see compact_grid
 
     @property
     def device(self) -> torch.device:
@@ -97,6 +101,39 @@ class VoxelRadianceField(torch.nn.Module):
 
     def grid_parameters(self) -> list[torch.nn.Parameter]:
         return [self.density_table, self.feature_table]
+
+    @contextmanager
+    def compact_grid(self) -> Iterator[tuple[torch.nn.Parameter, torch.nn.Parameter]]:
+        """Parameters of the only grid rows a render can read, density (M,) and features (M, C), for an
+        optimiser to step instead of the whole grid: while the context is open every lookup reads them, and
+        the grid takes their values when it closes.
+
+        A render samples occupied points only, whose trilinear corners lie in the occupancy grown by one
+        voxel (26-connected); a row outside it gets no gradient, which Adam leaves as it is, so stepping
+        these rows alone is the same training. The fine grid's dense tables are most of a CPU step's
+        memory traffic (docs/design-notes/reconstruct.md#field-speed)."""
+        grown = binary_dilation(self.occupancy.cpu().numpy(), structure=np.ones((3, 3, 3), dtype=bool))
+        rows = torch.from_numpy(np.flatnonzero(grown)).to(self.device)
+        lut = torch.zeros(len(self.density_table), dtype=torch.long, device=self.device)  # other rows: row 0, unread
+        lut[rows] = torch.arange(len(rows), device=self.device)
+        density = torch.nn.Parameter(self.density_table.detach().index_select(0, rows))
+        features = torch.nn.Parameter(self.feature_table.detach().index_select(0, rows))
+        self._compact = (lut, density, features)
+        try:
+            yield density, features
+        finally:
+            self._compact = None
+            with torch.no_grad():
+                self.density_table.index_copy_(0, rows, density.detach())
+                self.feature_table.index_copy_(0, rows, features.detach())
+
+    def _tables(self, flat: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(density table, feature table, ``flat`` as their row indices): the grid's, or while
+        :meth:`compact_grid` is open, its rows'."""
+        if self._compact is None:
+            return self.density_table, self.feature_table, flat
+        lut, density, features = self._compact
+        return density, features, lut.index_select(0, flat)
 
     # -- lookups ---------------------------------------------------------------------------------
     def _grid_coords(self, points_m: torch.Tensor) -> torch.Tensor:
@@ -128,9 +165,9 @@ class VoxelRadianceField(torch.nn.Module):
         idx, weights = self._corners(points_m)
         # index_select rather than table[idx]: its backward is an index_add, several times faster
         # on CPU than the accumulating index_put that advanced indexing differentiates into
-        flat = idx.reshape(-1)
-        density = (self.density_table.index_select(0, flat).view(idx.shape) * weights).sum(dim=1)
-        features = (self.feature_table.index_select(0, flat).view(*idx.shape, self.feature_channels) * weights[:, :, None]).sum(dim=1)
+        density_table, feature_table, flat = self._tables(idx.reshape(-1))
+        density = (density_table.index_select(0, flat).view(idx.shape) * weights).sum(dim=1)
+        features = (feature_table.index_select(0, flat).view(*idx.shape, self.feature_channels) * weights[:, :, None]).sum(dim=1)
         return torch.cat([density[:, None], features], dim=1)
 
     def blend_nodes(self, table: torch.Tensor, points_m: torch.Tensor) -> torch.Tensor:
@@ -139,7 +176,11 @@ class VoxelRadianceField(torch.nn.Module):
         return (table[idx] * weights).sum(dim=1)
 
     def _density_raw(self, points_m: torch.Tensor) -> torch.Tensor:
-        return self.blend_nodes(self.density_table, points_m)
+        if self._compact is None:
+            return self.blend_nodes(self.density_table, points_m)
+        idx, weights = self._corners(points_m)
+        table, _, flat = self._tables(idx.reshape(-1))
+        return (table.index_select(0, flat).view(idx.shape) * weights).sum(dim=1)
 
     def density(self, points_m: torch.Tensor) -> torch.Tensor:
         """(P,) density per voxel length at world points; zero outside the occupancy."""

@@ -19,6 +19,7 @@ The fine grid's region is the visual hull of the corrected views.
 from __future__ import annotations
 
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass, field as dataclass_field, replace
 
 import numpy as np
@@ -343,58 +344,57 @@ def _optimise(field: VoxelRadianceField, pool: RayPool, config: FieldConfig, ste
     schedule = schedule or StageSchedule(steps)
     start, trained_before = done, curve[-1][0] if curve else 0
     ranges = PoolRanges(field, pool, corrections)
-    optimisers = []
-    if learn_field:
-        # fused: one kernel over the whole grid rather than a loop over its tensors (why:
-        # docs/design-notes/reconstruct.md#field-speed)
-        grid_opt = torch.optim.Adam([{"params": [field.density_table], "lr": config.lr_density,
-                                      "base": config.lr_density},
-                                     {"params": [field.feature_table], "lr": config.lr_features,
-                                      "base": config.lr_features}], fused=True)
-        optimisers = [grid_opt, torch.optim.Adam(field.decoder.parameters(), lr=config.lr_decoder)]
-    if learner is not None:
-        optimisers.append(learner.optimiser)
-    window: list[torch.Tensor] = []  # losses on the device, read once per reporting window (a GPU sync)
-    device = field.device
-    for step in range(steps):
-        # the grid's learning rate decays tenfold over each stage, by its steps or by its loss's progress
-        fraction = schedule.fraction(step)
-        for group in optimisers[0].param_groups if learn_field else ():
-            group["lr"] = group["base"] * 0.1 ** fraction
-        if learner is not None:  # the corrections' schedule follows the same progress
-            corrections.schedule(learner.optimiser, start + round(fraction * steps), learner.total)
-        pick = torch.randint(len(pool.origins), (config.rays_per_step,), generator=gen).to(device)
-        jitter = torch.rand(config.rays_per_step, generator=gen).to(device)
-        background = torch.rand(config.rays_per_step, 3, generator=gen).to(device)
-        origins, directions, view = pool.origins[pick], pool.directions[pick], pool.view[pick]
-        t_range = ranges.batch(pick)
-        if corrections is not None:
-            origins, directions = corrections.rays(view, origins, directions)
-        out = field.render(origins, directions, step_voxels=config.step_voxels, view_dependent=config.view_dependent,
-                           jitter=jitter, t_range_m=t_range)
-        rgb = out.rgb if corrections is None else corrections.colour(view, out.rgb, out.opacity)
-        m = pool.mask[pick][:, None]
-        target = m * pool.rgb[pick] + (1 - m) * background
-        predicted = rgb + (1 - out.opacity)[:, None] * background
-        loss = torch.mean((predicted - target) ** 2)
-        if corrections is not None:
-            loss = loss + corrections.prior_loss()
-        for opt in optimisers:
-            opt.zero_grad(set_to_none=True)
-        loss.backward()
-        for opt in optimisers:
-            opt.step()
-        if learner is not None and learner.gauge:
-            corrections.fix_gauge()
-        window.append(loss.detach())
-        done += 1
-        if step % schedule.window == schedule.window - 1 or step == steps - 1:
-            curve.append((trained_before + step + 1,
-                          schedule.observe(float(torch.stack(window).mean()), len(window), step)))
-            window = []
-        done = start + steps if schedule.stopped else done  # an early end: the progress line jumps to the stage's end
-        if progress:
-            progress(f"training field ({field.grid.shape[0]}x{field.grid.shape[1]}x{field.grid.shape[2]})", done, total)
-        if schedule.stopped:
-            break
-    return done
+    with ExitStack() as stack:
+        optimisers = []
+        if learn_field:
+            # the rows a render reads, fused (why both: docs/design-notes/reconstruct.md#field-speed)
+            density, features = stack.enter_context(field.compact_grid())
+            grid_opt = torch.optim.Adam([{"params": [density], "lr": config.lr_density, "base": config.lr_density}, {
+                "params": [features], "lr": config.lr_features, "base": config.lr_features}], fused=True)
+            optimisers = [grid_opt, torch.optim.Adam(field.decoder.parameters(), lr=config.lr_decoder)]
+        if learner is not None:
+            optimisers.append(learner.optimiser)
+        window: list[torch.Tensor] = []  # losses on the device, read once per reporting window (a GPU sync)
+        device = field.device
+        for step in range(steps):
+            # the grid's learning rate decays tenfold over each stage, by its steps or by its loss's progress
+            fraction = schedule.fraction(step)
+            for group in optimisers[0].param_groups if learn_field else ():
+                group["lr"] = group["base"] * 0.1 ** fraction
+            if learner is not None:  # the corrections' schedule follows the same progress
+                corrections.schedule(learner.optimiser, start + round(fraction * steps), learner.total)
+            pick = torch.randint(len(pool.origins), (config.rays_per_step,), generator=gen).to(device)
+            jitter = torch.rand(config.rays_per_step, generator=gen).to(device)
+            background = torch.rand(config.rays_per_step, 3, generator=gen).to(device)
+            origins, directions, view = pool.origins[pick], pool.directions[pick], pool.view[pick]
+            t_range = ranges.batch(pick)
+            if corrections is not None:
+                origins, directions = corrections.rays(view, origins, directions)
+            out = field.render(origins, directions, step_voxels=config.step_voxels, view_dependent=config.view_dependent,
+                               jitter=jitter, t_range_m=t_range)
+            rgb = out.rgb if corrections is None else corrections.colour(view, out.rgb, out.opacity)
+            m = pool.mask[pick][:, None]
+            target = m * pool.rgb[pick] + (1 - m) * background
+            predicted = rgb + (1 - out.opacity)[:, None] * background
+            loss = torch.mean((predicted - target) ** 2)
+            if corrections is not None:
+                loss = loss + corrections.prior_loss()
+            for opt in optimisers:
+                opt.zero_grad(set_to_none=True)
+            loss.backward()
+            for opt in optimisers:
+                opt.step()
+            if learner is not None and learner.gauge:
+                corrections.fix_gauge()
+            window.append(loss.detach())
+            done += 1
+            if step % schedule.window == schedule.window - 1 or step == steps - 1:
+                curve.append((trained_before + step + 1,
+                              schedule.observe(float(torch.stack(window).mean()), len(window), step)))
+                window = []
+            done = start + steps if schedule.stopped else done  # an early end: the progress line jumps to the stage's end
+            if progress:
+                progress(f"training field ({field.grid.shape[0]}x{field.grid.shape[1]}x{field.grid.shape[2]})", done, total)
+            if schedule.stopped:
+                break
+        return done
