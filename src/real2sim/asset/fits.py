@@ -22,6 +22,7 @@ import torch
 import trimesh
 
 from real2sim.asset.config import AssetConfig
+from real2sim.collision.fit.config import FitConfig
 from real2sim.formats.collision import CollisionGeometry, write_collision_json
 from real2sim.formats.spec import CollisionSpec
 from real2sim.plumbing.progress import ProgressFn, null_progress, prefixed
@@ -75,7 +76,6 @@ def build_collision(
         if closed_by is not None:
             report["input_closed_by"] = closed_by
     else:
-        from real2sim.collision.fit.config import FitConfig
         from real2sim.collision.fit.stage import fit_collision
 
         geometry, report = fit_collision(
@@ -130,8 +130,6 @@ def fit_processes(config: AssetConfig, fits: int) -> int:
     if config.fit_workers is not None:
         wanted = config.fit_workers
     else:
-        from real2sim.collision.fit.config import FitConfig
-
         long_fits = (config.fit_config or FitConfig()).max_iterations >= SIDE_BY_SIDE_MIN_ITERATIONS
         wanted = budget if long_fits else 1
     return max(1, min(wanted, fits, budget))
@@ -190,7 +188,8 @@ def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[C
             except queue.Empty:
                 for k, spec in busy.items():
                     if procs[k].poll() is not None:  # died without finishing its SPEC
-                        raise _result(jobs / f"{spec.name}.pkl", procs[k].returncode, missing=True)
+                        raise RuntimeError(f"the fit worker for {spec.name} ended with exit status "
+                                           f"{procs[k].returncode} before its result")
                 continue
             if line is None:  # its output closed: it ended; the next poll says how
                 continue
@@ -200,7 +199,7 @@ def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[C
                 continue
             if isinstance(message, dict):  # {"done": job}: the SPEC's result is beside its job
                 spec = busy.pop(k)
-                done[spec.text] = _result(jobs / f"{spec.name}.pkl", None)
+                done[spec.text] = _result(jobs / f"{spec.name}.pkl")
                 idle.append(k)
             else:
                 say(*message)
@@ -231,15 +230,11 @@ def _forward(stream, lines: queue.Queue, worker: int) -> None:
     lines.put((worker, None))
 
 
-def _result(job: Path, returncode: int | None, missing: bool = False) -> Fitted | BaseException:
-    """A worker's Fitted for ``job``, or its exception raised here; with ``missing`` (the worker ended
-    before writing one) the RuntimeError to raise."""
+def _result(job: Path) -> Fitted:
+    """A worker's Fitted for ``job``, or its exception raised here."""
     out = job.with_suffix(".out")
-    if missing or not out.exists():
-        error = RuntimeError(f"the fit worker for {job.stem} ended with exit status {returncode} and no result")
-        if missing:
-            return error
-        raise error
+    if not out.exists():
+        raise RuntimeError(f"the fit worker for {job.stem} said it was done and left no result")
     result = pickle.loads(out.read_bytes())
     if isinstance(result, BaseException):
         raise result

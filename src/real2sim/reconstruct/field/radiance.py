@@ -176,8 +176,6 @@ class VoxelRadianceField(torch.nn.Module):
         return (table[idx] * weights).sum(dim=1)
 
     def _density_raw(self, points_m: torch.Tensor) -> torch.Tensor:
-        if self._compact is None:
-            return self.blend_nodes(self.density_table, points_m)
         idx, weights = self._corners(points_m)
         table, _, flat = self._tables(idx.reshape(-1))
         return (table.index_select(0, flat).view(idx.shape) * weights).sum(dim=1)
