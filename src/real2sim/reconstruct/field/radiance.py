@@ -43,6 +43,14 @@ class RayBatch:
     depth_m: torch.Tensor
 
 
+def _blend_rows(table: torch.Tensor, flat: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """(P,) or (P, C): the rows ``flat`` (P * 8,) of ``table`` (N,) or (N, C) blended by ``weights`` (P, 8).
+    index_select rather than table[idx]: its backward is an index_add, several times faster on CPU than
+    the accumulating index_put that advanced indexing differentiates into."""
+    rows = table.index_select(0, flat).view(*weights.shape, *table.shape[1:])
+    return (rows * weights.view(*weights.shape, *([1] * (table.dim() - 1)))).sum(dim=1)
+
+
 class VoxelRadianceField(torch.nn.Module):
     """Density + colour features on ``grid``, restricted to ``occupancy`` (bool, ``grid.shape``).
 
@@ -163,12 +171,9 @@ class VoxelRadianceField(torch.nn.Module):
     def interpolate(self, points_m: torch.Tensor) -> torch.Tensor:
         """(P, 1 + C) trilinear blend of raw density and features at world points (clamped to the grid)."""
         idx, weights = self._corners(points_m)
-        # index_select rather than table[idx]: its backward is an index_add, several times faster
-        # on CPU than the accumulating index_put that advanced indexing differentiates into
         density_table, feature_table, flat = self._tables(idx.reshape(-1))
-        density = (density_table.index_select(0, flat).view(idx.shape) * weights).sum(dim=1)
-        features = (feature_table.index_select(0, flat).view(*idx.shape, self.feature_channels) * weights[:, :, None]).sum(dim=1)
-        return torch.cat([density[:, None], features], dim=1)
+        density = _blend_rows(density_table, flat, weights)
+        return torch.cat([density[:, None], _blend_rows(feature_table, flat, weights)], dim=1)
 
     def blend_nodes(self, table: torch.Tensor, points_m: torch.Tensor) -> torch.Tensor:
         """(P,) trilinear blend at world points of ``table``, one value per grid node (flat, C order)."""
@@ -178,7 +183,7 @@ class VoxelRadianceField(torch.nn.Module):
     def _density_raw(self, points_m: torch.Tensor) -> torch.Tensor:
         idx, weights = self._corners(points_m)
         table, _, flat = self._tables(idx.reshape(-1))
-        return (table.index_select(0, flat).view(idx.shape) * weights).sum(dim=1)
+        return _blend_rows(table, flat, weights)
 
     def density(self, points_m: torch.Tensor) -> torch.Tensor:
         """(P,) density per voxel length at world points; zero outside the occupancy."""
