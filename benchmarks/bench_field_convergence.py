@@ -78,7 +78,8 @@ def run_row(name: str, dataset: Path, schedule: str, config, seed: int) -> tuple
     row = [name, schedule, steps, ended, steps_s, report["stages"]["train_field"]["seconds"], truth["chamfer_mm"],
            truth["iou"], report.get("psnr_field_held_out_db", float("nan")), com_mm]
     return row, {"steps": steps, "steps_s": steps_s, "chamfer_mm": truth["chamfer_mm"], "iou": truth["iou"],
-                 "com_mm": com_mm}
+                 "com_mm": com_mm, "psnr_field_db": report.get("psnr_field_held_out_db", float("nan")),
+                 "psnr_mesh_db": report.get("psnr_mesh_held_out_db", float("nan"))}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -495,6 +495,24 @@ def test_pool_abort_ends_busy_workers_at_once():
     assert not any(p.is_alive() for p in workers)
 
 
+def test_a_script_without_a_main_guard_is_told_why_every_simulation_fails(box, tmp_path):
+    """Spawned workers import the script again; unguarded, its evaluate() kills each one as it starts.
+    That is named in one error, not left as one "worker process died" row per simulation."""
+    script = tmp_path / "unguarded.py"
+    script.write_text(
+        "from pathlib import Path\n"
+        "from real2sim.evaluate.sweep import EvaluationConfig, evaluate\n"
+        "from tests.evaluate.test_sweep import SHORT_SCENE\n"
+        f"evaluate([Path({str(box)!r})], Path({str(tmp_path / 'res')!r}), EvaluationConfig(tasks=('push',), "
+        "contact_models=('point',), runs=1, jobs=2, scene=SHORT_SCENE))\n")
+    root = str(Path(__file__).resolve().parents[2])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([SRC, root])}
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, env=env,
+                          cwd=tmp_path)
+    assert done.returncode != 0
+    assert 'if __name__ == "__main__":' in done.stderr.splitlines()[-1], done.stderr[-2000:]
+
+
 def test_a_local_ray_started_for_the_sweep_stays_up():
     """Ray ties the processes it starts to the starting thread (a parent-death signal): a local Ray
     started in a helper thread died as soon as that thread ended, and the sweep failed a minute later."""

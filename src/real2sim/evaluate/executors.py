@@ -27,6 +27,11 @@ from real2sim.plumbing.errors import UserInputError
 
 
 EXECUTORS = ("local", "ray")
+#: Why every simulation fails when the pool's workers die before they run anything: the usual cause.
+WORKERS_DO_NOT_START = (
+    "the simulations' worker processes die as they start, before running anything: a script that calls "
+    "evaluate() (or run) with jobs > 1 must do so under `if __name__ == \"__main__\":`, since each worker "
+    "process imports the script again; or pass jobs=1 (EvaluationConfig.jobs, --jobs 1)")
 
 
 class _SerialExecutor:
@@ -121,8 +126,6 @@ class PoolExecutor:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        import sys
-
         self._jobs = jobs
         # spawn re-imports the parent's __main__ from its file; a script read from stdin or
         # typed interactively has none, and there fork is the only way.
@@ -133,6 +136,7 @@ class PoolExecutor:
                                                  initargs=(os.getpid(),))
         self._pool = self._make()
         self._solo = None  # one-worker pool for jobs caught in two pool breaks
+        self._start_ok: bool | None = None  # see _workers_start
         self._futures: dict[int, Any] = {}
         self._calls: dict[int, tuple[Callable, Any, int]] = {}
         self._next = 0
@@ -177,7 +181,26 @@ class PoolExecutor:
         except BrokenProcessPool:
             self._solo.shutdown(wait=False, cancel_futures=True)
             self._solo = None
+            if not self._workers_start():
+                raise UserInputError(WORKERS_DO_NOT_START) from None
             return _failed_result(fn, arg, "the simulation's worker process died (crash in native code)")
+
+    def _workers_start(self) -> bool:
+        """Whether a fresh worker runs a job that does nothing (asked once, after a job's own process died):
+        when it does not, the fault is the workers' start-up, not the job's simulation."""
+        if self._start_ok is None:
+            from concurrent.futures import ProcessPoolExecutor
+            from concurrent.futures.process import BrokenProcessPool
+
+            probe = ProcessPoolExecutor(max_workers=1, mp_context=self._ctx, initializer=_init_worker,
+                                        initargs=(os.getpid(),))
+            try:
+                self._start_ok = probe.submit(os.getpid).result() > 0
+            except BrokenProcessPool:
+                self._start_ok = False
+            finally:
+                probe.shutdown(wait=False, cancel_futures=True)
+        return self._start_ok
 
     def _renew_pool(self) -> None:
         # Only replace a pool that is actually broken (several futures report the same break).
