@@ -16,7 +16,7 @@ back on the same machine: first with the package of REV (a temporary git worktre
 ``PYTHONPATH``), then with this tree's, each in a fresh process, and the tables give both side by side,
 so that a speed-up is read against the code before it under the same conditions.
 
-Writes the profile section of the benchmark results (see common.py).
+Writes benchmarks/results/profile.md and .json (profile_TAG with ``--tag``; see common.py).
 """
 
 from __future__ import annotations
@@ -204,6 +204,7 @@ def main() -> int:
     parser.add_argument("--phone", type=int, default=60, metavar="VIEWS", help="photos of the phone capture (0: none)")
     parser.add_argument("--before", metavar="REV", help="also profile git revision REV first, and show both")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
+    parser.add_argument("--tag", default="", help="write profile_TAG instead of profile (e.g. the phone job alone)")
     parser.add_argument("--rows-only", nargs=3, metavar=("JOB", "ARG", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.rows_only:
@@ -245,7 +246,7 @@ def main() -> int:
             if before_src is not None:
                 subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "before")], cwd=repo,
                                capture_output=True)
-    print(write_result("profile", "Profile: wall and CPU seconds per stage and phase", "\n\n".join(parts),
+    print(write_result("profile" + (f"_{args.tag}" if args.tag else ""), "Profile: wall and CPU seconds per stage and phase", "\n\n".join(parts),
                         "python benchmarks/bench_profile.py " + " ".join(sys.argv[1:])))
     return 0
 

@@ -40,10 +40,11 @@ TARGET_COM_MM = 2.0
 
 def run_object(name: str, work: Path, quick: bool, runs: int | None = None,
                rolling_sagitta_m: float | None = None,
-               cylinder_flat_depth_m: float | None = None) -> tuple[dict, dict, float]:
-    """(run.json, truth.json, wall seconds) of one object's capture + run (``rolling_sagitta_m``:
-    see ``make_object``, None: the bundled object; ``cylinder_flat_depth_m``: see
-    ``ContactProperties``)."""
+               cylinder_flat_depth_m: float | None = None,
+               evaluate: bool = True) -> tuple[dict, dict, float, float]:
+    """(run.json, truth.json, wall seconds of the capture + run, of the run alone) of one object
+    (``rolling_sagitta_m``: see ``make_object``, None: the bundled object; ``cylinder_flat_depth_m``:
+    see ``ContactProperties``; ``evaluate`` False: `run` without `--evaluate`)."""
     from real2sim.capture.sim.wrist_camera import capture
     from real2sim.cli.demo import FULL, QUICK, capture_config, run_config
     from real2sim.evaluate.sweep import EvaluationConfig
@@ -56,15 +57,17 @@ def run_object(name: str, work: Path, quick: bool, runs: int | None = None,
     config = run_config(plan)
     contact = replace(config.asset.contact, cylinder_flat_depth_m=cylinder_flat_depth_m)
     config = replace(config, asset=replace(config.asset, mass_kg=OBJECTS[name].mass_kg, contact=contact),
-                     evaluation=EvaluationConfig(tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs))
+                     evaluation=EvaluationConfig(tasks=plan.tasks, contact_models=plan.contact_models, runs=plan.runs)
+                     if evaluate else None)
     start = time.perf_counter()
     dataset = work / f"{name}_capture"
     capture(make_textured_object(name, rolling_sagitta_m=rolling_sagitta_m), dataset, capture_config(plan))
     asset = work / f"{name}_asset"
+    started = time.perf_counter()
     run_pipeline(dataset, asset, config)
-    wall = time.perf_counter() - start
+    end = time.perf_counter()
     return (json.loads((asset / ".run" / "run.json").read_text()), json.loads((asset / "truth.json").read_text()),
-            wall)
+            end - start, end - started)
 
 
 def sagitta_sections_note() -> str:
@@ -95,6 +98,8 @@ def main() -> int:
     parser.add_argument("--tag", default="", help="write benchmarks/results/run_TAG.md instead of run.md")
     parser.add_argument("--cylinder-flat-depth", type=float, default=None, metavar="M",
                         help="`run --cylinder-flat-depth-m M`: compliant cylinders meshed with flats at most M deep")
+    parser.add_argument("--no-evaluate", action="store_true",
+                        help="`run` without `--evaluate` (no simulations): the asset alone, as most runs make it")
     parser.add_argument("--round-can", action="store_true",
                         help="capture a round can (flats at most ROUND_SAGITTA_M deep) instead of the bundled "
                              "72-section one (docs/truth.md)")
@@ -105,10 +110,12 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench_run-") as tmp:
         for name in args.objects.split(","):
             sagitta = ROUND_SAGITTA_M if args.round_can and name == "can" else None
-            manifest, truth, wall = run_object(name, Path(tmp), args.quick, runs, sagitta, args.cylinder_flat_depth)
+            manifest, truth, wall, run_wall = run_object(name, Path(tmp), args.quick, runs, sagitta,
+                                                         args.cylinder_flat_depth, not args.no_evaluate)
             for stage, entry in manifest["stages"].items():
                 stage_rows.append([name, stage, entry["wall_seconds"], entry.get("peak_memory_mb", float("nan"))])
             stage_rows.append([name, "(capture + run, wall)", wall, float("nan")])
+            stage_rows.append([name, "(run alone, wall)", run_wall, float("nan")])
             phys, rec = truth["physical_properties"], truth.get("reconstruction") or {}
             best = (truth.get("dynamics") or {}).get("best_primitive_by_paper_protocol")
             ratio = best["truth_over_reconstruction"] if best else float("nan")
@@ -117,10 +124,11 @@ def main() -> int:
                 name, rec.get("chamfer_mm", float("nan")), rec.get("iou", float("nan")),
                 phys["com_error_mm"], _verdict(phys["com_error_mm"] <= TARGET_COM_MM),
                 100 * inertia, _verdict(inertia <= TARGET_INERTIA_REL),
-                f"{best['representation']} ({best['contact_model']})" if best else "none",
+                f"{best['representation']} ({best['contact_model']})" if best else
+                "not evaluated" if args.no_evaluate else "none",
                 best["ocae_vs_reconstruction_m"] if best else float("nan"),
                 best["ocae_vs_truth_m"] if best else float("nan"),
-                ratio, _verdict(best is not None and ratio <= TARGET_OCAE_RATIO)])
+                ratio, "n/a" if args.no_evaluate else _verdict(best is not None and ratio <= TARGET_OCAE_RATIO)])
             for row in (truth.get("dynamics") or {}).get("representations", []):
                 dynamics_rows.append([name, row["representation"], row["contact_model"],
                                       *(("n/a" if row[k] is None else row[k])
@@ -133,8 +141,10 @@ def main() -> int:
                        if args.quick else
                        "The demo's settings: 100 views at 320x240 px with 5 mm / 1 deg robot-pose noise, COLMAP "
                        "refinement, radiance field, the demo's representations (+ the reconstruction itself as "
-                       f"`mesh`), push and ramp x point and hydroelastic, {runs} run(s) each; "
-                       "evaluated against the reconstruction (the paper's protocol) and against the true object.\n\n")
+                       + ("`mesh`), not evaluated (`run` without `--evaluate`).\n\n" if args.no_evaluate else
+                          f"`mesh`), push and ramp x point and hydroelastic, {runs} run(s) each; "
+                          "evaluated against the reconstruction (the paper's protocol) and against the true "
+                          "object.\n\n"))
                     + "Targets (issue #12): CoM within 2 mm, inertia eigenvalues within 5 %, and the best primitive "
                     "representation's OCAE against the truth within 1.5x of its OCAE against the reconstruction.\n\n"
                     + markdown_table(["object", "Chamfer mm", "IoU", "CoM error mm", "<= 2 mm", "inertia error %",

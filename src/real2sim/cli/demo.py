@@ -78,7 +78,7 @@ def register(sub) -> None:
         "evaluation of each representation (planar pushing, actuated ramp; point and hydroelastic contact; "
         "one run each) against the reconstruction and against the true bottle -> OUT/bottle_asset/truth.json "
         "(pose, mask, reconstruction, mass-property and dynamics errors against the true bottle) -> Pareto "
-        "plots, animations and report.html in OUT/bottle_asset/results. About 5 minutes on 2 idle CPU cores "
+        "plots, animations and report.html in OUT/bottle_asset/results. About 4 minutes on 2 idle CPU cores "
         "(benchmarks/results/demo.md). --quick: 60 noise-free views at 160x120 px, no pose refinement, "
         "visual-hull reconstruction, three representations: about a minute.",
     )
