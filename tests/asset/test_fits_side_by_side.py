@@ -12,12 +12,12 @@ import torch
 import trimesh
 
 from real2sim.asset.config import AssetConfig
-from real2sim.asset.fits import SIDE_BY_SIDE_MIN_ITERATIONS, fit_all, fit_processes
+from real2sim.asset.fits import SIDE_BY_SIDE_MIN_ITERATIONS, THREADED_BASELINES, fit_all, fit_processes
 from real2sim.collision.fit.config import FitConfig, iteration_limits
 from real2sim.formats.spec import parse_spec
 from real2sim.plumbing.errors import UserInputError
 
-SPECS = tuple(parse_spec(s) for s in ("cylinders:2", "spheres:4", "coacd"))
+SPECS = tuple(parse_spec(s) for s in ("cylinders:2", "spheres:4", "boxes:2", "coacd"))
 
 
 @pytest.fixture
@@ -69,16 +69,25 @@ def test_side_by_side_fits_as_one_after_another(tmp_path, threads):
         folder = tmp_path / f"w{workers}"
         for spec in SPECS:
             (folder / spec.name).mkdir(parents=True)
-        messages = []
-        # three SPECs on two workers: one worker fits a second SPEC when done with its first
+        messages, finished = [], []
+        # three primitive SPECs on two workers: one worker fits a second SPEC when done with its first
         fitted = fit_all(solid, solid, list(SPECS), folder, config(fit_workers=workers), tmp_path / "sdf",
-                         progress=lambda m, d, t: messages.append(m))
+                         progress=lambda m, d, t: messages.append(m),
+                         on_fitted=lambda spec, f: finished.append((spec.text, len(messages), f)))
         assert list(fitted) == [s.text for s in SPECS]
+        assert sorted(t for t, _, _ in finished) == sorted(fitted)  # each once, with its result
+        assert all(fitted[t] is f for t, _, f in finished)
         assert any("fit" in m and "cylinders:2" in m for m in messages)
         reports[workers] = {t: (f.fidelity["iou"], f.fidelity["chamfer_mm"]) for t, f in fitted.items()}
         geometry[workers] = {s.text: json.loads((folder / s.name / "collision.json").read_text()) for s in SPECS}
         assert not (folder / ".fit_jobs").exists()
-    assert any("2 processes" in m for m in messages)  # the second build ran side by side
+    assert any("in 2 processes" in m for m in messages)  # the second build ran side by side
+    # CoACD uses every thread it is given: after the side-by-side fits, in this process, not in a worker's share
+    assert "coacd" in THREADED_BASELINES and finished[-1][0] == "coacd"
+    decomposing = next(i for i, m in enumerate(messages) if m.startswith("collision coacd: decomposing"))
+    assert decomposing >= max(i for t, i, _ in finished[:-1])  # (i: the messages before its hand-over)
+    # the first result was handed over while another fit still reported its progress
+    assert finished[0][1] < max(i for i, m in enumerate(messages) if not m.startswith("collision coacd"))
     for text in reports[1]:
         assert np.allclose(reports[1][text], reports[2][text], rtol=1e-6, atol=1e-9), text
     assert len(geometry[1]["coacd"]["shapes"]) == len(geometry[2]["coacd"]["shapes"])
@@ -92,7 +101,7 @@ def test_side_by_side_fits_as_one_after_another(tmp_path, threads):
 def test_a_workers_failure_is_raised_in_the_build(tmp_path, threads):
     threads(2)
     solid = trimesh.creation.box((0.05, 0.04, 0.03))
-    specs = [parse_spec("coacd"), parse_spec("cylinders:1")]  # no folders made for them: the workers fail
+    specs = [parse_spec("spheres:1"), parse_spec("cylinders:1")]  # no folders made for them: the workers fail
     with pytest.raises(OSError):
         fit_all(solid, solid, specs, tmp_path, config(fit_workers=2), None)
     assert not (tmp_path / ".fit_jobs").exists()

@@ -26,7 +26,7 @@ import trimesh
 
 from real2sim.asset.checks import check_given_com, check_mesh_for_config
 from real2sim.asset.config import AssetConfig, config_record
-from real2sim.asset.fits import fit_all
+from real2sim.asset.fits import Fitted, fit_all
 from real2sim.asset.reuse import reuse_collision, reusable_representations
 from real2sim.formats.asset_config import ASSET_CONFIG_NAME, write_asset_config
 from real2sim.formats.contact import ContactProperties, MujocoConfig
@@ -173,9 +173,9 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
                            ) -> list[RepresentationResult]:
     """Each SPEC's folder in ``tmp``: collision.json, the model files, fit_report.json; a SPEC in
     ``reusable`` is copied from there (:func:`reusable_representations`) instead of fitted."""
+    from real2sim.asset.export.mjcf import mjcf_notes
     from real2sim.asset.export.writers import write_representation
 
-    results = []
     build_cache = tmp / ".sdf_cache"
     sdf_cache = config.sdf_cache_dir if config.sdf_cache_dir is not None else build_cache
     fitted_solid, filled = solid, None
@@ -191,14 +191,16 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
     to_fit = [spec for spec in config.specs if spec.text not in (reusable or {})]
     for spec in config.specs:
         (tmp / spec.name).mkdir()
-    fitted = fit_all(solid, fitted_solid, to_fit, tmp, config, sdf_cache, progress=say)
-    for spec in config.specs:
+    written: dict[str, RepresentationResult] = {}
+
+    def write(spec, fitted: Fitted | None) -> None:
+        """One representation's files, as soon as its fit is done (``fitted`` None: reused)."""
         rep_dir = tmp / spec.name
-        if spec.text in (reusable or {}):
+        if fitted is None:
             say(f"collision {spec.text}: unchanged, reused", 0, 0)
             geometry, report = reuse_collision(reusable[spec.text], rep_dir)
         else:
-            geometry, report = fitted[spec.text].geometry, {**fitted[spec.text].report, **(filled or {})}
+            geometry, report = fitted.geometry, {**fitted.report, **(filled or {})}
         say(f"collision {spec.text}: writing {', '.join(config.formats)}", 0, 0)
         write_representation(
             rep_dir, geometry, props, config.contact, visual_mesh_relpath=f"../{VISUAL_RELPATH}",
@@ -208,12 +210,10 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
             report = {
                 "spec": spec.text,
                 "num_primitives": len(geometry.shapes),
-                **fitted[spec.text].fidelity,
+                **fitted.fidelity,
                 **report,
             }
         if "mjcf" in config.formats:
-            from real2sim.asset.export.mjcf import mjcf_notes
-
             notes = mjcf_notes(geometry)
             if notes:
                 report["mjcf_notes"] = notes
@@ -228,7 +228,13 @@ def _write_representations(solid: trimesh.Trimesh, props: PhysicalProperties, tm
                f"{report['filled_solid']['chamfer_mm']:.2f} mm)" if "filled_solid" in report else "")
             + f", {took}", 0, 0
         )
-        results.append(RepresentationResult(spec.name, out_dir / spec.name / "model.urdf", report))
+        written[spec.text] = RepresentationResult(spec.name, out_dir / spec.name / "model.urdf", report)
+
+    for spec in config.specs:
+        if spec.text in (reusable or {}):
+            write(spec, None)
+    fit_all(solid, fitted_solid, to_fit, tmp, config, sdf_cache, progress=say, on_fitted=write)
+    results = [written[spec.text] for spec in config.specs]
     shutil.rmtree(build_cache, ignore_errors=True)
     return results
 

@@ -17,6 +17,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import torch
 import trimesh
@@ -29,6 +30,10 @@ from real2sim.plumbing.progress import ProgressFn, null_progress, prefixed
 
 #: Seconds between two looks at whether a busy worker still lives, while no message comes.
 POLL_S = 0.2
+#: Decompositions that use every thread they are given (CoACD's OpenMP: the bundled mug 71.9 s on one
+#: thread, 47.7 s on two; V-HACD 6.0 s on both): with fits side by side they run after them, in the
+#: build's process with all its threads, not in a worker's share (docs/design-notes/asset.md#fits-side-by-side).
+THREADED_BASELINES = ("coacd",)
 
 
 @dataclass(frozen=True)
@@ -136,29 +141,40 @@ def fit_processes(config: AssetConfig, fits: int) -> int:
 
 
 def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[CollisionSpec], folder: Path,
-            config: AssetConfig, sdf_cache: Path | str | None, progress: ProgressFn | None = None) -> dict[str, Fitted]:
-    """Every SPEC of ``specs`` fitted into ``folder/<spec.name>`` (which must exist), by SPEC text.
+            config: AssetConfig, sdf_cache: Path | str | None, progress: ProgressFn | None = None,
+            on_fitted: Callable[[CollisionSpec, Fitted], None] | None = None) -> dict[str, Fitted]:
+    """Every SPEC of ``specs`` fitted into ``folder/<spec.name>`` (which must exist), by SPEC text;
+    ``on_fitted(spec, fitted)`` is called in this process as each one is done, in the order they finish
+    (a build writes a representation's files there while the other fits go on).
 
     With more than one process (:func:`fit_processes`) the fits run in that many ``python -m
     real2sim.asset.fit_worker`` processes, each with its share of the threads and taking the next SPEC
     when it is done with one (a subprocess rather than a multiprocessing pool, which would re-run a
-    user's unguarded script), their progress coming back to ``progress`` line by line. The
-    signed-distance samples the primitive fits share are made once, here, first.
+    user's unguarded script), their progress coming back to ``progress`` line by line; a decomposition
+    of :data:`THREADED_BASELINES` then runs here, with every thread. The signed-distance samples the
+    primitive fits share are made once, here, while the workers start.
     """
     say = progress or null_progress
-    workers = fit_processes(config, len(specs))
+    done_with = on_fitted or (lambda spec, fitted: None)
     for spec in specs:
         say(f"collision {spec.text}: fitting", 0, 0)
-    if workers == 1:
-        return {spec.text: fit_and_measure(solid, fitted_solid, spec, folder / spec.name, config, sdf_cache,
-                                           progress=prefixed(say, f"collision {spec.text}")) for spec in specs}
-    if sum(spec.baseline is None for spec in specs) > 1 and sdf_cache is not None:
-        from real2sim.collision.sdf_sampling import SdfSamplingConfig, sample_sdf
+    threaded = [s for s in specs if s.baseline in THREADED_BASELINES and fit_processes(config, len(specs)) > 1]
+    side = [s for s in specs if s not in threaded]
+    workers = fit_processes(config, len(side))
+    done = {} if workers == 1 else _fit_side_by_side(solid, fitted_solid, side, folder, config, sdf_cache, say,
+                                                     done_with, workers)
+    for spec in (side if workers == 1 else []) + threaded:
+        done[spec.text] = fit_and_measure(solid, fitted_solid, spec, folder / spec.name, config, sdf_cache,
+                                          progress=prefixed(say, f"collision {spec.text}"))
+        done_with(spec, done[spec.text])
+    return {spec.text: done[spec.text] for spec in specs}
 
-        say("sampling the signed distance the primitive fits share", 0, 0)
-        sample_sdf(fitted_solid, SdfSamplingConfig(), cache_dir=sdf_cache)
+
+def _fit_side_by_side(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[CollisionSpec],
+                      folder: Path, config: AssetConfig, sdf_cache: Path | str | None, say: ProgressFn,
+                      done_with: Callable[[CollisionSpec, Fitted], None], workers: int) -> dict[str, Fitted]:
+    """``specs`` fitted in ``workers`` worker processes (see :func:`fit_all`)."""
     threads = max(1, torch.get_num_threads() // workers)
-    say(f"fitting {len(specs)} collision SPECs in {workers} processes of {threads} thread(s) each", 0, 0)
     jobs = folder / ".fit_jobs"
     jobs.mkdir(exist_ok=True)
     waiting, done = list(specs), {}
@@ -168,14 +184,21 @@ def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[C
     finished = False
     try:
         idle = []
-        for k in range(workers):
+        for k in range(workers):  # first: their imports go on while the samples are made
             proc = subprocess.Popen([sys.executable, "-m", "real2sim.asset.fit_worker", str(threads)],
                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                                     env={**os.environ, "OMP_NUM_THREADS": str(threads)})
             threading.Thread(target=_forward, args=(proc.stdout, lines, k), daemon=True).start()
             procs.append(proc)
             idle.append(k)
-        while waiting or busy:
+        if sum(spec.baseline is None for spec in specs) > 1 and sdf_cache is not None:
+            from real2sim.collision.sdf_sampling import SdfSamplingConfig, sample_sdf
+
+            say("sampling the signed distance the primitive fits share", 0, 0)
+            sample_sdf(fitted_solid, SdfSamplingConfig(), cache_dir=sdf_cache)
+        say(f"fitting {len(specs)} collision SPECs in {workers} processes of {threads} thread(s) each", 0, 0)
+
+        def dispatch() -> None:
             while waiting and idle:
                 k, spec = idle.pop(0), waiting.pop(0)
                 job = jobs / f"{spec.name}.pkl"
@@ -183,6 +206,9 @@ def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[C
                 procs[k].stdin.write(f"{job}\n")
                 procs[k].stdin.flush()
                 busy[k] = spec
+
+        while waiting or busy:
+            dispatch()
             try:
                 k, line = lines.get(timeout=POLL_S)
             except queue.Empty:
@@ -201,6 +227,8 @@ def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[C
                 spec = busy.pop(k)
                 done[spec.text] = _result(jobs / f"{spec.name}.pkl")
                 idle.append(k)
+                dispatch()  # the worker's next SPEC before this one's files
+                done_with(spec, done[spec.text])
             else:
                 say(*message)
         finished = True
@@ -221,7 +249,7 @@ def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[C
                 proc.wait()
             proc.stdout.close()
         shutil.rmtree(jobs, ignore_errors=True)
-    return {spec.text: done[spec.text] for spec in specs}
+    return done
 
 
 def _forward(stream, lines: queue.Queue, worker: int) -> None:
