@@ -14,24 +14,27 @@ holds the same pipe and stderr) sees its pipe close and exits too.
 
 from __future__ import annotations
 
+import contextlib
+import multiprocessing
 import os
 import signal
 import sys
 import threading
 import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor
+from concurrent.futures import wait as wait_futures
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, Callable
 
 from real2sim.evaluate.jobs import one_line, run_reference_job, runs_row
 from real2sim.plumbing.errors import UserInputError
 
-
 EXECUTORS = ("local", "ray")
 #: Why every simulation fails when the pool's workers die before they run anything: the usual cause.
-WORKERS_DO_NOT_START = (
-    "the simulations' worker processes die as they start, before running anything: a script that calls "
-    "evaluate() (or run) with jobs > 1 must do so under `if __name__ == \"__main__\":`, since each worker "
-    "process imports the script again; or pass jobs=1 (EvaluationConfig.jobs, --jobs 1)")
+WORKERS_DO_NOT_START = ("the simulations' worker processes die as they start, before running anything: a script "
+                        "that calls evaluate() (or run) with jobs > 1 must do so under `if __name__ == \"__main__\":`"
+                        ", since each worker imports the script again; or pass jobs=1 (EvaluationConfig.jobs, --jobs 1)")
 
 
 class _SerialExecutor:
@@ -123,18 +126,13 @@ class PoolExecutor:
     """
 
     def __init__(self, jobs: int) -> None:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
         self._jobs = jobs
         # spawn re-imports the parent's __main__ from its file; a script read from stdin or
         # typed interactively has none, and there fork is the only way.
         main_file = getattr(sys.modules.get("__main__"), "__file__", None)
         method = "spawn" if main_file is None or os.path.exists(main_file) else "fork"
         self._ctx = multiprocessing.get_context(method)
-        self._make = lambda: ProcessPoolExecutor(max_workers=jobs, mp_context=self._ctx, initializer=_init_worker,
-                                                 initargs=(os.getpid(),))
-        self._pool = self._make()
+        self._pool = self._new_pool(jobs)
         self._solo = None  # one-worker pool for jobs caught in two pool breaks
         self._start_ok: bool | None = None  # see _workers_start
         self._futures: dict[int, Any] = {}
@@ -147,17 +145,16 @@ class PoolExecutor:
         self._calls[self._next] = (fn, arg, attempt)
         return self._next
 
-    def wait(self, handles: set) -> set:
-        from concurrent.futures import FIRST_COMPLETED
-        from concurrent.futures import wait as fwait
+    def _new_pool(self, workers: int) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(max_workers=workers, mp_context=self._ctx, initializer=_init_worker,
+                                   initargs=(os.getpid(),))
 
+    def wait(self, handles: set) -> set:
         by_future = {self._futures[h]: h for h in handles}
-        done, _ = fwait(list(by_future), return_when=FIRST_COMPLETED)
+        done, _ = wait_futures(list(by_future), return_when=FIRST_COMPLETED)
         return {by_future[f] for f in done}
 
     def result(self, handle: int) -> Any:
-        from concurrent.futures.process import BrokenProcessPool
-
         future = self._futures.pop(handle)
         fn, arg, attempt = self._calls.pop(handle)
         try:
@@ -170,12 +167,8 @@ class PoolExecutor:
 
     def _run_isolated(self, fn: Callable, arg: Any) -> Any:
         """Run one job alone in a one-worker pool: if that dies too, the job is the culprit."""
-        from concurrent.futures import ProcessPoolExecutor
-        from concurrent.futures.process import BrokenProcessPool
-
         if self._solo is None:
-            self._solo = ProcessPoolExecutor(max_workers=1, mp_context=self._ctx, initializer=_init_worker,
-                                             initargs=(os.getpid(),))
+            self._solo = self._new_pool(1)
         try:
             return self._solo.submit(fn, arg).result()
         except BrokenProcessPool:
@@ -189,24 +182,17 @@ class PoolExecutor:
         """Whether a fresh worker runs a job that does nothing (asked once, after a job's own process died):
         when it does not, the fault is the workers' start-up, not the job's simulation."""
         if self._start_ok is None:
-            from concurrent.futures import ProcessPoolExecutor
-            from concurrent.futures.process import BrokenProcessPool
-
-            probe = ProcessPoolExecutor(max_workers=1, mp_context=self._ctx, initializer=_init_worker,
-                                        initargs=(os.getpid(),))
-            try:
+            probe, self._start_ok = self._new_pool(1), False
+            with contextlib.suppress(BrokenProcessPool):
                 self._start_ok = probe.submit(os.getpid).result() > 0
-            except BrokenProcessPool:
-                self._start_ok = False
-            finally:
-                probe.shutdown(wait=False, cancel_futures=True)
+            probe.shutdown(wait=False, cancel_futures=True)
         return self._start_ok
 
     def _renew_pool(self) -> None:
         # Only replace a pool that is actually broken (several futures report the same break).
         if getattr(self._pool, "_broken", False):
             self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = self._make()
+            self._pool = self._new_pool(self._jobs)
 
     def shutdown(self, abort: bool = False) -> None:
         """Wait for the workers to exit; ``abort``: end them now, dropping what they were doing."""

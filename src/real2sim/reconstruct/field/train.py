@@ -51,9 +51,8 @@ class FieldConfig:
     fine_steps: int = 800
     """Training steps on the fine grid; >= 1."""
     rays_per_step: int = 2048
-    """Rays drawn for each step (on a CPU; ``device_batch_scale`` times as many on a GPU); >= 4. Half of 4096
-    trains in about 45 % fewer seconds at the same geometry and textured mesh; only the field's own held-out
-    PSNR is lower, by about 1 dB (why: docs/design-notes/reconstruct.md#rays-per-step)."""
+    """Rays drawn for each step (on a CPU; ``device_batch_scale`` times as many on a GPU); >= 4. 4096 gave the
+    same mesh in nearly twice the time (why: docs/design-notes/reconstruct.md#rays-per-step)."""
     lr_density: float = 0.02
     """Adam's learning rate of the density grid at the start of each grid (it decays tenfold over it); > 0.
     Five times slower than the features: the field starts as the visual hull, and a fast density lets the
@@ -158,8 +157,7 @@ class TrainResult:
     loss_curve: tuple[tuple[int, float], ...]  # (steps trained, mean MSE over the last reporting window)
     seconds: float
     carved_voxels: int = 0  # coarse-grid voxels of the visual hull removed by photo-consistent carving
-    # carving-grid voxels the carving removed and the masks' rays put back (poses off, see photo_carving)
-    restored_voxels: int = 0
+    restored_voxels: int = 0  # carving-grid voxels it removed and the masks' rays put back (see photo_carving)
     opened_voxels: int = 0  # carving-grid voxels the second pass (the hollow prior, see photo_carving) removed
     carving_exposure: dict | None = None  # the views' exposure and white balance as photo carving found them
     corrections: ViewCorrections | None = None  # the per-view corrections learnt (None: neither poses nor colours)
