@@ -158,7 +158,8 @@ def fit_all(solid: trimesh.Trimesh, fitted_solid: trimesh.Trimesh, specs: list[C
     done_with = on_fitted or (lambda spec, fitted: None)
     for spec in specs:
         say(f"collision {spec.text}: fitting", 0, 0)
-    threaded = [s for s in specs if s.baseline in THREADED_BASELINES and fit_processes(config, len(specs)) > 1]
+    side_by_side = fit_processes(config, len(specs)) > 1
+    threaded = [s for s in specs if side_by_side and s.baseline in THREADED_BASELINES]
     side = [s for s in specs if s not in threaded]
     workers = fit_processes(config, len(side))
     done = {} if workers == 1 else _fit_side_by_side(solid, fitted_solid, side, folder, config, sdf_cache, say,
