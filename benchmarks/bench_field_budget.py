@@ -3,15 +3,17 @@
 Each capture is reconstructed with the stage's defaults (``reconstruct``, seed 0) and with each variant of
 ``FieldConfig`` given on the command line, one after another in this process; per run: steps trained per
 grid and why each ended, the training steps' wall seconds, Chamfer and IoU against the capture's
-``ground_truth/``, the field's held-out PSNR and the mesh's volume centroid against the true one's (the
-columns of ``bench_field_convergence.py``, whose captures and rows this reuses).
+``ground_truth/``, the held-out PSNR of the field and of the textured mesh, and the mesh's volume centroid
+against the true one's (the columns of ``bench_field_convergence.py``, whose captures and rows this reuses).
 
     python benchmarks/bench_field_budget.py --variant rays2048=rays_per_step=2048
     python benchmarks/bench_field_budget.py --variant rays2048=rays_per_step=2048 \\
         --variant coarse200=coarse_steps=200 --objects bottle,mug,can
 
 Writes benchmarks/results/field_budget.md and .json (or field_budget_TAG), stamped with machine, date and
-command. Steps and quality are deterministic for a seed; seconds are wall time: run it alone.
+command. Seeded, but not bit for bit on a CPU: the grid's scatter-adds sum in thread order, so the loss the
+convergence rule reads, and with it the step a grid stops at, varies a little from run to run (the can's fine
+grid: 320 and 440 steps in two runs); seconds are wall time: run it alone.
 """
 
 from __future__ import annotations

@@ -13,7 +13,8 @@ its flat bottom).
     python benchmarks/bench_field_convergence.py --rule rel_tolerance=0.02 --tag tol2
 
 Writes benchmarks/results/field_convergence.md and .json (or field_convergence_TAG), stamped with machine,
-date and command. Steps and quality are deterministic for a seed; seconds are wall time on whatever else
+date and command. Steps and quality are seeded but vary a little run to run on a CPU (bench_field_budget.py says
+why); seconds are wall time on whatever else
 the machine runs: say so when you cite them.
 """
 
