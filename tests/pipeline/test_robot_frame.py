@@ -336,6 +336,9 @@ def test_bad_colmap_inputs_exit_2_with_one_line(captures, tmp_path, capsys):
     assert "--scale" in err and "--object-height-m" in err
 
 
+# about 36 s; the default suite's version is tests/multiview/test_dense_run.py (25 sparse points, the table from the
+# dense points of a close-up capture)
+@pytest.mark.slow
 def test_too_few_sparse_points_take_the_table_from_dense_points(captures, tmp_path, capsys):
     """12 sparse points give no table plane; the dense points from the photos do (issue #68 part 2)."""
     code, _, err = run_cli(capsys, captures["few_points"], "--object-height-m", "0.1", "--out", tmp_path / "few",

@@ -103,6 +103,25 @@ def test_points_seen_only_by_neighbouring_views_are_not_inside():
     assert float(view_spread_deg(two, torch.ones(2, 1, dtype=torch.bool))[0]) == pytest.approx(40.0, abs=0.01)
 
 
+@pytest.mark.parametrize("offset_m", [0.0, 250.0])
+def test_the_spread_from_camera_centres_is_the_spread_of_the_directions(offset_m):
+    """camera_spread_deg (three matrix products) against view_spread_deg on the (V, P, 3) unit directions, for
+    random cameras and points, also in a frame far from the origin (a COLMAP model's): within 0.01 degree."""
+    import torch
+
+    from real2sim.multiview.hull import camera_spread_deg, view_spread_deg
+
+    rng = np.random.default_rng(4)
+    centres = rng.normal(size=(40, 3)) * [0.4, 0.4, 0.2] + [0.0, 0.0, 0.4] + offset_m
+    pts = rng.uniform(-0.08, 0.08, size=(500, 3)) + offset_m
+    seen = torch.from_numpy(rng.random((40, 500)) < 0.3)
+    directions = centres[:, None] - pts[None]
+    directions /= np.linalg.norm(directions, axis=-1, keepdims=True)
+    expected = view_spread_deg(torch.from_numpy(directions), seen)
+    got = camera_spread_deg(torch.from_numpy(centres).float(), torch.from_numpy(pts).float(), seen)
+    assert float((got - expected).abs().max()) < 0.01
+
+
 def test_a_point_beyond_an_edge_the_mask_stays_clear_of_is_outside():
     """With the whole sphere in every image, a view the point projects outside of votes against it."""
     from real2sim.multiview.hull import border_touched, silhouette_scores

@@ -73,6 +73,25 @@ def view_spread_deg(directions: torch.Tensor, seen: torch.Tensor) -> torch.Tenso
     return torch.rad2deg(2.0 * torch.asin(middle.sqrt())).float()
 
 
+def camera_spread_deg(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tensor) -> torch.Tensor:
+    """(P,) :func:`view_spread_deg` of the directions from points ``pts`` (P, 3) to the cameras at ``centres``
+    (V, 3) that see them (``seen``: (V, P) bool), without forming the (V, P, 3) directions: with
+    ``s = seen / |c - p|^2``, the second moment is ``sum s c c^T - (sum s c) p^T - p (sum s c)^T + (sum s) p p^T``,
+    three matrix products over the views. Coordinates are taken from the points' mean so that the terms stay
+    of the size of the result (float32), and the moments are assembled in float64."""
+    ref = pts.mean(dim=0)
+    c, p = centres - ref, pts - ref
+    dist2 = (p * p).sum(dim=1)[None].addmm(c, p.T, alpha=-2.0).add_((c * c).sum(dim=1)[:, None])  # (V, P)
+    s_t = (seen.to(dist2.dtype) / dist2.clamp_min(1e-30)).T  # (P, V)
+    outer_c = (c[:, :, None] * c[:, None, :]).reshape(-1, 9)
+    sum_sc, p64 = (s_t @ c).double(), p.double()
+    moment = ((s_t @ outer_c).view(-1, 3, 3).double() - sum_sc[:, :, None] * p64[:, None, :]
+              - p64[:, :, None] * sum_sc[:, None, :] + s_t.sum(dim=1).double()[:, None, None] * p64[:, :, None] * p64[:, None, :])
+    moment = moment / seen.sum(dim=0).clamp_min(1).double()[:, None, None]
+    middle = _middle_eigenvalue(moment).clamp(0.0, 1.0)
+    return torch.rad2deg(2.0 * torch.asin(middle.sqrt())).float()
+
+
 def _middle_eigenvalue(a: torch.Tensor) -> torch.Tensor:
     """(P,) middle eigenvalue of symmetric (P, 3, 3) matrices, in closed form (the trigonometric
     solution of the characteristic cubic): batched LAPACK calls on 3x3 matrices cost more than the
@@ -109,13 +128,17 @@ def _votes(views: PosedViews, w2c: torch.Tensor, pts: torch.Tensor, touched: tor
     """
     k = views.intrinsics
     u, v, z = project_torch(k, w2c, pts)
-    grid = torch.stack([u * (2.0 / k.width) - 1.0, v * (2.0 / k.height) - 1.0], dim=-1)
-    in_image = (z > 0) & (grid.abs() <= 1).all(dim=-1)
+    gx, gy = u.mul_(2.0 / k.width).sub_(1.0), v.mul_(2.0 / k.height).sub_(1.0)
+    grid = torch.stack([gx, gy], dim=-1)
+    front = z > 0
+    left, right, top, bottom = gx < -1, gx > 1, gy < -1, gy > 1
+    in_image = front & ~(left | right | top | bottom)
     if touched is None:
         return grid, in_image, in_image
-    beyond = torch.stack([grid[..., 0] < -1, grid[..., 0] > 1, grid[..., 1] < -1, grid[..., 1] > 1], dim=-1)
-    unknown = (beyond & touched[:, None, :]).any(dim=-1)
-    return grid, in_image, in_image | ((z > 0) & ~in_image & ~unknown)
+    # (V, P) comparisons against each edge's (V, 1) flag: a (V, P, 4) stack of them took most of the scoring
+    unknown = ((left & touched[:, 0:1]) | (right & touched[:, 1:2]) | (top & touched[:, 2:3])
+               | (bottom & touched[:, 3:4]))
+    return grid, in_image, front & ~unknown
 
 
 def _constrained(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tensor, min_votes: int,
@@ -124,9 +147,7 @@ def _constrained(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tensor, m
     ok = seen.sum(dim=0) >= min_votes
     if min_spread_deg > 0 and bool(ok.any()):
         idx = torch.nonzero(ok)[:, 0]
-        to_cam = centres[:, None, :] - pts[None, idx]
-        to_cam = to_cam / to_cam.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-        ok[idx] = view_spread_deg(to_cam, seen[:, idx]) >= min_spread_deg
+        ok[idx] = camera_spread_deg(centres, pts[idx], seen[:, idx]) >= min_spread_deg
     return ok
 
 
