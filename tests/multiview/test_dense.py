@@ -140,3 +140,28 @@ def test_each_bundled_object_at_320x240(tmp_path, name):
     assert np.degrees(np.arccos(np.clip(d.scene.normal[2], -1, 1))) < 1.0
     assert abs(d.scene.height / d.true_height_m - 1.0) < 0.05
     assert _mask_iou(d).mean() >= 0.8
+
+
+def test_a_closed_surface_is_drawn_from_the_faces_of_one_winding():
+    """filled_triangles(closed=True) draws only the fewer of the two windings: on a closed mug from 12 views the
+    silhouettes are those of every face drawn alone, but for a few edge pixels (at most 0.1 % of the area)."""
+    from real2sim.geometry.inside import inside_mask
+    from real2sim.geometry.objects import make_textured_object
+    from real2sim.geometry.silhouettes import filled_triangles
+    from real2sim.multiview.voxel_grid import VoxelGrid, surface_from_grid
+
+    mug = make_textured_object("mug")
+    grid = VoxelGrid.covering(mug.bounds[0] - 0.005, mug.bounds[1] + 0.005, 48, table_z_m=0.0)
+    solid = surface_from_grid(inside_mask(mug, grid.centres()).reshape(grid.shape).astype(np.float32), grid, 0.5)
+    rng = np.random.default_rng(0)
+    for _ in range(12):
+        d = rng.normal(size=3)
+        d[2] = abs(d[2]) + 0.2
+        cam = d / np.linalg.norm(d) * rng.uniform(0.15, 0.4)
+        forward = -cam / np.linalg.norm(cam)
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        local = (solid.vertices - cam) @ np.stack([right, np.cross(forward, right), forward]).T
+        uv = 400.0 * local[:, :2] / local[:, 2:] + [240.0, 135.0]
+        every, one_winding = (filled_triangles(270, 480, uv[solid.faces], closed=c) for c in (False, True))
+        assert every.sum() > 2000 and (every != one_winding).sum() <= 1e-3 * every.sum()

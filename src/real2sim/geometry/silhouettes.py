@@ -44,11 +44,15 @@ def check_not_full(fractions: Sequence[float], names: Sequence[str], what: str, 
 _SUBPIXEL_BITS = 4
 
 
-def filled_triangles(height_px: int, width_px: int, corners_px: np.ndarray) -> np.ndarray:
+def filled_triangles(height_px: int, width_px: int, corners_px: np.ndarray, closed: bool = False) -> np.ndarray:
     """(H, W) uint8 mask, 1 where the union of the triangles ``corners_px`` ((T, 3, 2) image coordinates,
     pixel (u, v) spanning [u, u + 1) x [v, v + 1)) covers a pixel's centre: a mesh's silhouette from its
     projected faces. Each triangle is drawn alone: OpenCV fills the polygons of one call by the even-odd
-    rule, so overlapping faces (a surface's front and back) would cancel into holes."""
+    rule, so overlapping faces (a surface's front and back) would cancel into holes.
+
+    ``closed``: the triangles are the faces of a closed, consistently oriented surface, all in front of the
+    camera. Every pixel of its silhouette then sees the surface entered and left as often, so the faces of
+    either winding in the image cover the silhouette alone: only the fewer of the two are drawn."""
     import cv2
 
     drawn = np.zeros((height_px, width_px), np.uint8)
@@ -59,6 +63,11 @@ def filled_triangles(height_px: int, width_px: int, corners_px: np.ndarray) -> n
     # a triangle off the picture draws nothing, and fixed-point coordinates must fit in int32
     keep = (hi[:, 0] >= -1) & (hi[:, 1] >= -1) & (lo[:, 0] <= width_px) & (lo[:, 1] <= height_px) & \
         (np.abs(corners) < 8 * max(width_px, height_px)).all(axis=(1, 2))
+    if closed:
+        edge1, edge2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        winding = np.sign(edge1[:, 0] * edge2[:, 1] - edge1[:, 1] * edge2[:, 0])
+        fewer = 1.0 if (winding > 0).sum() <= (winding < 0).sum() else -1.0
+        keep &= winding == fewer
     for triangle in np.round(corners[keep] * (1 << _SUBPIXEL_BITS)).astype(np.int32):
         cv2.fillConvexPoly(drawn, triangle, 1, lineType=cv2.LINE_8, shift=_SUBPIXEL_BITS)
     return drawn

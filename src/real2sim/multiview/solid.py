@@ -127,7 +127,8 @@ def solid_masks(solid: ObjectSolid, k: CameraIntrinsics, c2w_cv: np.ndarray, rgb
     band = edge_band_px(k.width, k.height)
     for i in range(len(c2w_cv)):
         front = (z[i][faces] > 0).all(axis=1)
-        drawn = filled_triangles(k.height, k.width, np.stack([u[i][faces[front]], v[i][faces[front]]], axis=-1))
+        drawn = filled_triangles(k.height, k.width, np.stack([u[i][faces[front]], v[i][faces[front]]], axis=-1),
+                                 closed=bool(front.all()))  # marching cubes on a padded grid: a closed surface
         masks[i] = drawn
         if rgb is not None and drawn.any():
             masks[i] = colour_refined_mask(rgb[i], masks[i], band)
