@@ -38,8 +38,11 @@ def two(tmp_path_factory) -> list[Path]:
 def _batch(datasets, out: Path, *extra, group: bool = False) -> subprocess.Popen:
     argv = [sys.executable, "-m", "real2sim", "batch", *map(str, datasets), "--mass-kg", "0.4", "--out", str(out),
             *FAST, *extra]
+    # SIGINT at its default, as under a terminal: a test run started in the background (`make test &`) ignores
+    # SIGINT, a child inherits that and Python keeps it ignored, and the batch then finished and exited 0
     return subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONWARNINGS": "ignore"}, start_new_session=group)
+                            env={**os.environ, "PYTHONWARNINGS": "ignore"}, start_new_session=group,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def _locks(out: Path) -> list[str]:
