@@ -38,6 +38,12 @@ class SolidConfig:
     see_through_footprints: float = 2.0
     """A view sees past a voxel when its depth there is beyond it by this many pixel footprints (> 0), plus
     half a voxel."""
+    above_top_reach_voxels: int = 2
+    """Above the object's top (:attr:`SupportScene.height`, a high percentile of its points' heights) the solid
+    keeps only the voxels within this many voxels of an object point (>= 0): nothing carves the space over a
+    textureless lid or a mug's opening, where the grid's margin otherwise stands as a cap, while a thin top
+    with few points (a nozzle) keeps its points' neighbourhood
+    (docs/design-notes/capture.md#solid-above-the-top)."""
 
 
 @dataclass(frozen=True)
@@ -89,7 +95,22 @@ def object_solid(maps: DepthMaps, trusted: np.ndarray, scene: SupportScene, dens
     held[0] = 0
     # the parts holding at least a tenth of the points the best-held part holds
     occupied = np.isin(labels, np.nonzero(held >= 0.1 * max(held.max(), 1))[0]) & (labels > 0)
-    return ObjectSolid(grid, occupied, world_from_table)
+    return ObjectSolid(grid, occupied & ~above_the_points(grid, pts[inside], cells[inside], scene.height,
+                                                           config.above_top_reach_voxels), world_from_table)
+
+
+def above_the_points(grid: VoxelGrid, pts: np.ndarray, cells: np.ndarray, top: float, reach: int) -> np.ndarray:
+    """(``grid.shape``) bool: voxels wholly above ``top`` (table frame) farther than ``reach`` voxels from every
+    object point above it (``pts`` (P, 3) table frame, in their grid ``cells`` (P, 3))."""
+    from scipy.ndimage import binary_dilation
+
+    z = grid.origin_m[2] + np.arange(grid.shape[2]) * grid.voxel_m
+    above = np.broadcast_to(z - 0.5 * grid.voxel_m > top, grid.shape)
+    near = np.zeros(grid.shape, bool)
+    near[tuple(cells[pts[:, 2] > top].T)] = True
+    if reach > 0 and near.any():
+        near = binary_dilation(near, np.ones((3, 3, 3), bool), iterations=reach)
+    return above & ~near
 
 
 def _seen_through(maps: DepthMaps, trusted: np.ndarray, centres: np.ndarray, voxel: float, config: SolidConfig,
