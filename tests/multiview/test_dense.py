@@ -165,3 +165,22 @@ def test_a_closed_surface_is_drawn_from_the_faces_of_one_winding():
         uv = 400.0 * local[:, :2] / local[:, 2:] + [240.0, 135.0]
         every, one_winding = (filled_triangles(270, 480, uv[solid.faces], closed=c) for c in (False, True))
         assert every.sum() > 2000 and (every != one_winding).sum() <= 1e-3 * every.sum()
+
+
+def test_above_the_top_the_solid_keeps_only_what_points_reach():
+    """A cap standing over a flat top (its points end at the top) goes; a nozzle whose points rise above the top
+    keeps the voxels within reach of them; nothing below the top goes."""
+    from real2sim.multiview.solid import above_the_points
+    from real2sim.multiview.voxel_grid import VoxelGrid
+
+    grid = VoxelGrid(np.array([0.5, 0.5, 0.5]), 1.0, (20, 20, 30))  # voxel (i, j, k) centred at (i, j, k) + 0.5
+    rng = np.random.default_rng(0)
+    body = np.c_[rng.uniform(4, 16, (2000, 2)), rng.uniform(0, 20, 2000)]  # a top at z = 20
+    nozzle = np.c_[rng.uniform(9, 11, (40, 2)), rng.uniform(20, 26, 40)]  # a thin part rising to z = 26
+    pts = np.vstack([body, nozzle])
+    cells = np.floor(pts).astype(int)
+    gone = above_the_points(grid, pts, cells, top=20.0, reach=2)
+    assert not gone[:, :, :21].any()  # below the top and the layer across it: kept
+    assert gone[4:16, 4:16, 21:].sum() > 0.75 * 12 * 12 * 9  # the cap over the flat top, but by the nozzle
+    assert not gone[9:11, 9:11, 20:26].any()  # the nozzle's own cells
+    assert gone[:, :, 29].all()  # beyond its reach
