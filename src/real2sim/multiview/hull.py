@@ -68,9 +68,7 @@ def view_spread_deg(directions: torch.Tensor, seen: torch.Tensor) -> torch.Tenso
     """
     weight = seen.to(directions.dtype)
     moment = torch.einsum("vp,vpi,vpj->pij", weight, directions, directions)
-    moment = moment / weight.sum(dim=0).clamp_min(1.0)[:, None, None]
-    middle = _middle_eigenvalue(moment.double()).clamp(0.0, 1.0)
-    return torch.rad2deg(2.0 * torch.asin(middle.sqrt())).float()
+    return _spread_deg((moment / weight.sum(dim=0).clamp_min(1.0)[:, None, None]).double())
 
 
 def camera_spread_deg(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tensor) -> torch.Tensor:
@@ -87,7 +85,12 @@ def camera_spread_deg(centres: torch.Tensor, pts: torch.Tensor, seen: torch.Tens
     sum_sc, p64 = (s_t @ c).double(), p.double()
     moment = ((s_t @ outer_c).view(-1, 3, 3).double() - sum_sc[:, :, None] * p64[:, None, :]
               - p64[:, :, None] * sum_sc[:, None, :] + s_t.sum(dim=1).double()[:, None, None] * p64[:, :, None] * p64[:, None, :])
-    moment = moment / seen.sum(dim=0).clamp_min(1).double()[:, None, None]
+    return _spread_deg(moment / seen.sum(dim=0).clamp_min(1).double()[:, None, None])
+
+
+def _spread_deg(moment: torch.Tensor) -> torch.Tensor:
+    """(P,) float32 ``2 asin(sqrt(lambda_2))`` in degrees of the (P, 3, 3) float64 second moments of unit
+    directions (:func:`view_spread_deg`)."""
     middle = _middle_eigenvalue(moment).clamp(0.0, 1.0)
     return torch.rad2deg(2.0 * torch.asin(middle.sqrt())).float()
 
