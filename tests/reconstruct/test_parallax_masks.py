@@ -638,3 +638,30 @@ def test_the_plates_specks_are_dropped_and_its_band_and_hole_kept():
     assert joined[band].all() and joined[hole].all() and joined[touching].all()
     assert not joined[speck].any()
     assert not _plate_joined((table | own)[None], hole[None], min_share=0.02)[0][hole].any()  # 197 < 384 px
+
+
+def test_neighbour_votes_are_packed_and_unpacked_to_the_same_verdicts():
+    """The neighbours' votes are made once and bit-packed along the rows: at a width that is not a multiple
+    of 8 each view's unpacked ``valid`` is the one its warp gives, and judging the table twice from one set of
+    votes (as the two rounds do) gives the same verdicts, and occluders change them."""
+    from real2sim.capture.masks.parallax_config import ParallaxConfig
+    from real2sim.capture.masks.parallax_table import _table_points_in_neighbours, neighbour_votes, table_evidence
+    from real2sim.multiview.views import PosedViews
+
+    ring = _ring_views(width=83, height=61)
+    rng = np.random.default_rng(0)
+    views = PosedViews(rng.random(ring.rgb.shape, dtype=np.float32), ring.mask, ring.c2w_cv, ring.intrinsics,
+                       ring.names)
+    config = ParallaxConfig()
+    votes = neighbour_votes(views, config, (config.match_reach_px, config.base_reach_px))
+    assert votes.valid.shape == (views.count, config.neighbours, 61, 11)
+    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
+    for i in (0, 17, 59):
+        _, valid = _table_points_in_neighbours(views, votes.near[i], i, config.table_z_m, w2c)
+        assert torch.equal(votes.unpacked(votes.valid[i]), valid)
+    first = table_evidence(views, config, votes)
+    assert first.shape == (2, views.count, 61, 83)
+    assert np.array_equal(first, table_evidence(views, config, votes))
+    occluders = np.zeros((views.count, 61, 83), bool)
+    occluders[:, 25:35, 35:45] = True
+    assert not np.array_equal(first, table_evidence(views, config, votes, occluders))

@@ -38,7 +38,7 @@ the table does not, by the parallax of its height. Per view:
    voxel lies within ``bottom_band`` of the table is filled down to it (a handle, higher up,
    is not extended);
 5. steps 2-4 again, now that the first object tells which table points each neighbour has
-   hidden behind it: those neighbours do not vote, and the table right next to the object,
+   hidden behind it (from the same warps and comparisons: they are made once): those neighbours do not vote, and the table right next to the object,
    which the first round could not confirm, is confirmed;
 6. the table plate (:mod:`real2sim.capture.masks.table_plate`): the empty table's image, each point's
    colour from the views that see it past the second round's masks, judges the mask pixels again; the
@@ -74,7 +74,7 @@ from real2sim.plumbing.progress import ProgressFn, null_progress
 from real2sim.multiview.hull import carve, object_region
 from real2sim.capture.masks.parallax_config import ParallaxConfig
 from real2sim.multiview.voxel_grid import VoxelGrid, surface_from_grid, voxel_footprint_px, voxel_parts
-from real2sim.capture.masks.parallax_table import neighbour_views, table_evidence
+from real2sim.capture.masks.parallax_table import neighbour_views, neighbour_votes, table_evidence
 from real2sim.multiview.views import PosedViews, pixel_rays, project, project_torch
 
 
@@ -115,10 +115,10 @@ def parallax_masks(views: PosedViews, config: ParallaxConfig = ParallaxConfig(),
     from scipy.ndimage import binary_dilation
 
     masks = None
+    votes = neighbour_votes(views, config, (config.match_reach_px, config.base_reach_px), progress)
     for _ in range(2):  # the second round knows, from the first one's object, which table points each view sees
         occluders = None if masks is None else binary_dilation(masks, np.ones((1, 3, 3), bool))
-        table, base_table = table_evidence(views, config, (config.match_reach_px, config.base_reach_px),
-                                           occluders, progress)
+        table, base_table = table_evidence(views, config, votes, occluders, progress)
         solid = _standing_hull(views, table, base_table, config)
         masks = render_silhouettes(solid, views.intrinsics, views.c2w_cv, progress)
     if config.plate_threshold > 0:  # step 6: the table's plate, seen by every view, judges what neighbours could not

@@ -9,6 +9,7 @@ World frame: the views', table plane z = ``config.table_z_m``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -124,36 +125,69 @@ def _local_std(gray: torch.Tensor, radius: int) -> torch.Tensor:
     return (_window_mean(gray * gray, radius) - mean * mean).clamp_min(0.0).sqrt()
 
 
-def table_evidence(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[float, ...],
-                   occluders: np.ndarray | None = None, progress: ProgressFn = null_progress) -> np.ndarray:
-    """(len(reaches_px), N, H, W) bool: the pixels that see the textured table (steps 1-2 of
-    :mod:`real2sim.capture.masks.parallax`), judged with each reach of ``reaches_px`` (pixels; the
-    neighbours are warped once).
+@dataclass(frozen=True)
+class NeighbourVotes:
+    """What each view's neighbours say of its pixels before any view is known to hide the table (steps 1-2
+    without the occluders): each round of :func:`table_evidence` reads them, so the warps, exposure gains,
+    texture and aperture tests are made once however many rounds judge the table. Boolean arrays are
+    bit-packed along the image rows (``np.packbits``, last axis): a 60-view capture at 640x480 holds some
+    80 MB instead of 600 MB."""
 
-    ``occluders`` (N, H, W) bool, optional: where each view sees the object (a first estimate). A neighbour
-    in whose image the table point behind a pixel falls there cannot show that point and does not vote;
-    a pixel with fewer than two voting neighbours keeps the verdict it gets with every neighbour voting."""
+    reaches_px: tuple[float, ...]
+    """The Birchfield-Tomasi reaches (pixels) the verdicts were judged with."""
+    near: np.ndarray
+    """(N, K) int: each view's neighbours (:func:`neighbour_views`)."""
+    valid: np.ndarray
+    """(N, K, H, W / 8) packed bool: the neighbour sees the table point behind the pixel."""
+    close: np.ndarray
+    """(R, N, K, H, W / 8) packed bool: the pixel's colour lies within the threshold of the range of the
+    neighbour's warped image, per reach of ``reaches_px``."""
+    informative: np.ndarray | None
+    """(N, K, H, W / 8) packed bool: the neighbour's parallax crosses the local edge; None without the
+    aperture test (``min_parallax_share`` 0)."""
+    textured: np.ndarray
+    """(N, H, W) bool: the image has texture around the pixel."""
+    width_px: int
+    """The images' width, to unpack the rows."""
+
+    def unpacked(self, packed: np.ndarray) -> torch.Tensor:
+        """A packed array of this record as a bool tensor of its full width."""
+        return torch.from_numpy(np.unpackbits(packed, axis=-1, count=self.width_px).view(bool))
+
+
+def _table_points_in_neighbours(views: PosedViews, near: np.ndarray, i: int, table_z_m: float,
+                                w2c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Where the table point behind each pixel of view ``i`` falls in each of its neighbours ``near`` (K,):
+    (grid, valid), (K, H, W, 2) normalised image coordinates for ``grid_sample`` and (K, H, W) bool, the
+    neighbour sees it (in front of it, inside its image, the pixel's ray meets the plane)."""
     k = views.intrinsics
     h, w = k.height, k.width
     v_px, u_px = np.mgrid[0:h, 0:w]
+    on_plane, hits = plane_hits(*pixel_rays(k, views.c2w_cv[i], u_px.ravel() + 0.5, v_px.ravel() + 0.5), table_z_m)
+    u, v, z = project_torch(k, w2c[near], torch.from_numpy(on_plane.astype(np.float32)))
+    grid = torch.stack([u * (2.0 / w) - 1.0, v * (2.0 / h) - 1.0], dim=-1).reshape(len(near), h, w, 2)
+    valid = (z > 0).reshape(-1, h, w) & (grid.abs() <= 1).all(dim=-1) & torch.from_numpy(hits.reshape(1, h, w))
+    return grid, valid
+
+
+def neighbour_votes(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[float, ...],
+                    progress: ProgressFn = null_progress) -> NeighbourVotes:
+    """Each view's neighbours warped onto it through the table plane and compared with it (steps 1-2 of
+    :mod:`real2sim.capture.masks.parallax`), with each reach of ``reaches_px`` (pixels; the neighbours are
+    warped once): the votes :func:`table_evidence` counts."""
+    k = views.intrinsics
     images = torch.from_numpy(np.ascontiguousarray(views.rgb.transpose(0, 3, 1, 2)))  # (N, 3, H, W), [0, 1]
     w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
     near = neighbour_views(views, config)
-    out = np.zeros((len(reaches_px), views.count, h, w), dtype=bool)
-    occ = None if occluders is None else torch.from_numpy(occluders[:, None].astype(np.float32))
+    valid_all, close_all, informative_all, textured_all = [], [], [], []
+
+    def packed(a: torch.Tensor) -> np.ndarray:
+        return np.packbits(a.numpy(), axis=-1)
+
     with torch.no_grad():
         for i in range(views.count):
-            on_plane, hits = plane_hits(*pixel_rays(k, views.c2w_cv[i], u_px.ravel() + 0.5, v_px.ravel() + 0.5),
-                                        config.table_z_m)
-            u, v, z = project_torch(k, w2c[near[i]], torch.from_numpy(on_plane.astype(np.float32)))
-            grid = torch.stack([u * (2.0 / w) - 1.0, v * (2.0 / h) - 1.0], dim=-1).reshape(len(near[i]), h, w, 2)
+            grid, valid = _table_points_in_neighbours(views, near[i], i, config.table_z_m, w2c)
             warped = torch.nn.functional.grid_sample(images[near[i]], grid, mode="bilinear", align_corners=False)
-            valid = ((z > 0).reshape(-1, h, w) & (grid.abs() <= 1).all(dim=-1)
-                     & torch.from_numpy(hits.reshape(1, h, w)))
-            hidden = None
-            if occluders is not None:  # a table point lies behind the object in a neighbour that sees it inside
-                hidden = torch.nn.functional.grid_sample(occ[near[i]], grid, mode="nearest",
-                                                         align_corners=False)[:, 0] > 0.5
             own = images[i]
             # exposure: per-channel gain of each neighbour on the pixels both see (medians: the object is a minority)
             for j in range(len(near[i])):
@@ -161,31 +195,63 @@ def table_evidence(views: PosedViews, config: ParallaxConfig, reaches_px: tuple[
                 if m.sum() > 100:
                     gain = own[:, m].median(dim=1).values / warped[j][:, m].median(dim=1).values.clamp_min(1e-3)
                     warped[j] *= gain.clamp(0.5, 2.0)[:, None, None]
-            textured = (_channel_std(own * 255.0, config.texture_px) >= config.min_texture).numpy()
+            textured_all.append((_channel_std(own * 255.0, config.texture_px) >= config.min_texture).numpy())
+            if config.min_parallax_share > 0:  # a neighbour whose parallax runs along the local edge cannot tell its height
+                informative_all.append(packed(torch.from_numpy(_parallax_across_edges(
+                    own, views.c2w_cv[i], views.c2w_cv[near[i]], k, config.texture_px) >= config.min_parallax_share)))
+            extremes = _cross_extremes(warped)
+            close = []
+            for reach in reaches_px:  # per neighbour, against the range of its warped image around (Birchfield-Tomasi)
+                low, high = _reached(warped, extremes, reach)
+                close.append(packed(torch.maximum(own - high, low - own).clamp_min(0.0).amax(dim=1) * 255.0
+                                    <= config.threshold))
+            valid_all.append(packed(valid))
+            close_all.append(np.stack(close))
+            progress("parallax masks: table", i + 1, views.count)
+    return NeighbourVotes(tuple(reaches_px), near, np.stack(valid_all), np.stack(close_all, axis=1),
+                          np.stack(informative_all) if informative_all else None, np.stack(textured_all), k.width)
+
+
+def table_evidence(views: PosedViews, config: ParallaxConfig, votes: NeighbourVotes,
+                   occluders: np.ndarray | None = None, progress: ProgressFn = null_progress) -> np.ndarray:
+    """(len(votes.reaches_px), N, H, W) bool: the pixels that see the textured table (steps 1-2 of
+    :mod:`real2sim.capture.masks.parallax`), judged with each reach of the neighbours' ``votes``
+    (:func:`neighbour_votes` of the same views and config).
+
+    ``occluders`` (N, H, W) bool, optional: where each view sees the object (a first estimate). A neighbour
+    in whose image the table point behind a pixel falls there cannot show that point and does not vote;
+    a pixel with fewer than two voting neighbours keeps the verdict it gets with every neighbour voting."""
+    k = views.intrinsics
+    h, w = k.height, k.width
+    w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv)).float()
+    out = np.zeros((len(votes.reaches_px), views.count, h, w), dtype=bool)
+    occ = None if occluders is None else torch.from_numpy(occluders[:, None].astype(np.float32))
+    with torch.no_grad():
+        for i in range(views.count):
+            near = votes.near[i]
+            valid = votes.unpacked(votes.valid[i])
+            textured = votes.textured[i]
             beyond = (valid.sum(dim=0) < 2).numpy()
             # the neighbours that vote: those that can show the table point behind the pixel, where at least
             # two can (all that see it otherwise)
-            voters = valid if hidden is None else \
-                torch.where((valid & ~hidden).sum(dim=0) >= 2, valid & ~hidden, valid)
+            voters = valid
+            if occ is not None:  # a table point lies behind the object in a neighbour that sees it inside
+                grid, _ = _table_points_in_neighbours(views, near, i, config.table_z_m, w2c)
+                hidden = torch.nn.functional.grid_sample(occ[near], grid, mode="nearest", align_corners=False)[:, 0] > 0.5
+                voters = torch.where((valid & ~hidden).sum(dim=0) >= 2, valid & ~hidden, valid)
             barrier = np.zeros_like(textured)
-            if config.min_parallax_share > 0:
-                # a neighbour whose parallax runs along the local edge cannot tell the edge's height
-                informative = torch.from_numpy(_parallax_across_edges(
-                    own, views.c2w_cv[i], views.c2w_cv[near[i]], k, config.texture_px) >= config.min_parallax_share)
+            if votes.informative is not None:
+                informative = votes.unpacked(votes.informative[i])
                 # only where enough neighbours see the table point at all: with fewer, the pixel cannot be
                 # confirmed as table whatever its edges, and stays "not table" as without this test
                 barrier = textured & ((voters.sum(dim=0) >= 2) & ((voters & informative).sum(dim=0) < 2)).numpy()
                 voters = voters & informative
-            extremes = _cross_extremes(warped)
             decided = textured & ~barrier
-            for r, reach in enumerate(reaches_px):
-                # per neighbour, against the range of its warped image around (Birchfield-Tomasi)
-                low, high = _reached(warped, extremes, reach)
-                close = torch.maximum(own - high, low - own).clamp_min(0.0).amax(dim=1) * 255.0 <= config.threshold
-                matches = _agreed(voters, close, config.agreement).numpy()
+            for r in range(len(votes.reaches_px)):
+                matches = _agreed(voters, votes.unpacked(votes.close[r, i]), config.agreement).numpy()
                 table = _plain_patches_decided(matches & decided, ~matches & decided, beyond, barrier)
                 out[r, i] = _without_table_specks(table, config.min_table_speck_share)
-            progress("parallax masks: table", i + 1, views.count)
+            progress("parallax masks: table verdicts", i + 1, views.count)
     return out
 
 
