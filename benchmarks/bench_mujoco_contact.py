@@ -6,9 +6,12 @@ every representation in MuJoCo under the evaluation's equation-error protocol
 (:func:`real2sim.evaluate.mujoco.simulate.simulate_candidate_mujoco`), scored by the evaluation's
 own code. The settings change one thing at a time from MuJoCo's defaults (Euler, pyramidal cone,
 condim 3, solref 0.02 1, solimp 0.9 0.95 0.001 0.5 2, 1 ms), then combine the first round's best. The pick is the lowest mean OCAE over
-every representation, object, task and run (ties: time) among the settings under which a resting
-representation sinks at most 1 mm into the floor (a softer contact damps the rolling by sinking, which
-the object does not do), the rule MujocoConfig's defaults follow.
+every representation, object, task and run (ties: time) among the settings under which no resting
+representation of any object sinks more than 1 mm into the floor (a softer contact damps the rolling by
+sinking, which the object does not do), the rule MujocoConfig's defaults follow; each object's own pick by
+the same rule is listed beside it, to show whether one setting serves every shape.
+``--assets`` takes asset folders already built (by ``bench_table1.py``, say: the shape set, the round
+references) instead of building the bundled objects.
 
 Then the speed target of issue #66: the same candidates with the picked setting in MuJoCo and with
 Drake's point contact, back to back on this machine, each sweep's wall time (building, simulating
@@ -16,6 +19,7 @@ and scoring every row) and its summed ``sim_time_s``.
 
     python benchmarks/bench_mujoco_contact.py                      # 2 runs, push and ramp
     python benchmarks/bench_mujoco_contact.py --runs 3 --specs boxes:10 cylinders:10 coacd
+    python benchmarks/bench_mujoco_contact.py --assets /work/t1shapes/assets/* --specs coacd boxes:10 cylinders:10
 
 Work (assets, reference trajectories) is kept in benchmarks/out/mujoco_contact. Writes
 benchmarks/results/mujoco_contact.md (machine and date included; load average at start and end).
@@ -160,6 +164,8 @@ def main() -> int:
     parser.add_argument("--duration-scale", type=float, default=1.0)
     parser.add_argument("--work", type=Path, default=ROOT / "benchmarks" / "out" / "mujoco_contact")
     parser.add_argument("--settings", nargs="*", default=None, help="names of SETTINGS to try (default all)")
+    parser.add_argument("--assets", type=Path, nargs="+", default=None,
+                        help="asset folders already built (each named by its folder) instead of --objects")
     args = parser.parse_args()
 
     from real2sim.evaluate.discovery import discover_representations
@@ -173,10 +179,18 @@ def main() -> int:
     scene = SceneConfig()
     scene = dataclasses.replace(scene, push_duration_s=scene.push_duration_s * k, total_duration_s=scene.total_duration_s * k)
     tasks = tuple(args.tasks.split(","))
-    objects = tuple(args.objects.split(","))
-    assets = build_assets(args.work, tuple(args.specs), objects)
+    from real2sim.formats.spec import parse_spec
+
+    if args.assets:
+        assets = list(args.assets)
+        objects = tuple(a.name for a in assets)
+    else:
+        objects = tuple(args.objects.split(","))
+        assets = build_assets(args.work, tuple(args.specs), objects)
     refs = references(assets, tasks, args.runs, scene, args.work)
-    reps = discover_representations(assets)
+    wanted = {parse_spec(s).name for s in args.specs}
+    reps = [rep for rep in discover_representations(assets) if rep.name in wanted]
+    pushes = {k[0]: v for k, v in sorted(refs.items(), reverse=True) if k[1] == "push"}  # each object's first push run
 
     table, per_setting = [], {}
     for name, change in SETTINGS.items():
@@ -186,10 +200,11 @@ def main() -> int:
         rows, wall = sweep(reps, refs, scene,
                            lambda rep, spec, ref, cfg=cfg: simulate_candidate_mujoco(rep.mjcf_path, spec, scene, ref, cfg))
         m = means(rows)
-        push = next(v for k, v in sorted(refs.items()) if k[1] == "push") if "push" in tasks else None
-        sink = (max(rest_sink_m(rep, push[0], push[1], scene, cfg) for rep in reps if rep.object == reps[0].object)
-                if push else float("nan"))
+        sinks = {o: max(rest_sink_m(rep, *pushes[o], scene, cfg) for rep in reps if rep.object == o) for o in pushes}
+        sink = max(sinks.values()) if sinks else float("nan")
         m["sink_m"] = sink
+        m["per_object"] = {o: (float(np.mean([r["ocae_m"] for r in rows if r["object"] == o])), sinks.get(o, np.nan))
+                           for o in objects}
         per_setting[name] = (cfg, m, rows)
         by_task = {t: float(np.mean([r["ocae_m"] for r in rows if r["task"] == t])) for t in tasks}
         table.append([name, m["ocae_m"], *[by_task[t] for t in tasks], m["ate_m"], m["cpd_paper"], m["sim_time_s"], wall,
@@ -199,6 +214,13 @@ def main() -> int:
     allowed = [n for n in per_setting if not per_setting[n][1]["sink_m"] > MAX_REST_SINK_M] or list(per_setting)
     best = min(allowed, key=lambda n: (round(per_setting[n][1]["ocae_m"], 6), per_setting[n][1]["sim_time_s"]))
     chosen = per_setting[best][0]
+    per_object = []  # each object's own pick by the same rule, and what the common pick costs it
+    for o in objects:
+        mine = [n for n in per_setting if not per_setting[n][1]["per_object"][o][1] > MAX_REST_SINK_M] or list(per_setting)
+        own = min(mine, key=lambda n: per_setting[n][1]["per_object"][o][0])
+        per_object.append([o, own, per_setting[own][1]["per_object"][o][0], per_setting[best][1]["per_object"][o][0],
+                           per_setting["mujoco defaults"][1]["per_object"][o][0] if "mujoco defaults" in per_setting
+                           else float("nan"), 1000 * per_setting[best][1]["per_object"][o][1]])
 
     # Back to back: the picked MuJoCo setting, then Drake's point contact, same candidates and references.
     mj_rows, mj_wall = sweep(reps, refs, scene, lambda rep, spec, ref: simulate_candidate_mujoco(
@@ -215,7 +237,7 @@ def main() -> int:
 
     quiet = max(load_start[0], load_end[0]) < 1.5
     body = (
-        f"Objects: {', '.join(objects)} (bundled). Representations: {', '.join(sorted({r.name for r in reps}))}. Tasks: {', '.join(tasks)}, "
+        f"Objects: {', '.join(objects)} ({'asset folders given' if args.assets else 'bundled'}). Representations: {', '.join(sorted({r.name for r in reps}))}. Tasks: {', '.join(tasks)}, "
         f"{args.runs} runs each (seed 0), duration scale {k:g}. Equation error (resets every 0.1 s) against Drake's "
         "hydroelastic simulation of the closed mesh, scored by the evaluation's code. Each setting changes one thing "
         "from MuJoCo's defaults, the last three combine the first round's best. Load average (1 min) at start "
@@ -224,8 +246,13 @@ def main() -> int:
         + "\n\n"
         + markdown_table(["setting", "OCAE [m]", *[f"OCAE {t} [m]" for t in tasks], "ATE [m]", "cpd_paper",
                           "ST [s]", "sweep wall [s]", "rest sink [mm]"], table)
-        + f"\n\nPicked (lowest mean OCAE among the settings whose resting sink, the deepest of the first object's "
+        + f"\n\nPicked (lowest mean OCAE among the settings whose resting sink, the deepest of every object's "
         f"representations after 0.5 s on the floor, stays within {1000 * MAX_REST_SINK_M:g} mm): **{best}** = `{chosen}`.\n\n"
+        + "Each object's own pick by the same rule (its representations' mean OCAE, its own sink), beside the "
+        "common pick and MuJoCo's defaults:\n\n"
+        + markdown_table(["object", "own pick", "OCAE own pick [m]", f"OCAE {best} [m]", "OCAE defaults [m]",
+                          f"rest sink {best} [mm]"], per_object)
+        + "\n\n"
         + "Speed, back to back (the picked MuJoCo setting, then Drake point contact; every row built, simulated and "
         "scored in one process):\n\n"
         + markdown_table(["sweep", "rows", "wall [s]", "sum sim_time_s [s]", "mean OCAE [m]"],

@@ -4,7 +4,8 @@
 
 Runs the demo's job (a simulated robot capture of the bundled bottle -> run -> evaluate, as
 `real2sim demo` does) and a handheld phone capture of the bundled mug through `run` (with the
-printed board), in this process, with a progress function that timestamps every report. A phase is
+printed board, fitting `run`'s default collision SPEC; ``--phone-collision cylinders:10 coacd`` adds CoACD,
+whose decomposition of a reconstructed mug takes longer than the rest of the asset stage), in this process, with a progress function that timestamps every report. A phase is
 what a stage reports while it works ("reconstruct / training field", "asset / collision
 cylinders:10 ..."); the time between two reports belongs to the later one's phase, since a report
 says what the work before it was. CPU seconds are this process's and all its children's (live and
@@ -12,7 +13,7 @@ finished), so the simulation workers count. Nothing is instrumented: the profile
 progress display sees, at most one sample every 0.2 s per phase.
 
 With ``--before REV`` (a git revision, e.g. the last release or ``HEAD~3``) each job runs twice, back to
-back on the same machine: first with the package of REV (a temporary git worktree put first on
+back on the same machine (the same job, as this script defines it), first with the package of REV (a temporary git worktree put first on
 ``PYTHONPATH``), then with this tree's, each in a fresh process, and the tables give both side by side,
 so that a speed-up is read against the code before it under the same conditions.
 
@@ -134,8 +135,12 @@ def profile_demo(work: Path, quick: bool) -> Profile:
     return prof
 
 
-def profile_phone(work: Path, views: int) -> Profile:
-    """A handheld capture of the bundled mug with the board, then `run` over its photos."""
+#: The phone job's collision SPECs: `run`'s default (``--phone-collision`` adds others, CoACD say).
+PHONE_COLLISION = ("cylinders:10",)
+
+
+def profile_phone(work: Path, views: int, specs: tuple[str, ...] = PHONE_COLLISION) -> Profile:
+    """A handheld capture of the bundled mug with the board, then `run` over its photos, fitting ``specs``."""
     from real2sim.asset.config import AssetConfig
     from real2sim.capture.phone.board import DEFAULT_BOARD
     from real2sim.capture.sim.handheld import HandheldConfig, capture_handheld
@@ -147,19 +152,25 @@ def profile_phone(work: Path, views: int) -> Profile:
     prof = Profile()
     capture_handheld(make_textured_object("mug"), work / "photos", HandheldConfig(views=views, board=DEFAULT_BOARD),
                      progress=prefixed(prof, "capture"))
-    asset = AssetConfig(mass_kg=OBJECTS["mug"].mass_kg, specs=(parse_spec("cylinders:10"), parse_spec("coacd")))
+    asset = AssetConfig(mass_kg=OBJECTS["mug"].mass_kg, specs=tuple(parse_spec(s) for s in specs))
     run_pipeline(work / "photos", work / "mug_asset", RunConfig(asset=asset), progress=prof)
     prof.close()
     return prof
 
 
-def profile_rows(job: str, arg: str, work: Path) -> list[list]:
-    """The profile rows of one job ("demo" with "full"/"quick", or "phone" with its photo count)."""
-    prof = profile_demo(work / "demo", arg == "quick") if job == "demo" else profile_phone(work / "phone", int(arg))
-    return prof.rows()
+def profile_rows(job: str, arg: str, work: Path) -> dict:
+    """One job ("demo" with "full"/"quick", or "phone" with its photo count and SPECs, space-separated): its
+    profile rows, and its reconstruction against the truth (truth.json: Chamfer mm, IoU)."""
+    if job == "demo":
+        prof, asset = profile_demo(work / "demo", arg == "quick"), work / "demo" / "bottle_asset"
+    else:
+        views, *specs = arg.split()
+        prof, asset = profile_phone(work / "phone", int(views), tuple(specs) or PHONE_COLLISION), work / "phone" / "mug_asset"
+    truth = json.loads((asset / "truth.json").read_text()).get("reconstruction", {})
+    return {"rows": prof.rows(), "chamfer_mm": truth.get("chamfer_mm"), "iou": truth.get("iou")}
 
 
-def rows_in_process(job: str, arg: str, src: Path | None, work: Path) -> list[list]:
+def rows_in_process(job: str, arg: str, src: Path | None, work: Path) -> dict:
     """:func:`profile_rows` in a fresh process, with the package at ``src`` (None: this tree's)."""
     out = work / f"{job}_rows.json"
     env = dict(os.environ)
@@ -167,6 +178,13 @@ def rows_in_process(job: str, arg: str, src: Path | None, work: Path) -> list[li
         env["PYTHONPATH"] = os.pathsep.join([str(src), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     subprocess.run([sys.executable, __file__, "--rows-only", job, arg, str(out)], env=env, check=True)
     return json.loads(out.read_text())
+
+
+def quality_line(runs: list[tuple[str, dict]]) -> str:
+    """The reconstruction's figures against the truth of each run (label, :func:`profile_rows`' record)."""
+    return "Reconstruction against the truth: " + "; ".join(
+        f"{label}{' ' * bool(label)}Chamfer {r['chamfer_mm']:.3f} mm, IoU {r['iou']:.3f}" if r.get("chamfer_mm") is not None
+        else f"{label}{' ' * bool(label)}no truth" for label, r in runs) + "."
 
 
 def _by_stage(rows: list[list]) -> dict[str, list[list]]:
@@ -202,6 +220,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--demo", choices=["full", "quick", "none"], default="full")
     parser.add_argument("--phone", type=int, default=60, metavar="VIEWS", help="photos of the phone capture (0: none)")
+    parser.add_argument("--phone-collision", nargs="+", default=list(PHONE_COLLISION), metavar="SPEC",
+                        help="the phone job's collision SPECs (default: run's, %(default)s)")
     parser.add_argument("--before", metavar="REV", help="also profile git revision REV first, and show both")
     parser.add_argument("--note", default="", help="a line about the conditions (e.g. a machine shared with other work)")
     parser.add_argument("--tag", default="", help="write profile_TAG instead of profile (e.g. the phone job alone)")
@@ -213,7 +233,9 @@ def main() -> int:
             Path(out).write_text(json.dumps(profile_rows(job, arg, Path(tmp))))
         return 0
     jobs = ([("demo", args.demo, f"The demo's job ({args.demo})")] if args.demo != "none" else []) + (
-        [("phone", str(args.phone), f"A {args.phone}-photo phone capture of the mug through `run`")] if args.phone else [])
+        [("phone", " ".join([str(args.phone), *args.phone_collision]),
+          f"A {args.phone}-photo phone capture of the mug through `run` (collision {' '.join(args.phone_collision)})")]
+        if args.phone else [])
     header = ["stage", "phase", "wall s", "CPU s", "% of wall"]
     parts = [args.note] if args.note else []
     repo = Path(__file__).resolve().parent.parent
@@ -235,13 +257,14 @@ def main() -> int:
         try:
             for job, arg, title in jobs:
                 if before_src is None:
-                    parts += [f"### {title}", markdown_table(header, rows_in_process(job, arg, None, tmp))]
+                    now = rows_in_process(job, arg, None, tmp)
+                    parts += [f"### {title}", markdown_table(header, now["rows"]), quality_line([("", now)])]
                     continue
                 before = rows_in_process(job, arg, before_src, tmp)
                 after = rows_in_process(job, arg, None, tmp)
                 parts += [f"### {title}", markdown_table(
                     ["stage", "phase", "wall s before", "wall s now", "CPU s before", "CPU s now"],
-                    side_by_side(before, after))]
+                    side_by_side(before["rows"], after["rows"])), quality_line([("before", before), ("now", after)])]
         finally:
             if before_src is not None:
                 subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "before")], cwd=repo,

@@ -202,8 +202,9 @@ def explained_by_plate(views: PosedViews, masks: np.ndarray, plate: TablePlate, 
         difference = np.full(image.shape[:2], np.inf, np.float32)
         for dy in (-1, 0, 1):
             for dx in (-1, 0, 1):
-                shifted = np.roll(background, (dy, dx), axis=(0, 1))
-                difference = np.minimum(difference, np.abs(image - shifted).max(-1))
+                gap = np.abs(image - np.roll(background, (dy, dx), axis=(0, 1)))
+                # the largest channel: numpy's reduction over a last axis of 3 took ten times as long
+                difference = np.minimum(difference, np.maximum(np.maximum(gap[..., 0], gap[..., 1]), gap[..., 2]))
         pixel = np.where(valid, difference, 1.0).astype(np.float32)
         grey = background.mean(-1)
         variance = uniform_filter(grey * grey, side) - uniform_filter(grey, side) ** 2
