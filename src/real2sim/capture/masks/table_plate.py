@@ -42,6 +42,7 @@ import numpy as np
 import torch
 from scipy.ndimage import binary_dilation, uniform_filter
 
+from real2sim.multiview.rays import SurfaceRays
 from real2sim.multiview.views import PosedViews, bilinear, pixel_rays, plane_hits, project_torch
 
 #: the plate has at most this many texels along a side (its texel grows for a very wide table)
@@ -240,14 +241,17 @@ def explained_by_object(views: PosedViews, explained: np.ndarray, solid, neighbo
     side = 2 * window_px + 1
     images = torch.from_numpy(np.ascontiguousarray(views.rgb, dtype=np.float32))
     out = np.zeros_like(explained, dtype=bool)
+    surface = SurfaceRays(solid)
     for i in range(views.count):
         rows, cols = np.nonzero(explained[i])
         if not len(rows):
             continue
         origin, direction = pixel_rays(k, views.c2w_cv[i], cols + 0.5, rows + 0.5)
-        hits, ray_of, _ = solid.ray.intersects_location(origin, direction, multiple_hits=False)
+        t = surface.first_hit(origin, direction)
+        ray_of = np.nonzero(np.isfinite(t))[0]
         if not len(ray_of):
             continue
+        hits = origin[ray_of] + t[ray_of, None] * direction[ray_of]
         colour = views.rgb[i][rows[ray_of], cols[ray_of]] / view_gain[i]
         others = neighbours[i]
         centres = views.c2w_cv[others, :3, 3]
@@ -255,9 +259,7 @@ def explained_by_object(views: PosedViews, explained: np.ndarray, solid, neighbo
         distance = np.linalg.norm(offsets, axis=-1)
         ray_origin = np.repeat(centres, len(hits), axis=0)
         ray_direction = (offsets / distance[..., None]).reshape(-1, 3)
-        first = np.full(ray_origin.shape[0], np.inf)
-        blocked_at, blocked, _ = solid.ray.intersects_location(ray_origin, ray_direction, multiple_hits=False)
-        first[blocked] = np.linalg.norm(blocked_at - ray_origin[blocked], axis=-1)
+        first = surface.first_hit(ray_origin, ray_direction)
         unhidden = first.reshape(distance.shape) >= (1 - visibility_tolerance) * distance
         w2c = torch.from_numpy(np.linalg.inv(views.c2w_cv[others])).float()
         u, v, depth = project_torch(k, w2c, torch.from_numpy(hits.astype(np.float32)))  # (K, P)

@@ -18,15 +18,17 @@ import numpy as np
 import torch
 
 from real2sim.formats.dataset import CameraIntrinsics
+from real2sim.multiview.rays import SurfaceRays
 from real2sim.multiview.voxel_grid import VoxelGrid, surface_from_grid
 from real2sim.multiview.views import PosedViews, project_torch
 
 
 class Occluder(NamedTuple):
-    """What a line of sight is tested against: the solid's surface ``mesh`` (Embree), or the ``solid``
-    itself (a bool tensor) walked on ``device`` (voxel_rays.segments_blocked); one of the two is None."""
+    """What a line of sight is tested against: the solid's surface (``surface``, its Embree scene), or the
+    ``solid`` itself (a bool tensor) walked on ``device`` (voxel_rays.segments_blocked); one of the two is
+    None."""
 
-    mesh: object | None
+    surface: SurfaceRays | None
     solid: torch.Tensor | None
     grid: VoxelGrid
     device: str
@@ -69,8 +71,8 @@ def occluder(grid: VoxelGrid, solid, method: str, device: str) -> Occluder:
     if visibility_method(method, device) == "voxels":
         return Occluder(None, torch.as_tensor(solid, device=device), grid, device)
     solid = solid.cpu().numpy() if isinstance(solid, torch.Tensor) else np.asarray(solid)
-    return Occluder(surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2])), None,
-                    grid, device)
+    surface = surface_from_grid(solid.astype(np.float32), grid, 0.5, float(grid.bounds_m[0, 2]))
+    return Occluder(SurfaceRays(surface), None, grid, device)
 
 
 def in_image(cameras: Cameras, uv: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
@@ -94,15 +96,12 @@ def sightings(cameras: Cameras, grid: VoxelGrid, points_m: torch.Tensor, occlude
     distance = torch.linalg.vector_norm(offsets, dim=1)
     directions = offsets / distance[:, None]
     reach = distance - tolerance_voxels * grid.voxel_m
-    if occluder.mesh is None:
+    if occluder.surface is None:
         from real2sim.reconstruct.carving.voxel_rays import segments_blocked
 
         visible = ~segments_blocked(occluder.solid, grid, origins, directions, reach)
     else:
-        o, d = origins.cpu().numpy(), directions.cpu().numpy()
-        hit_at = np.full(len(o), np.inf)
-        hits, rays, _ = occluder.mesh.ray.intersects_location(o, d, multiple_hits=False)
-        hit_at[rays] = np.einsum("nd,nd->n", hits - o[rays], d[rays])
+        hit_at = occluder.surface.first_hit(origins.cpu().numpy(), directions.cpu().numpy())
         visible = torch.as_tensor(hit_at, device=points_m.device) >= reach
     view_of, point_of = view_of[visible], point_of[visible]
     return view_of, point_of, uv[view_of, point_of], directions[visible]

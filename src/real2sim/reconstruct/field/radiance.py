@@ -30,6 +30,7 @@ import torch
 import torch.nn.functional as F
 from scipy.ndimage import binary_dilation
 
+from real2sim.multiview.rays import SurfaceRays
 from real2sim.multiview.views import ray_box
 from real2sim.multiview.voxel_grid import VoxelGrid
 
@@ -106,6 +107,13 @@ class VoxelRadianceField(torch.nn.Module):
             surfaces[grow_voxels] = surface_from_grid(grown.astype(np.float32), self.grid, 0.5,
                                                       table_z_m=float(self.grid.bounds_m[0, 2]))
         return surfaces[grow_voxels]
+
+    def occupancy_rays(self, grow_voxels: int = 1) -> SurfaceRays:
+        """The Embree scene of :meth:`occupancy_surface` (built once per field and growth)."""
+        scenes = self.__dict__.setdefault("_occupancy_rays", {})
+        if grow_voxels not in scenes:
+            scenes[grow_voxels] = SurfaceRays(self.occupancy_surface(grow_voxels))
+        return scenes[grow_voxels]
 
     def grid_parameters(self) -> list[torch.nn.Parameter]:
         return [self.density_table, self.feature_table]

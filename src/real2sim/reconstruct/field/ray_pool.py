@@ -58,20 +58,16 @@ def occupancy_ranges(field: VoxelRadianceField, origins: torch.Tensor, direction
     Ray-cast (embree) against the occupancy's surface, so rendering marches only that
     stretch of each ray; a ray that misses gets an empty range.
     """
-    surface = field.occupancy_surface(grow_voxels)
+    surface = field.occupancy_rays(grow_voxels)
     origins = origins.detach().cpu().numpy().astype(np.float64)
     dirs = directions.detach().cpu().numpy().astype(np.float64)
     far = 4.0 * float(np.linalg.norm(field.grid.bounds_m[1] - field.grid.bounds_m[0])) + \
         float(np.abs(origins - field.grid.bounds_m.mean(axis=0)).max())
-    t_in = np.zeros(len(origins))
-    t_out = np.zeros(len(origins))
-    hits, rays, _ = surface.ray.intersects_location(origins, dirs, multiple_hits=False)
-    t_in[rays] = np.einsum("nd,nd->n", hits - origins[rays], dirs[rays])
-    back_origin = origins + far * dirs
-    hits_back, rays_back, _ = surface.ray.intersects_location(back_origin, -dirs, multiple_hits=False)
-    t_out[rays_back] = far - np.einsum("nd,nd->n", hits_back - back_origin[rays_back], -dirs[rays_back])
-    entered = np.zeros(len(origins), dtype=bool)
-    entered[rays] = True
+    t_in = surface.first_hit(origins, dirs)
+    entered = np.isfinite(t_in)
+    t_in = np.where(entered, t_in, 0.0)
+    t_back = surface.first_hit(origins + far * dirs, -dirs)  # from beyond the far side, back along the ray
+    t_out = np.where(np.isfinite(t_back), far - t_back, 0.0)
     t_out = np.where(entered, np.maximum(t_out, t_in) + field.grid.voxel_m, 0.0)
     t_in = np.where(entered, np.maximum(t_in - field.grid.voxel_m, 0.0), 0.0)
     to = lambda a: torch.from_numpy(a.astype(np.float32)).to(field.device)
