@@ -146,13 +146,11 @@ class NeighbourVotes:
     """(N, K, H, W / 8) packed bool: the neighbour's parallax crosses the local edge; None without the
     aperture test (``min_parallax_share`` 0)."""
     textured: np.ndarray
-    """(N, H, W) bool: the image has texture around the pixel."""
-    width_px: int
-    """The images' width, to unpack the rows."""
+    """(N, H, W) bool: the image has texture around the pixel (unpacked: its width is the images')."""
 
     def unpacked(self, packed: np.ndarray) -> torch.Tensor:
-        """A packed array of this record as a bool tensor of its full width."""
-        return torch.from_numpy(np.unpackbits(packed, axis=-1, count=self.width_px).view(bool))
+        """A packed array of this record as a bool tensor of the images' full width."""
+        return torch.from_numpy(np.unpackbits(packed, axis=-1, count=self.textured.shape[-1]).view(bool))
 
 
 def _table_points_in_neighbours(views: PosedViews, near: np.ndarray, i: int, table_z_m: float,
@@ -196,7 +194,7 @@ def neighbour_votes(views: PosedViews, config: ParallaxConfig, reaches_px: tuple
                     gain = own[:, m].median(dim=1).values / warped[j][:, m].median(dim=1).values.clamp_min(1e-3)
                     warped[j] *= gain.clamp(0.5, 2.0)[:, None, None]
             textured_all.append((_channel_std(own * 255.0, config.texture_px) >= config.min_texture).numpy())
-            if config.min_parallax_share > 0:  # a neighbour whose parallax runs along the local edge cannot tell its height
+            if config.min_parallax_share > 0:  # parallax along the local edge cannot tell the edge's height
                 informative_all.append(packed(torch.from_numpy(_parallax_across_edges(
                     own, views.c2w_cv[i], views.c2w_cv[near[i]], k, config.texture_px) >= config.min_parallax_share)))
             extremes = _cross_extremes(warped)
@@ -209,7 +207,7 @@ def neighbour_votes(views: PosedViews, config: ParallaxConfig, reaches_px: tuple
             close_all.append(np.stack(close))
             progress("parallax masks: table", i + 1, views.count)
     return NeighbourVotes(tuple(reaches_px), near, np.stack(valid_all), np.stack(close_all, axis=1),
-                          np.stack(informative_all) if informative_all else None, np.stack(textured_all), k.width)
+                          np.stack(informative_all) if informative_all else None, np.stack(textured_all))
 
 
 def table_evidence(views: PosedViews, config: ParallaxConfig, votes: NeighbourVotes,

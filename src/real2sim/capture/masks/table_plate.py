@@ -204,7 +204,7 @@ def explained_by_plate(views: PosedViews, masks: np.ndarray, plate: TablePlate, 
         for dy in (-1, 0, 1):
             for dx in (-1, 0, 1):
                 gap = np.abs(image - np.roll(background, (dy, dx), axis=(0, 1)))
-                # the largest channel: numpy's reduction over a last axis of 3 took ten times as long
+                # the largest channel by elementwise maxima: numpy reduces a last axis of 3 about 5x slower
                 difference = np.minimum(difference, np.maximum(np.maximum(gap[..., 0], gap[..., 1]), gap[..., 2]))
         pixel = np.where(valid, difference, 1.0).astype(np.float32)
         grey = background.mean(-1)
