@@ -38,8 +38,9 @@ the table does not, by the parallax of its height. Per view:
    voxel lies within ``bottom_band`` of the table is filled down to it (a handle, higher up,
    is not extended);
 5. steps 2-4 again, now that the first object tells which table points each neighbour has
-   hidden behind it (from the same warps and comparisons: they are made once): those neighbours do not vote, and the table right next to the object,
-   which the first round could not confirm, is confirmed;
+   hidden behind it (from the same warps and comparisons: they are made once): those neighbours do
+   not vote, and the table right next to the object, which the first round could not confirm, is
+   confirmed;
 6. the table plate (:mod:`real2sim.capture.masks.table_plate`): the empty table's image, each point's
    colour from the views that see it past the second round's masks, judges the mask pixels again; the
    pixels whose image it explains join the table verdict for steps 3-4 once more. It takes the table

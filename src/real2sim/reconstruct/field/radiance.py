@@ -32,7 +32,7 @@ from scipy.ndimage import binary_dilation
 
 from real2sim.multiview.rays import SurfaceRays
 from real2sim.multiview.views import ray_box
-from real2sim.multiview.voxel_grid import VoxelGrid
+from real2sim.multiview.voxel_grid import VoxelGrid, surface_from_grid
 
 
 @dataclass(frozen=True)
@@ -93,27 +93,16 @@ class VoxelRadianceField(torch.nn.Module):
     def device(self) -> torch.device:
         return self.density_table.device
 
-    def occupancy_surface(self, grow_voxels: int = 1):
-        """The surface (trimesh, metres) of the occupied voxels' cells grown by ``grow_voxels`` (at least
-        one, so that no occupied sample lies outside it); made once per field and growth (ray casts use
-        it to skip empty space)."""
-        surfaces = self.__dict__.setdefault("_occupancy_surfaces", {})
-        if grow_voxels not in surfaces:
-            from scipy.ndimage import binary_dilation
-
-            from real2sim.multiview.voxel_grid import surface_from_grid
-
-            grown = binary_dilation(self.occupancy.cpu().numpy(), iterations=max(int(grow_voxels), 1))
-            surfaces[grow_voxels] = surface_from_grid(grown.astype(np.float32), self.grid, 0.5,
-                                                      table_z_m=float(self.grid.bounds_m[0, 2]))
-        return surfaces[grow_voxels]
-
     def occupancy_rays(self, grow_voxels: int = 1) -> SurfaceRays:
-        """The Embree scene of :meth:`occupancy_surface` (built once per field and growth)."""
-        scenes = self.__dict__.setdefault("_occupancy_rays", {})
-        if grow_voxels not in scenes:
-            scenes[grow_voxels] = SurfaceRays(self.occupancy_surface(grow_voxels))
-        return scenes[grow_voxels]
+        """The surface (trimesh, metres; ``.mesh``) of the occupied voxels' cells grown by ``grow_voxels`` (at
+        least one, so that no occupied sample lies outside it), with its Embree scene; made once per field and
+        growth (ray casts use it to skip empty space)."""
+        surfaces = self.__dict__.setdefault("_occupancy_rays", {})
+        if grow_voxels not in surfaces:
+            grown = binary_dilation(self.occupancy.cpu().numpy(), iterations=max(int(grow_voxels), 1))
+            surfaces[grow_voxels] = SurfaceRays(surface_from_grid(grown.astype(np.float32), self.grid, 0.5,
+                                                                  table_z_m=float(self.grid.bounds_m[0, 2])))
+        return surfaces[grow_voxels]
 
     def grid_parameters(self) -> list[torch.nn.Parameter]:
         return [self.density_table, self.feature_table]
